@@ -1,0 +1,39 @@
+"""npmrf3d: 3D solid textures from one 2D exemplar with a non-parametric Markov random field.
+
+Public API
+----------
+synthesize
+    Multi-scale NP-MRF synthesis (ICM with per-voxel temperatures, four heuristics).
+load_exemplar
+    Read an exemplar image or array as float32 (H, W, C).
+SynthesisConfig, SynthesisResult, DecisionRule, VARIANTS
+    Run configuration, result object and decision-rule presets.
+ParameterError
+    The exception raised for user mistakes.
+"""
+
+from importlib.metadata import PackageNotFoundError, version
+
+from .config import VARIANTS, DecisionRule, SynthesisConfig, SynthesisResult
+from .errors import ParameterError
+from .exemplar import load_exemplar
+from .heuristics import HEURISTICS
+from .synthesis import make_config, synthesize
+
+try:
+    __version__ = version("npmrf3d")
+except PackageNotFoundError:  # running from a source tree that was not installed
+    __version__ = "0.0.0+unknown"
+
+__all__ = [
+    "HEURISTICS",
+    "VARIANTS",
+    "DecisionRule",
+    "ParameterError",
+    "SynthesisConfig",
+    "SynthesisResult",
+    "__version__",
+    "load_exemplar",
+    "make_config",
+    "synthesize",
+]

@@ -1,0 +1,22 @@
+"""The one place for JIT options (STYLE.md practice 8).
+
+``cache=True`` keeps compiled machine code on disk between processes, so the compile cost
+(several seconds per kernel) is paid once per machine. ``fastmath`` is off: the kernels
+compare log-densities across labels and a reordered reduction would change argmax ties
+and break the bit-identical-results promise.
+"""
+
+from __future__ import annotations
+
+import numba
+
+JIT_OPTIONS = {"cache": True, "fastmath": False, "nogil": True}
+
+jit = numba.njit(**JIT_OPTIONS)
+jit_parallel = numba.njit(parallel=True, **JIT_OPTIONS)
+prange = numba.prange
+
+
+def thread_count() -> int:
+    """Number of threads numba's parallel loops use in this process."""
+    return int(numba.get_num_threads())

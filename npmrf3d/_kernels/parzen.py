@@ -1,0 +1,177 @@
+"""Parzen-window LCPDF of one site in one view (SPEC.md section 2).
+
+Notation (SPEC.md section 2): for a site ``s`` of the volume, a view ``v`` with ``M = w*w - 1``
+neighbour offsets, exemplar patches ``p = 0..n-1`` with neighbour vectors ``y_p`` and centre
+labels ``lab[p]``, and labels ``lam_k`` (rows of ``labels``)::
+
+    D_p      = sum_r (1 - t_r)^2 * ||x_r - y_{p,r}||^2           (neighbour term)
+    log w_p  = -(D_p - D_min) / (2 h^2)                          (relative weight, max 0)
+    W_j      = sum_{p : lab[p] = j} w_p                          (weighted label histogram)
+    log f(k) = log sum_j W_j exp(-||lam_j - lam_k||^2 / (2 h_c^2))
+    log Z    = log sum_j W_j c_j,   c_j = sum_k exp(-||lam_j - lam_k||^2 / (2 h_c^2))
+    log L(k) = log f(k) - log Z
+
+With ``h_c = h`` this is exactly the LCPDF of SPEC.md eq. for ``L_v`` (the common factor
+``exp(-D_min / 2h^2)`` cancels between numerator and normaliser). Patches whose log weight is
+more than ``prune`` below the best one are skipped (``prune = inf`` keeps all). With
+``adapt_eps > 0`` the neighbour bandwidth is chosen per site: ``2 h^2 = max(adapt_eps * D_min,
+min_two_h2)`` (a relative, Efros-Leung-like tolerance around the best match).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ._jit import jit
+
+
+@jit
+def gather_neighbours(volume, temps, i, j, k, offsets, values, trust):
+    """Copy the neighbour values and trust weights of site (i, j, k) into the buffers.
+
+    ``values[m * C + c] = volume[s + offsets[m], c]`` (toroidal) and
+    ``trust[m] = (1 - temps[s + offsets[m]])**2``.
+    """
+    n1, n2, n3, nc = volume.shape
+    for m in range(offsets.shape[0]):
+        ii = (i + offsets[m, 0]) % n1
+        jj = (j + offsets[m, 1]) % n2
+        kk = (k + offsets[m, 2]) % n3
+        t = 1.0 - temps[ii, jj, kk]
+        trust[m] = t * t
+        for c in range(nc):
+            values[m * nc + c] = volume[ii, jj, kk, c]
+
+
+@jit
+def neighbour_distances(values, trust, patches_t, n_patches, dist):
+    """``dist[p] = sum_m trust[m] * sum_c (values[m*C+c] - patches_t[m*C+c, p])**2``.
+
+    ``patches_t`` is the transposed patch matrix (M*C, n_max), so the inner loop runs over
+    contiguous patches and vectorises.
+    """
+    n_m = trust.shape[0]
+    nc = values.shape[0] // n_m
+    for p in range(n_patches):
+        dist[p] = 0.0
+    for m in range(n_m):
+        a = trust[m]
+        if a == 0.0:
+            continue
+        for c in range(nc):
+            x = values[m * nc + c]
+            row = patches_t[m * nc + c]
+            for p in range(n_patches):
+                d = x - row[p]
+                dist[p] += a * d * d
+
+
+@jit
+def log_lcpdf_from_distances(
+    dist, n_patches, centre_labels, labels, inv_two_h2, inv_two_hc2, adapt_eps,
+    min_two_h2, prune, log_norm_const, kernel_table, weights, nonzero, log_weights, out,
+):
+    """Turn neighbour distances into the log-LCPDF over all labels (see module docstring).
+
+    ``kernel_table`` (K, K) holds ``exp(-||lam_j - lam_k||^2 / (2 h_c^2))`` (or is (0, 0):
+    then every term is computed in the log domain); where the table's sum underflows the
+    label falls back to the log domain, so both paths give the same result.
+    ``weights`` (K,) must be all zero on entry and is all zero again on exit; ``nonzero`` and
+    ``log_weights`` are scratch (K,). Writes ``out`` (K,) and returns the number of distinct
+    centre labels that carried weight.
+    """
+    n_labels, nc = labels.shape
+    d_min = np.inf
+    for p in range(n_patches):
+        if dist[p] < d_min:
+            d_min = dist[p]
+    inv = inv_two_h2
+    if adapt_eps > 0.0:
+        inv = 1.0 / max(adapt_eps * d_min, min_two_h2)
+    n_nz = 0
+    for p in range(n_patches):
+        lw = -(dist[p] - d_min) * inv
+        if lw >= -prune:
+            lab = centre_labels[p]
+            if weights[lab] == 0.0:
+                nonzero[n_nz] = lab
+                n_nz += 1
+            weights[lab] += math.exp(lw)
+    # normaliser: log sum_j W_j c_j
+    top = -np.inf
+    for a in range(n_nz):
+        jl = nonzero[a]
+        log_weights[a] = math.log(weights[jl])
+        v = log_weights[a] + log_norm_const[jl]
+        if v > top:
+            top = v
+    acc = 0.0
+    for a in range(n_nz):
+        acc += math.exp(log_weights[a] + log_norm_const[nonzero[a]] - top)
+    log_z = top + math.log(acc)
+    use_table = kernel_table.shape[0] == n_labels
+    for kl in range(n_labels):
+        s = 0.0
+        if use_table:  # linear domain (1 <= max W_j <= n): no exp per term
+            for a in range(n_nz):
+                jl = nonzero[a]
+                s += weights[jl] * kernel_table[jl, kl]
+        if s > 1e-280:
+            out[kl] = math.log(s) - log_z
+            continue
+        # log domain (sharp centre kernel or underflow): log-sum-exp over the labels with weight
+        best = -np.inf
+        for a in range(n_nz):
+            jl = nonzero[a]
+            d2 = 0.0
+            for c in range(nc):
+                d = labels[jl, c] - labels[kl, c]
+                d2 += d * d
+            v = log_weights[a] - d2 * inv_two_hc2
+            if v > best:
+                best = v
+        for a in range(n_nz):
+            jl = nonzero[a]
+            d2 = 0.0
+            for c in range(nc):
+                d = labels[jl, c] - labels[kl, c]
+                d2 += d * d
+            s += math.exp(log_weights[a] - d2 * inv_two_hc2 - best)
+        out[kl] = best + math.log(s) - log_z
+    for a in range(n_nz):
+        weights[nonzero[a]] = 0.0
+    return n_nz
+
+
+@jit
+def label_log_norm_const(labels, inv_two_hc2):
+    """``log c_j = log sum_k exp(-||lam_j - lam_k||^2 / (2 h_c^2))`` for every label j."""
+    n_labels, nc = labels.shape
+    out = np.empty(n_labels, dtype=np.float64)
+    for jl in range(n_labels):
+        s = 0.0
+        for kl in range(n_labels):
+            d2 = 0.0
+            for c in range(nc):
+                d = labels[jl, c] - labels[kl, c]
+                d2 += d * d
+            s += math.exp(-d2 * inv_two_hc2)
+        out[jl] = math.log(s)
+    return out
+
+
+@jit
+def label_kernel_table(labels, inv_two_hc2):
+    """``exp(-||lam_j - lam_k||^2 / (2 h_c^2))`` for all label pairs, (K, K) float64."""
+    n_labels, nc = labels.shape
+    out = np.empty((n_labels, n_labels), dtype=np.float64)
+    for jl in range(n_labels):
+        for kl in range(n_labels):
+            d2 = 0.0
+            for c in range(nc):
+                d = labels[jl, c] - labels[kl, c]
+                d2 += d * d
+            out[jl, kl] = math.exp(-d2 * inv_two_hc2)
+    return out

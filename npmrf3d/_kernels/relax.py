@@ -1,0 +1,214 @@
+"""Heuristic choice of one value from the per-view LCPDFs, and the parallel ICM class update.
+
+Heuristic codes (SPEC.md section 3): 0 = ML_H1a, 1 = ML_H1b, 2 = ML_H2a, 3 = ML_H2b.
+Decision codes: 0 = argmax (the paper's ICM), 1 = draw from ``exp(score / tau)`` with a
+pre-drawn uniform (this project's stochastic decision, see docs/quality.md).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from ._jit import jit, jit_parallel, prange
+from .parzen import gather_neighbours, log_lcpdf_from_distances, neighbour_distances
+
+H1A, H1B, H2A, H2B = 0, 1, 2, 3
+ARGMAX, SAMPLE = 0, 1
+
+
+
+
+class ViewModels(NamedTuple):
+    """Everything the kernels need about the constrained views (V views, K labels).
+
+    offsets : (V, M, 3) int64, volume offsets of each view's window (centre excluded)
+    patches_t : (V, M*C, n_max) float32, transposed exemplar neighbour vectors
+    centre_labels : (V, n_max) int32, label index of each patch centre
+    n_patches : (V,) int64, valid patches per view
+    inv_two_h2 : (V,) float64, 1 / (2 h^2) for the neighbour term
+    inv_two_hc2 : (V,) float64, 1 / (2 h_c^2) for the centre term
+    log_norm_const : (V, K) float64, log c_j per view
+    kernel_tables : (V, K, K) float64 label kernel tables, or (V, 0, 0) when too large
+    labels : (K, C) float32
+    union_offsets : (U, 3) int64, the 3D neighbourhood N_s (union of the views' windows)
+    """
+
+    offsets: np.ndarray
+    patches_t: np.ndarray
+    centre_labels: np.ndarray
+    n_patches: np.ndarray
+    inv_two_h2: np.ndarray
+    inv_two_hc2: np.ndarray
+    log_norm_const: np.ndarray
+    kernel_tables: np.ndarray
+    labels: np.ndarray
+    union_offsets: np.ndarray
+
+
+@jit
+def robust_log(log_p, outlier, n_labels):
+    """``log((1 - outlier) * p + outlier / K)``: an LCPDF mixed with a uniform outlier term."""
+    if outlier <= 0.0:
+        return log_p
+    a = math.log1p(-outlier) + log_p
+    b = math.log(outlier / n_labels)
+    top = max(a, b)
+    return top + math.log(math.exp(a - top) + math.exp(b - top))
+
+
+@jit
+def choose_label(log_l, heuristic, decision, tau, u, penalty, outlier, labels, value_out, score):
+    """Combine per-view log-LCPDFs ``log_l`` (V, K) into one value.
+
+    With ``outlier > 0`` each view's LCPDF is first mixed with a uniform term
+    (:func:`robust_log`), so for ML_H2a/ML_H2b a value that one view finds impossible is not
+    vetoed: a value that two views agree on beats a compromise no view supports.
+
+    Writes the chosen value into ``value_out`` (C,) and returns its label index (-1 for
+    ML_H1b, whose average is generally not a label). ``penalty`` (K,) is added to the
+    ML_H2a/ML_H2b score; ``score`` (K,) is scratch.
+    """
+    n_views, n_labels = log_l.shape
+    nc = labels.shape[1]
+    if heuristic == H1A or heuristic == H1B:
+        chosen = -1
+        lowest = np.inf
+        for c in range(nc):
+            value_out[c] = 0.0
+        for v in range(n_views):
+            kv = 0
+            for kl in range(1, n_labels):
+                if log_l[v, kl] > log_l[v, kv]:
+                    kv = kl
+            if log_l[v, kv] < lowest:
+                lowest = log_l[v, kv]
+                chosen = kv
+            for c in range(nc):
+                value_out[c] += labels[kv, c] / n_views
+        if heuristic == H1B:
+            return -1
+        for c in range(nc):
+            value_out[c] = labels[chosen, c]
+        return chosen
+    for kl in range(n_labels):
+        if heuristic == H2A:
+            s = np.inf
+            for v in range(n_views):
+                x = robust_log(log_l[v, kl], outlier, n_labels)
+                if x < s:
+                    s = x
+        else:
+            s = 0.0
+            for v in range(n_views):
+                s += robust_log(log_l[v, kl], outlier, n_labels)
+        score[kl] = s + penalty[kl]
+    best = 0
+    for kl in range(1, n_labels):
+        if score[kl] > score[best]:
+            best = kl
+    chosen = best
+    if decision == SAMPLE:
+        top = score[best]
+        total = 0.0
+        for kl in range(n_labels):
+            total += math.exp((score[kl] - top) / tau)
+        target = u * total
+        acc = 0.0
+        chosen = n_labels - 1
+        for kl in range(n_labels):
+            acc += math.exp((score[kl] - top) / tau)
+            if acc >= target:
+                chosen = kl
+                break
+    for c in range(nc):
+        value_out[c] = labels[chosen, c]
+    return chosen
+
+
+@jit
+def site_log_lcpdfs(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune, buffers, log_l):
+    """Per-view log-LCPDF of site (i, j, k) into ``log_l`` (V, K)."""
+    values, trust, dist, weights, nonzero, log_weights = buffers
+    n_views = models.offsets.shape[0]
+    for v in range(n_views):
+        gather_neighbours(volume, temps, i, j, k, models.offsets[v], values, trust)
+        n = models.n_patches[v]
+        neighbour_distances(values, trust, models.patches_t[v], n, dist)
+        log_lcpdf_from_distances(
+            dist, n, models.centre_labels[v], models.labels, models.inv_two_h2[v],
+            models.inv_two_hc2[v], adapt_eps, min_two_h2, prune, models.log_norm_const[v],
+            models.kernel_tables[v],
+            weights, nonzero, log_weights, log_l[v],
+        )
+
+
+@jit
+def make_buffers(models):
+    """Scratch arrays for one thread: values, trust, dist, weights, nonzero, log_weights."""
+    n_m = models.offsets.shape[1]
+    n_labels = models.labels.shape[0]
+    return (
+        np.empty(models.patches_t.shape[1], dtype=np.float32),
+        np.empty(n_m, dtype=np.float32),
+        np.empty(models.patches_t.shape[2], dtype=np.float32),
+        np.zeros(n_labels, dtype=np.float64),
+        np.empty(n_labels, dtype=np.int64),
+        np.empty(n_labels, dtype=np.float64),
+    )
+
+
+CHUNK = 8
+
+
+@jit_parallel
+def icm_update_class(
+    volume, labels_volume, temps, inherited, sites, uniforms, models, heuristic, decision,
+    tau, xi, resynth, adapt_eps, min_two_h2, prune, penalty, outlier, old_labels, new_labels,
+):
+    """Update every site of one colour class (sites never interact, so order is irrelevant).
+
+    ``sites`` (S, 3) int64. A site is visited when its temperature is positive, or when it is
+    inherited and ``resynth`` is set. Its new value is the heuristic's choice; afterwards a
+    non-inherited site cools as ``t_s = max(0, (xi + sum_{r in N_s} t_r) / |N_s|)``.
+    ``old_labels``/``new_labels`` (S,) receive the label indices (-2 where not visited), so the
+    caller can update label counts. Randomness comes only from ``uniforms`` (S,), drawn by the
+    caller before this call: the result does not depend on the number of threads.
+    """
+    n_sites = sites.shape[0]
+    n_views = models.offsets.shape[0]
+    n_labels = models.labels.shape[0]
+    nc = volume.shape[3]
+    n1, n2, n3 = temps.shape
+    n_union = models.union_offsets.shape[0]
+    n_chunks = (n_sites + CHUNK - 1) // CHUNK
+    for chunk in prange(n_chunks):
+        buffers = make_buffers(models)
+        log_l = np.empty((n_views, n_labels), dtype=np.float64)
+        score = np.empty(n_labels, dtype=np.float64)
+        value = np.empty(nc, dtype=np.float32)
+        for q in range(chunk * CHUNK, min(n_sites, (chunk + 1) * CHUNK)):
+            i, j, k = sites[q, 0], sites[q, 1], sites[q, 2]
+            is_inherited = inherited[i, j, k]
+            if not (temps[i, j, k] > 0.0 or (resynth and is_inherited)):
+                old_labels[q] = -2
+                new_labels[q] = -2
+                continue
+            site_log_lcpdfs(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune,
+                            buffers, log_l)
+            chosen = choose_label(log_l, heuristic, decision, tau, uniforms[q], penalty, outlier,
+                                  models.labels, value, score)
+            old_labels[q] = labels_volume[i, j, k]
+            new_labels[q] = chosen
+            labels_volume[i, j, k] = chosen
+            for c in range(nc):
+                volume[i, j, k, c] = value[c]
+            if not is_inherited:
+                total = 0.0
+                for r in range(n_union):
+                    total += temps[(i + models.union_offsets[r, 0]) % n1,
+                                   (j + models.union_offsets[r, 1]) % n2,
+                                   (k + models.union_offsets[r, 2]) % n3]
+                temps[i, j, k] = max(0.0, (xi + total) / n_union)

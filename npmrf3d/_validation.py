@@ -1,0 +1,151 @@
+"""Every user-facing check and its message (STYLE.md practice 7).
+
+Each function checks one parameter and raises :class:`npmrf3d.errors.ParameterError` whose
+message names the parameter, the rule and the value received.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+
+import numpy as np
+
+from .errors import ParameterError
+
+WINDOW_MIN, WINDOW_MAX = 3, 15
+
+
+def fail(message: str):
+    raise ParameterError(message)
+
+
+def choice(parameter: str, value, valid: Iterable[str]) -> str:
+    """Return the canonical spelling of ``value`` among ``valid`` (case-insensitive)."""
+    valid = list(valid)
+    lookup = {v.lower(): v for v in valid}
+    if not isinstance(value, str) or value.lower() not in lookup:
+        fail(f"{parameter} must be one of {', '.join(valid)}; got {value!r}")
+    return lookup[value.lower()]
+
+
+def integer(parameter: str, value, *, low: int | None = None, high: int | None = None) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        fail(f"{parameter} must be an integer; got {value!r}")
+    value = int(value)
+    if (low is not None and value < low) or (high is not None and value > high):
+        bounds = f"between {low} and {high}" if high is not None else f">= {low}"
+        fail(f"{parameter} must be {bounds}; got {value}")
+    return value
+
+
+def real(parameter: str, value, *, low: float | None = None, high: float | None = None,
+         low_open: bool = False, high_open: bool = False) -> float:
+    """A finite float in [low, high] (open ends where asked)."""
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        fail(f"{parameter} must be a number; got {value!r}")
+    bad = not math.isfinite(value)
+    if low is not None:
+        bad |= value <= low if low_open else value < low
+    if high is not None:
+        bad |= value >= high if high_open else value > high
+    if bad:
+        lo = "" if low is None else f"{'(' if low_open else '['}{low}"
+        hi = "" if high is None else f"{high}{')' if high_open else ']'}"
+        rng = f"in {lo or '(-inf'}, {hi or 'inf)'}"
+        fail(f"{parameter} must be a finite number {rng}; got {value}")
+    return value
+
+
+def window(value) -> int:
+    w = integer("window", value)
+    if w % 2 == 0 or not WINDOW_MIN <= w <= WINDOW_MAX:
+        fail(f"window must be an odd integer between {WINDOW_MIN} and {WINDOW_MAX}; got {w}")
+    return w
+
+
+def exemplar_array(array, *, name: str = "exemplar") -> np.ndarray:
+    """Validate and convert an exemplar to float32 ``(H, W, C)``."""
+    a = np.asarray(array)
+    if a.dtype == object or not (np.issubdtype(a.dtype, np.number) or a.dtype == bool):
+        fail(f"{name} must hold numbers; got dtype {a.dtype}")
+    if a.ndim not in (2, 3):
+        fail(f"{name} must be a 2D image (H, W) or (H, W, C); got an array of shape {a.shape}")
+    if a.size == 0:
+        fail(f"{name} is empty; got an array of shape {a.shape}")
+    if a.ndim == 2:
+        a = a[:, :, None]
+    if a.dtype == bool:
+        out = a.astype(np.float32)
+    elif a.dtype == np.uint8:
+        out = a.astype(np.float32) / 255.0
+    elif a.dtype == np.uint16:
+        out = a.astype(np.float32) / 65535.0
+    elif np.issubdtype(a.dtype, np.complexfloating):
+        fail(f"{name} must be real-valued; got dtype {a.dtype}")
+    else:
+        out = a.astype(np.float32)
+    bad = ~np.isfinite(out)
+    if bad.any():
+        fail(f"{name} contains {int(bad.sum())} NaN or Inf values; clean or mask them first")
+    return np.ascontiguousarray(out)
+
+
+def exemplar_fits(exemplar: np.ndarray, *, window: int, levels: int, toroidal: bool, name: str) -> None:
+    """The window must fit in the exemplar at the coarsest level (its decimation phases)."""
+    f = 2 ** (levels - 1)
+    h, w = exemplar.shape[0] // f, exemplar.shape[1] // f
+    need = 1 if toroidal else window
+    if min(h, w) < need:
+        fail(
+            f"{name} of size {exemplar.shape[0]}x{exemplar.shape[1]} is too small for window "
+            f"{window} with {levels} levels: the coarsest level sees {h}x{w} pixels; use a larger "
+            f"exemplar, a smaller window or fewer levels"
+        )
+
+
+def size(value, *, levels: int, window: int) -> tuple[int, int, int]:
+    """Volume size: one int (a cube) or three; divisible by ``2**(levels - 1)``."""
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+        dims = (int(value),) * 3
+    else:
+        try:
+            dims = tuple(int(integer("size", v)) for v in value)
+        except TypeError:
+            fail(f"size must be an integer or three integers; got {value!r}")
+        if len(dims) != 3:
+            fail(f"size must be an integer or three integers; got {value!r}")
+    f = 2 ** (levels - 1)
+    radius = window // 2
+    for n in dims:
+        if n < 1:
+            fail(f"size must be positive; got {value!r}")
+        if n % f:
+            fail(f"size {n} is not divisible by 2**(levels-1) = {f} (levels={levels}); "
+                 f"choose a multiple of {f} or fewer levels")
+        if n // f < radius + 1:
+            fail(f"size {n} is too small for window {window} with {levels} levels: the coarsest "
+                 f"level has {n // f} voxels per side, needs at least {radius + 1}")
+    return dims
+
+
+def views(value, valid: tuple[str, ...]) -> tuple[str, ...]:
+    if isinstance(value, str):
+        value = [v.strip() for v in value.split(",") if v.strip()]
+    value = list(value)
+    if not value:
+        fail(f"views must name 1 to 3 of {', '.join(valid)}; got an empty list")
+    out = tuple(choice("view", v, valid) for v in value)
+    if len(set(out)) != len(out):
+        fail(f"views must not repeat a view; got {', '.join(out)}")
+    return out
+
+
+def rng(value) -> np.random.Generator:
+    if value is None or isinstance(value, (np.random.Generator, int, np.integer)) and not isinstance(value, bool):
+        if isinstance(value, (int, np.integer)) and value < 0:
+            fail(f"seed must be a non-negative integer; got {value}")
+        return np.random.default_rng(value)
+    fail(f"rng must be None, an integer seed or a numpy Generator; got {value!r}")

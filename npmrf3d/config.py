@@ -1,0 +1,115 @@
+"""Frozen run configurations and the result object.
+
+A :class:`SynthesisConfig` is what a run was asked to do, after validation: it is stored in
+``run.json``, compared by the tests and rebuilt by the CLI. :data:`VARIANTS` holds the named
+presets for how voxels decide (SPEC.md section 4, "What the literal method does"): ``literal``
+is the paper word for word (the ablation baseline), ``default`` is the variant chosen by
+measurement (``benchmarks/bench_quality.py``, ``docs/quality.md``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+__all__ = ["DecisionRule", "SynthesisConfig", "SynthesisResult", "VARIANTS"]
+
+
+@dataclass(frozen=True)
+class DecisionRule:
+    """How a visited voxel picks its value (the quality levers of SPEC.md section 4).
+
+    Attributes
+    ----------
+    bandwidth : float
+        Neighbour bandwidth as a factor of ``h_opt`` (used when ``adaptive == 0``).
+    centre_bandwidth : float
+        Centre-value bandwidth ``h_c`` as a factor of ``h_opt`` (1.0 = the paper's single h).
+    adaptive : float
+        If > 0, the neighbour bandwidth is set per site and view to
+        ``2 h^2 = adaptive * D_min`` (relative tolerance around the best-matching patch).
+    decision : {"argmax", "sample"}
+        ``argmax`` is the paper's ICM; ``sample`` draws from ``exp(score / tau)``.
+    tau : float
+        Temperature of the ``sample`` decision.
+    histogram_weight : float
+        Weight of a histogram penalty ``-w * max(0, log(q_k / e_k))`` on labels that the volume
+        already over-uses relative to the exemplar (0 = off, the paper).
+    outlier : float
+        Weight of a uniform term mixed into each view's LCPDF before ML_H2a/ML_H2b combine the
+        views (a robust product of experts; 0 = off, the paper).
+    """
+
+    bandwidth: float = 1.0
+    centre_bandwidth: float = 1.0
+    adaptive: float = 0.0
+    decision: str = "argmax"
+    tau: float = 1.0
+    histogram_weight: float = 0.0
+    outlier: float = 0.0
+
+
+VARIANTS: dict[str, DecisionRule] = {
+    "literal": DecisionRule(),
+    "default": DecisionRule(
+        bandwidth=1.0, centre_bandwidth=0.1, adaptive=0.2, decision="sample", tau=1.0,
+        histogram_weight=1.0,
+    ),
+}
+
+
+@dataclass(frozen=True)
+class SynthesisConfig:
+    """A validated NP-MRF synthesis run (see :func:`npmrf3d.synthesize` for the meaning)."""
+
+    size: tuple[int, int, int]
+    window: int = 7
+    levels: int = 3
+    heuristic: str = "ML_H2b"
+    relaxation: str = "icm"
+    views: tuple[str, ...] = ("front", "right", "top")
+    upsample: str = "1/8"
+    inherit: str = "resynth"
+    xi: float = -3.0
+    stop: float = 0.95
+    max_sweeps: int = 30
+    variant: str = "default"
+    rule: DecisionRule = field(default_factory=DecisionRule)
+    grey_levels: int | None = None
+    palette: int | None = None
+    toroidal_exemplar: bool = False
+    seed: int | None = None
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able dictionary (tuples become lists)."""
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class SynthesisResult:
+    """What :func:`npmrf3d.synthesize` returns.
+
+    Attributes
+    ----------
+    volume : (N1, N2, N3, C) float32 ndarray
+        The synthesized volume, values in the exemplar's units.
+    history : list of list of float
+        Global temperature after each sweep, one list per level (coarsest first); the first
+        entry of each list is the global temperature before the first sweep.
+    config : SynthesisConfig
+        The validated configuration of the run.
+    timings : dict
+        Wall time in seconds per level (``level_2``, ...), ``setup`` and ``total``.
+    labels : (K, C) float32 ndarray
+        The label set used.
+    stats : dict
+        Per-level counts: sweeps, voxel updates, voxel-view LCPDF evaluations.
+    """
+
+    volume: np.ndarray
+    history: list[list[float]]
+    config: SynthesisConfig
+    timings: dict
+    labels: np.ndarray
+    stats: dict

@@ -1,0 +1,279 @@
+"""``synthesize``: the multi-scale NP-MRF sampler behind one function (SPEC.md sections 1-5)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from . import _validation as check
+from ._kernels import _jit
+from .config import VARIANTS, SynthesisConfig, SynthesisResult
+from .exemplar import load_exemplar, make_labels
+from .heuristics import DECISIONS, get_heuristic
+from .neighborhood import VIEWS, colour_classes
+from .parzen import PRUNE, adaptive_floor, build_view_models
+from .pyramid import INHERIT, UPSAMPLING, LevelState, level_shape, random_state, upsample
+from .relax import RELAXATIONS
+
+__all__ = ["synthesize", "make_config"]
+
+ProgressCallback = Callable[[int, int, int, float], None]
+
+
+def make_config(
+    *, size=32, window=7, levels=3, heuristic="ML_H2b", relaxation="icm", views=VIEWS,
+    upsample="1/8", inherit="resynth", xi=-3.0, stop=0.95, max_sweeps=30, variant="default",
+    bandwidth=None, centre_bandwidth=None, adaptive=None, decision=None, tau=None,
+    histogram_weight=None, outlier=None, grey_levels=None, palette=None, toroidal_exemplar=False,
+    seed=None,
+) -> SynthesisConfig:
+    """Validate plain keyword arguments into a frozen :class:`SynthesisConfig`.
+
+    ``variant`` names a preset of :data:`npmrf3d.config.VARIANTS`; the seven rule arguments
+    (``bandwidth`` ... ``outlier``) override single fields of it when not None.
+    """
+    levels = check.integer("levels", levels, low=1, high=8)
+    window = check.window(window)
+    dims = check.size(size, levels=levels, window=window)
+    heuristic = get_heuristic(heuristic).name
+    relaxation = check.choice("relaxation", relaxation, RELAXATIONS)
+    views = check.views(views, VIEWS)
+    upsample = check.choice("upsample", upsample, UPSAMPLING)
+    inherit = check.choice("inherit", inherit, INHERIT)
+    xi = check.real("xi", xi, high=0.0, high_open=True)
+    stop = check.real("stop", stop, low=0.0, high=1.0, low_open=True)
+    max_sweeps = check.integer("max_sweeps", max_sweeps, low=1)
+    variant = check.choice("variant", variant, VARIANTS)
+    rule = VARIANTS[variant]
+    overrides = {}
+    for name, value, low in (("bandwidth", bandwidth, 0.0), ("centre_bandwidth", centre_bandwidth, 0.0),
+                             ("tau", tau, 0.0)):
+        if value is not None:
+            overrides[name] = check.real(name, value, low=low, low_open=True)
+    for name, value in (("adaptive", adaptive), ("histogram_weight", histogram_weight)):
+        if value is not None:
+            overrides[name] = check.real(name, value, low=0.0)
+    if outlier is not None:
+        overrides["outlier"] = check.real("outlier", outlier, low=0.0, high=1.0, high_open=True)
+    if decision is not None:
+        overrides["decision"] = check.choice("decision", decision, DECISIONS)
+    rule = dataclasses.replace(rule, **overrides)
+    if rule.decision == "sample" and heuristic in ("ML_H1a", "ML_H1b"):
+        check.fail(f"decision 'sample' needs a heuristic with an objective (ML_H2a, ML_H2b); "
+                   f"{heuristic} is defined by per-view argmax searches: use decision='argmax'")
+    if grey_levels is not None:
+        grey_levels = check.integer("grey_levels", grey_levels, low=2, high=65536)
+    if palette is not None:
+        palette = check.integer("palette", palette, low=2, high=65536)
+    if seed is not None:
+        seed = check.integer("seed", seed, low=0)
+    return SynthesisConfig(
+        size=dims, window=window, levels=levels, heuristic=heuristic, relaxation=relaxation,
+        views=views, upsample=upsample, inherit=inherit, xi=xi, stop=stop, max_sweeps=max_sweeps,
+        variant=variant, rule=rule, grey_levels=grey_levels, palette=palette,
+        toroidal_exemplar=bool(toroidal_exemplar), seed=seed,
+    )
+
+
+def resolve_exemplars(exemplar, exemplars: dict | None, views: tuple[str, ...], config) -> dict[str, np.ndarray]:
+    """One float32 (H, W, C) exemplar per constrained view, validated against the window."""
+    exemplars = dict(exemplars or {})
+    unknown = set(exemplars) - set(views)
+    if unknown:
+        check.fail(f"exemplars given for views that are not constrained: {', '.join(sorted(unknown))}; "
+                   f"constrained views are {', '.join(views)}")
+    out, cache = {}, {}
+    for v in views:
+        source = exemplars.get(v, exemplar)
+        key = id(source) if not isinstance(source, (str, Path)) else str(source)
+        if key not in cache:
+            cache[key] = load_exemplar(source, name=f"exemplar for view {v}" if v in exemplars else "exemplar")
+        out[v] = cache[key]
+    channels = {a.shape[2] for a in out.values()}
+    if len(channels) > 1:
+        check.fail(f"all exemplars must have the same number of channels; got {sorted(channels)}")
+    for v, a in out.items():
+        check.exemplar_fits(a, window=config.window, levels=config.levels,
+                            toroidal=config.toroidal_exemplar,
+                            name="exemplar" if len(out) == 1 or v not in exemplars else f"exemplar for view {v}")
+    return out
+
+
+def synthesize(
+    exemplar=None, *, size=32, window=7, levels=3, heuristic="ML_H2b", relaxation="icm",
+    views=VIEWS, exemplars: dict | None = None, upsample="1/8", inherit="resynth", xi=-3.0,
+    stop=0.95, max_sweeps=30, variant="default", bandwidth=None, centre_bandwidth=None,
+    adaptive=None, decision=None, tau=None, histogram_weight=None, outlier=None, grey_levels=None,
+    palette=None, toroidal_exemplar=False, rng=None, progress: ProgressCallback | None = None,
+    checkpoint: str | Path | None = None,
+) -> SynthesisResult:
+    """Synthesize a solid texture whose constrained slices look like the exemplar.
+
+    Parameters
+    ----------
+    exemplar : path, (H, W) or (H, W, C) array, or None
+        The 2D sample (None: the bundled default). Used for every constrained view that has no
+        entry in ``exemplars``.
+    size : int or (N1, N2, N3)
+        Output size, divisible by ``2**(levels - 1)``.
+    window : odd int in [3, 15]
+        Side of each view's square neighbourhood.
+    levels : int
+        Number of pyramid levels (the paper's "scales").
+    heuristic : {"ML_H1a", "ML_H1b", "ML_H2a", "ML_H2b"}
+    relaxation : {"icm"}
+    views : sequence of {"front", "right", "top"} (or a comma-separated string)
+        Constrained views; see :mod:`npmrf3d.neighborhood` for the axis mapping.
+    exemplars : dict view -> exemplar, optional
+        A different exemplar for some views.
+    upsample : {"1/8", "8/8"}
+        How a level initialises the next finer one (SPEC.md section 5).
+    inherit : {"resynth", "fixed"}
+        Whether inherited voxels may still change (their temperature stays 0 either way).
+    xi : float < 0
+        ICM cooling step.
+    stop : float in (0, 1]
+        Stop a level once the global temperature fell by this fraction (1: down to 0).
+    max_sweeps : int
+        Hard limit of sweeps per level.
+    variant : {"default", "literal"}
+        Preset of the decision rule (:data:`npmrf3d.config.VARIANTS`); ``literal`` is the paper
+        word for word, ``default`` the variant chosen by measurement (docs/quality.md).
+    bandwidth, centre_bandwidth, adaptive, decision, tau, histogram_weight, outlier : optional
+        Override single fields of the preset (:class:`npmrf3d.config.DecisionRule`).
+    grey_levels : int, optional
+        Re-quantise the exemplar to this many levels per channel.
+    palette : int, optional
+        Reduce the exemplar to at most this many colours (k-means).
+    toroidal_exemplar : bool
+        Let exemplar patches wrap around its borders.
+    rng : None, int or numpy Generator
+        Seed; the result depends on it only (not on the number of threads).
+    progress : callable, optional
+        Called as ``progress(level, sweep, max_sweeps, global_temperature)`` before the first
+        sweep of each level (``sweep = 0``) and after every sweep.
+    checkpoint : path, optional
+        A ``.npz`` file written after each level; if it exists and holds a checkpoint of the
+        same configuration, synthesis resumes after its last finished level.
+
+    Returns
+    -------
+    SynthesisResult
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> stripes = np.tile(np.array([0, 0, 1, 1], dtype=np.uint8) * 255, (16, 4))
+    >>> res = synthesize(stripes, size=8, window=3, levels=1, views="front", rng=0)
+    >>> res.volume.shape
+    (8, 8, 8, 1)
+    """
+    t_start = time.perf_counter()
+    seed = rng if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) else None
+    config = make_config(
+        size=size, window=window, levels=levels, heuristic=heuristic, relaxation=relaxation,
+        views=views, upsample=upsample, inherit=inherit, xi=xi, stop=stop, max_sweeps=max_sweeps,
+        variant=variant, bandwidth=bandwidth, centre_bandwidth=centre_bandwidth, adaptive=adaptive,
+        decision=decision, tau=tau, histogram_weight=histogram_weight, outlier=outlier,
+        grey_levels=grey_levels,
+        palette=palette, toroidal_exemplar=toroidal_exemplar, seed=seed,
+    )
+    generator = check.rng(rng)
+    per_view = resolve_exemplars(exemplar, exemplars, config.views, config)
+    return run(config, per_view, generator, progress=progress, checkpoint=checkpoint, t_start=t_start)
+
+
+def run(config: SynthesisConfig, per_view: dict[str, np.ndarray], rng: np.random.Generator, *,
+        progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
+        t_start: float | None = None) -> SynthesisResult:
+    """Run a validated configuration on validated exemplars (the body of :func:`synthesize`)."""
+    t_start = time.perf_counter() if t_start is None else t_start
+    distinct = {id(a): a for a in per_view.values()}
+    labels, images = make_labels(list(distinct.values()), grey_levels=config.grey_levels,
+                                 palette=config.palette, rng=rng)
+    image_of = dict(zip(distinct, images))
+    label_images = {v: image_of[id(a)] for v, a in per_view.items()}
+    label_freq = np.bincount(np.concatenate([im.ravel() for im in images]), minlength=len(labels))
+    label_freq = label_freq / label_freq.sum()
+    rule = config.rule
+    heuristic = get_heuristic(config.heuristic)
+    timings = {"setup": time.perf_counter() - t_start}
+    history: list[list[float]] = []
+    stats: dict = {"threads": _jit.thread_count(), "levels": {}}
+    state: LevelState | None = None
+    first_level = config.levels - 1
+    resumed = _load_checkpoint(checkpoint, config, labels)
+    if resumed is not None:
+        state, done_level, rng_state, history, timings, stats = resumed
+        rng.bit_generator.state = rng_state
+        first_level = done_level - 1
+    for level in range(first_level, -1, -1):
+        t0 = time.perf_counter()
+        shape = level_shape(config.size, level)
+        if state is None:
+            state = random_state(shape, labels, label_freq, rng)
+        else:
+            state = upsample(state, config.upsample, labels, label_freq, rng)
+        models, info = build_view_models(label_images, labels, window=config.window, level=level,
+                                         rule=rule, toroidal=config.toroidal_exemplar)
+        classes = colour_classes(shape, config.window)
+
+        def on_sweep(sweep, temperature, level=level):
+            if progress is not None:
+                progress(level, sweep, config.max_sweeps, temperature)
+
+        if progress is not None:
+            progress(level, 0, config.max_sweeps, float(state.temps.sum(dtype=np.float64)))
+        level_history, level_stats = RELAXATIONS[config.relaxation](
+            state.volume, state.labels_volume, state.temps, state.inherited, models, classes,
+            heuristic=heuristic.code, decision=DECISIONS[rule.decision], tau=rule.tau, xi=config.xi,
+            stop=config.stop, max_sweeps=config.max_sweeps, resynth=config.inherit == "resynth",
+            adaptive=rule.adaptive, min_two_h2=adaptive_floor(info), prune=PRUNE,
+            histogram_weight=rule.histogram_weight, outlier=rule.outlier, exemplar_freq=label_freq, rng=rng,
+            on_sweep=on_sweep,
+        )
+        history.append(level_history)
+        timings[f"level_{level}"] = time.perf_counter() - t0
+        stats["levels"][f"level_{level}"] = {**level_stats, "shape": list(shape),
+                                              "classes": len(classes), "views": info}
+        if checkpoint is not None:
+            _save_checkpoint(checkpoint, config, labels, state, level, rng, history, timings, stats)
+    timings["total"] = time.perf_counter() - t_start
+    return SynthesisResult(volume=state.volume, history=history, config=config, timings=timings,
+                           labels=labels, stats=stats)
+
+
+def _config_key(config: SynthesisConfig) -> str:
+    return json.dumps(config.to_dict(), sort_keys=True, default=str)
+
+
+def _save_checkpoint(path, config, labels, state, level, rng, history, timings, stats) -> None:
+    from .io import save_checkpoint
+
+    save_checkpoint(
+        path, config=_config_key(config), labels=labels, volume=state.volume,
+        labels_volume=state.labels_volume, temps=state.temps, inherited=state.inherited,
+        level=level, rng_state=json.dumps(rng.bit_generator.state),
+        history=json.dumps(history), timings=json.dumps(timings), stats=json.dumps(stats, default=str),
+    )
+
+
+def _load_checkpoint(path, config, labels):
+    """State after the last finished level, or None when there is nothing (matching) to resume."""
+    if path is None or not Path(path).exists():
+        return None
+    from .io import load_checkpoint
+
+    data = load_checkpoint(path)
+    if str(data["config"]) != _config_key(config) or not np.array_equal(data["labels"], labels):
+        check.fail(f"checkpoint '{path}' was written by a different configuration or exemplar; "
+                   f"delete it or choose another checkpoint path")
+    state = LevelState(data["volume"], data["labels_volume"], data["temps"], data["inherited"])
+    return (state, int(data["level"]), json.loads(str(data["rng_state"])),
+            json.loads(str(data["history"])), json.loads(str(data["timings"])),
+            json.loads(str(data["stats"])))
