@@ -125,7 +125,7 @@ def adaptive_floor(info: dict) -> float:
 
 def log_lcpdf(
     volume: np.ndarray, temps: np.ndarray, site: tuple[int, int, int], models: ViewModels, *,
-    adaptive: float = 0.0, min_two_h2: float = 0.0, prune: float = PRUNE,
+    adaptive: float = 0.0, min_two_h2: float = 0.0, prune: float = PRUNE, exact_tail: bool = True,
 ) -> np.ndarray:
     """Per-view log-LCPDF ``log L_v(lam_k)`` of one site over all labels.
 
@@ -139,6 +139,9 @@ def log_lcpdf(
         Per-site bandwidth ``2h^2 = max(adaptive * D_min, min_two_h2)`` when ``adaptive > 0``.
     prune : float
         Skip patches whose log weight is more than this below the best (``np.inf`` keeps all).
+    exact_tail : bool
+        If False, labels whose density underflows float64 get ``log(1e-280) - log Z`` instead of
+        their exact log-domain value (what the sampler uses when an outlier term hides them).
 
     Returns
     -------
@@ -148,5 +151,6 @@ def log_lcpdf(
     i, j, k = (int(x) for x in site)
     site_log_lcpdfs(np.ascontiguousarray(volume, dtype=np.float32),
                     np.ascontiguousarray(temps, dtype=np.float32), i, j, k, models,
-                    float(adaptive), float(min_two_h2), float(prune), make_buffers(models), out)
+                    float(adaptive), float(min_two_h2), float(prune), bool(exact_tail),
+                    make_buffers(models), out)
     return out

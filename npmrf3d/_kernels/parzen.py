@@ -26,6 +26,9 @@ import numpy as np
 
 from ._jit import jit
 
+#: log(1e-280): the value of an underflowing label sum when the exact tail is not needed.
+TAIL_LOG = math.log(1e-280)
+
 
 @jit
 def gather_neighbours(volume, temps, i, j, k, offsets, values, trust):
@@ -50,34 +53,55 @@ def neighbour_distances(values, trust, patches_t, n_patches, dist):
     """``dist[p] = sum_m trust[m] * sum_c (values[m*C+c] - patches_t[m*C+c, p])**2``.
 
     ``patches_t`` is the transposed patch matrix (M*C, n_max), so the inner loop runs over
-    contiguous patches and vectorises.
+    contiguous patches and vectorises; four rows are folded into each pass over ``dist`` to
+    halve its loads and stores. Rows of neighbours with zero trust are skipped.
     """
     n_m = trust.shape[0]
     nc = values.shape[0] // n_m
+    rows = np.empty(values.shape[0], dtype=np.int64)
+    n_rows = 0
+    for m in range(n_m):
+        if trust[m] != 0.0:
+            for c in range(nc):
+                rows[n_rows] = m * nc + c
+                n_rows += 1
     for p in range(n_patches):
         dist[p] = 0.0
-    for m in range(n_m):
-        a = trust[m]
-        if a == 0.0:
-            continue
-        for c in range(nc):
-            x = values[m * nc + c]
-            row = patches_t[m * nc + c]
-            for p in range(n_patches):
-                d = x - row[p]
-                dist[p] += a * d * d
+    q = 0
+    while q + 4 <= n_rows:
+        q0, q1, q2, q3 = rows[q], rows[q + 1], rows[q + 2], rows[q + 3]
+        x0, x1, x2, x3 = values[q0], values[q1], values[q2], values[q3]
+        a0, a1, a2, a3 = trust[q0 // nc], trust[q1 // nc], trust[q2 // nc], trust[q3 // nc]
+        r0, r1, r2, r3 = patches_t[q0], patches_t[q1], patches_t[q2], patches_t[q3]
+        for p in range(n_patches):
+            d0 = x0 - r0[p]
+            d1 = x1 - r1[p]
+            d2 = x2 - r2[p]
+            d3 = x3 - r3[p]
+            dist[p] += (a0 * d0 * d0 + a1 * d1 * d1) + (a2 * d2 * d2 + a3 * d3 * d3)
+        q += 4
+    while q < n_rows:
+        x0 = values[rows[q]]
+        a0 = trust[rows[q] // nc]
+        r0 = patches_t[rows[q]]
+        for p in range(n_patches):
+            d0 = x0 - r0[p]
+            dist[p] += a0 * d0 * d0
+        q += 1
 
 
 @jit
 def log_lcpdf_from_distances(
     dist, n_patches, centre_labels, labels, inv_two_h2, inv_two_hc2, adapt_eps,
-    min_two_h2, prune, log_norm_const, kernel_table, weights, nonzero, log_weights, out,
+    min_two_h2, prune, log_norm_const, kernel_table, exact_tail, weights, nonzero, log_weights, out,
 ):
     """Turn neighbour distances into the log-LCPDF over all labels (see module docstring).
 
     ``kernel_table`` (K, K) holds ``exp(-||lam_j - lam_k||^2 / (2 h_c^2))`` (or is (0, 0):
     then every term is computed in the log domain); where the table's sum underflows the
-    label falls back to the log domain, so both paths give the same result.
+    label falls back to the log domain, so both paths give the same result. With
+    ``exact_tail`` False such labels get ``log(1e-280) - log Z`` instead (for callers that mix
+    a uniform outlier term into the LCPDF, where anything below ~e^-50 is invisible).
     ``weights`` (K,) must be all zero on entry and is all zero again on exit; ``nonzero`` and
     ``log_weights`` are scratch (K,). Writes ``out`` (K,) and returns the number of distinct
     centre labels that carried weight.
@@ -93,12 +117,16 @@ def log_lcpdf_from_distances(
     n_nz = 0
     for p in range(n_patches):
         lw = -(dist[p] - d_min) * inv
-        if lw >= -prune:
-            lab = centre_labels[p]
-            if weights[lab] == 0.0:
-                nonzero[n_nz] = lab
-                n_nz += 1
-            weights[lab] += math.exp(lw)
+        if lw < -prune:
+            continue
+        wp = math.exp(lw)
+        if wp == 0.0:  # underflow: contributes nothing (and must not mark its label as seen)
+            continue
+        lab = centre_labels[p]
+        if weights[lab] == 0.0:
+            nonzero[n_nz] = lab
+            n_nz += 1
+        weights[lab] += wp
     # normaliser: log sum_j W_j c_j
     top = -np.inf
     for a in range(n_nz):
@@ -111,17 +139,24 @@ def log_lcpdf_from_distances(
     for a in range(n_nz):
         acc += math.exp(log_weights[a] + log_norm_const[nonzero[a]] - top)
     log_z = top + math.log(acc)
-    use_table = kernel_table.shape[0] == n_labels
+    # linear domain with the kernel table (1 <= max W_j <= n, so no overflow); out holds sums
     for kl in range(n_labels):
-        s = 0.0
-        if use_table:  # linear domain (1 <= max W_j <= n): no exp per term
-            for a in range(n_nz):
-                jl = nonzero[a]
-                s += weights[jl] * kernel_table[jl, kl]
-        if s > 1e-280:
-            out[kl] = math.log(s) - log_z
+        out[kl] = 0.0
+    if kernel_table.shape[0] == n_labels:
+        for a in range(n_nz):
+            jl = nonzero[a]
+            w = weights[jl]
+            row = kernel_table[jl]
+            for kl in range(n_labels):
+                out[kl] += w * row[kl]
+    for kl in range(n_labels):
+        if out[kl] > 1e-280:
+            out[kl] = math.log(out[kl]) - log_z
             continue
-        # log domain (sharp centre kernel or underflow): log-sum-exp over the labels with weight
+        if not exact_tail:
+            out[kl] = TAIL_LOG - log_z
+            continue
+        # log domain (no table, or the sum underflows): log-sum-exp over the weighted labels
         best = -np.inf
         for a in range(n_nz):
             jl = nonzero[a]
@@ -132,14 +167,15 @@ def log_lcpdf_from_distances(
             v = log_weights[a] - d2 * inv_two_hc2
             if v > best:
                 best = v
+        acc = 0.0
         for a in range(n_nz):
             jl = nonzero[a]
             d2 = 0.0
             for c in range(nc):
                 d = labels[jl, c] - labels[kl, c]
                 d2 += d * d
-            s += math.exp(log_weights[a] - d2 * inv_two_hc2 - best)
-        out[kl] = best + math.log(s) - log_z
+            acc += math.exp(log_weights[a] - d2 * inv_two_hc2 - best)
+        out[kl] = best + math.log(acc) - log_z
     for a in range(n_nz):
         weights[nonzero[a]] = 0.0
     return n_nz

@@ -117,10 +117,10 @@ def choose_label(log_l, heuristic, decision, tau, u, penalty, outlier, labels, v
             total += math.exp((score[kl] - top) / tau)
         target = u * total
         acc = 0.0
-        chosen = n_labels - 1
+        chosen = best  # reached only if rounding leaves acc <= target at the end
         for kl in range(n_labels):
             acc += math.exp((score[kl] - top) / tau)
-            if acc >= target:
+            if acc > target:
                 chosen = kl
                 break
     for c in range(nc):
@@ -129,7 +129,8 @@ def choose_label(log_l, heuristic, decision, tau, u, penalty, outlier, labels, v
 
 
 @jit
-def site_log_lcpdfs(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune, buffers, log_l):
+def site_log_lcpdfs(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune, exact_tail,
+                    buffers, log_l):
     """Per-view log-LCPDF of site (i, j, k) into ``log_l`` (V, K)."""
     values, trust, dist, weights, nonzero, log_weights = buffers
     n_views = models.offsets.shape[0]
@@ -140,7 +141,7 @@ def site_log_lcpdfs(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune
         log_lcpdf_from_distances(
             dist, n, models.centre_labels[v], models.labels, models.inv_two_h2[v],
             models.inv_two_hc2[v], adapt_eps, min_two_h2, prune, models.log_norm_const[v],
-            models.kernel_tables[v],
+            models.kernel_tables[v], exact_tail,
             weights, nonzero, log_weights, log_l[v],
         )
 
@@ -197,7 +198,7 @@ def icm_update_class(
                 new_labels[q] = -2
                 continue
             site_log_lcpdfs(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune,
-                            buffers, log_l)
+                            outlier <= 0.0, buffers, log_l)
             chosen = choose_label(log_l, heuristic, decision, tau, uniforms[q], penalty, outlier,
                                   models.labels, value, score)
             old_labels[q] = labels_volume[i, j, k]

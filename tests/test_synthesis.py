@@ -1,0 +1,147 @@
+"""End-to-end behaviour of the sampler: determinism, stopping, inheritance, patterns, resume."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+import npmrf3d
+from npmrf3d import metrics
+from npmrf3d.config import VARIANTS
+from npmrf3d.exemplar import make_labels
+from npmrf3d.heuristics import DECISIONS, get_heuristic
+from npmrf3d.neighborhood import colour_classes
+from npmrf3d.parzen import PRUNE, adaptive_floor, build_view_models
+from npmrf3d.pyramid import random_state, upsample
+from npmrf3d.relax import relax_icm
+
+
+def checkerboard(side: int = 24, block: int = 2) -> np.ndarray:
+    """A 2D checkerboard of period ``2 * block``; every axis-aligned slice of the 3D
+    checkerboard ``((i//b) + (j//b) + (k//b)) % 2`` is a shifted copy of it."""
+    r = np.arange(side) // block
+    return (((r[:, None] + r[None, :]) % 2) * 255).astype(np.uint8)
+
+
+def lag_correlation(volume: np.ndarray, view: str, lag: int) -> float:
+    """Mean normalised autocorrelation of the view's slices at lags (0, lag) and (lag, 0)."""
+    ac = metrics.autocorrelation(metrics.view_slices(volume, view)[..., 0], lag)
+    return float((ac[lag, 2 * lag] + ac[2 * lag, lag]) / 2)
+
+
+SMALL = dict(size=16, window=5, levels=2)
+
+
+def test_same_seed_same_volume_and_different_seed_differs():
+    a = npmrf3d.synthesize(checkerboard(), rng=3, **SMALL).volume
+    b = npmrf3d.synthesize(checkerboard(), rng=3, **SMALL).volume
+    c = npmrf3d.synthesize(checkerboard(), rng=4, **SMALL).volume
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, c)
+
+
+@pytest.mark.slow
+def test_volume_does_not_depend_on_thread_count(tmp_path):
+    script = textwrap.dedent(
+        """
+        import sys, numpy as np, numba, npmrf3d
+        assert numba.get_num_threads() == int(sys.argv[2])
+        res = npmrf3d.synthesize(None, size=16, window=5, levels=2, rng=11)
+        np.save(sys.argv[1], res.volume)
+        """
+    )
+    volumes = []
+    for threads in (1, 2):
+        out = tmp_path / f"v{threads}.npy"
+        env = {**os.environ, "NUMBA_NUM_THREADS": str(threads)}
+        subprocess.run([sys.executable, "-c", script, str(out), str(threads)], check=True, env=env)
+        volumes.append(np.load(out))
+    np.testing.assert_array_equal(volumes[0], volumes[1])
+
+
+def _level_setup(window=5, shape=(16, 16, 16), seed=0):
+    rng = np.random.default_rng(seed)
+    ex = npmrf3d.load_exemplar(None)[:32, :32]
+    labels, (image,) = make_labels([ex], rng=rng)
+    freq = np.bincount(image.ravel(), minlength=len(labels)) / image.size
+    rule = VARIANTS["default"]
+    models, info = build_view_models({"front": image, "right": image, "top": image}, labels,
+                                     window=window, level=0, rule=rule)
+    parent = random_state(tuple(n // 2 for n in shape), labels, freq, rng)
+    state = upsample(parent, "1/8", labels, freq, rng)
+    kwargs = dict(heuristic=get_heuristic("ML_H2b").code, decision=DECISIONS[rule.decision],
+                  tau=rule.tau, xi=-3.0, max_sweeps=30, adaptive=rule.adaptive,
+                  min_two_h2=adaptive_floor(info), prune=PRUNE,
+                  histogram_weight=rule.histogram_weight, outlier=rule.outlier,
+                  exemplar_freq=freq, rng=rng)
+    return state, models, colour_classes(shape, window), kwargs
+
+
+@pytest.mark.parametrize("stop", [0.5, 0.95])
+def test_icm_stops_at_the_requested_fraction(stop):
+    state, models, classes, kwargs = _level_setup()
+    history, stats = relax_icm(state.volume, state.labels_volume, state.temps, state.inherited,
+                               models, classes, stop=stop, resynth=True, **kwargs)
+    initial = history[0]
+    assert history[-1] <= (1 - stop) * initial
+    assert all(t > (1 - stop) * initial for t in history[:-1])
+    assert stats["sweeps"] == len(history) - 1
+
+
+@pytest.mark.parametrize("resynth", [False, True])
+def test_fixed_keeps_inherited_voxels_and_resynth_may_change_them(resynth):
+    state, models, classes, kwargs = _level_setup()
+    before = state.volume[state.inherited].copy()
+    temps_before = state.temps[state.inherited].copy()
+    relax_icm(state.volume, state.labels_volume, state.temps, state.inherited, models, classes,
+              stop=0.95, resynth=resynth, **kwargs)
+    after = state.volume[state.inherited]
+    assert np.all(state.temps[state.inherited] == temps_before)  # temperature stays 0
+    if resynth:
+        assert not np.array_equal(before, after)
+    else:
+        np.testing.assert_array_equal(before, after)
+
+
+@pytest.mark.parametrize("variant", ["default"])
+def test_checkerboard_period_appears_in_every_constrained_view(variant):
+    """A sampler that ignores its neighbours gives ~0 correlation at every lag; the pattern
+    of period 4 gives +1 at lag 4 and -1 at lag 2."""
+    res = npmrf3d.synthesize(checkerboard(), size=16, window=5, levels=2, heuristic="ML_H2b",
+                             variant=variant, rng=0)
+    for view in ("front", "right", "top"):
+        assert lag_correlation(res.volume, view, 4) > 0.5, view
+        assert lag_correlation(res.volume, view, 2) < -0.3, view
+
+
+def test_structureless_control_fails_the_checkerboard_check():
+    """The check above can fail: voxels drawn independently from the exemplar."""
+    rng = np.random.default_rng(0)
+    control = rng.choice([0.0, 1.0], size=(16, 16, 16, 1)).astype(np.float32)
+    assert lag_correlation(control, "front", 4) < 0.3
+
+
+def test_resume_from_checkpoint_gives_the_uninterrupted_result(tmp_path):
+    path = tmp_path / "run.npz"
+    full = npmrf3d.synthesize(None, size=16, window=5, levels=2, rng=5).volume
+
+    class Stop(Exception):
+        pass
+
+    def interrupt(level, sweep, max_sweeps, temperature):
+        if level == 0 and sweep == 1:
+            raise Stop
+
+    with pytest.raises(Stop):
+        npmrf3d.synthesize(None, size=16, window=5, levels=2, rng=5, progress=interrupt,
+                           checkpoint=path)
+    assert path.exists()
+    resumed = npmrf3d.synthesize(None, size=16, window=5, levels=2, rng=5, checkpoint=path)
+    np.testing.assert_array_equal(full, resumed.volume)
+    with pytest.raises(npmrf3d.ParameterError, match="different configuration"):
+        npmrf3d.synthesize(None, size=16, window=3, levels=2, rng=5, checkpoint=path)
