@@ -165,6 +165,11 @@ def build_parser() -> argparse.ArgumentParser:
         help=_rule_help("weight of the penalty on labels the volume over-uses relative to the "
                         "exemplar, >= 0 (0 = off)", "histogram_weight"),
     )
+    method.add_argument(
+        "--outlier", type=float, default=None, metavar="A",
+        help=_rule_help("weight of a uniform term mixed into each view's density before "
+                        "ML_H2a/ML_H2b combine the views, in [0, 1) (0 = off, the paper)", "outlier"),
+    )
 
     views = synth.add_argument_group("views and exemplars")
     views.add_argument(
@@ -328,7 +333,8 @@ def _synth(args: argparse.Namespace, argv: list[str]) -> int:
         upsample=args.upsample, inherit=args.inherit, xi=args.xi, stop=args.stop,
         max_sweeps=args.max_sweeps, variant=args.variant, bandwidth=args.bandwidth,
         centre_bandwidth=args.centre_bandwidth, adaptive=args.adaptive, decision=args.decision,
-        tau=args.tau, histogram_weight=args.histogram_weight, grey_levels=args.grey_levels,
+        tau=args.tau, histogram_weight=args.histogram_weight, outlier=args.outlier,
+        grey_levels=args.grey_levels,
         palette=args.palette, toroidal_exemplar=args.toroidal_exemplar, seed=args.seed,
     )
     if not args.out.strip():

@@ -53,8 +53,8 @@ class DecisionRule:
 VARIANTS: dict[str, DecisionRule] = {
     "literal": DecisionRule(),
     "default": DecisionRule(
-        bandwidth=1.0, centre_bandwidth=0.1, adaptive=0.2, decision="sample", tau=1.0,
-        histogram_weight=1.0,
+        bandwidth=0.2, centre_bandwidth=0.1, adaptive=0.0, decision="sample", tau=0.1,
+        histogram_weight=8.0, outlier=0.01,
     ),
 }
 

@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from ._jit import jit
+from ._jit import jit, jit_contract
 
 #: log(1e-280): the value of an underflowing label sum when the exact tail is not needed.
 TAIL_LOG = math.log(1e-280)
@@ -48,7 +48,7 @@ def gather_neighbours(volume, temps, i, j, k, offsets, values, trust):
             values[m * nc + c] = volume[ii, jj, kk, c]
 
 
-@jit
+@jit_contract
 def neighbour_distances(values, trust, patches_t, n_patches, dist):
     """``dist[p] = sum_m trust[m] * sum_c (values[m*C+c] - patches_t[m*C+c, p])**2``.
 
