@@ -55,7 +55,7 @@ def get_heuristic(name: str) -> Heuristic:
 
 def choose(log_l: np.ndarray, labels: np.ndarray, heuristic: str = "ML_H2b", *,
            decision: str = "argmax", tau: float = 1.0, u: float = 0.5,
-           penalty: np.ndarray | None = None, outlier: float = 0.0) -> tuple[int, np.ndarray]:
+           penalty: np.ndarray | None = None) -> tuple[int, np.ndarray]:
     """Apply a heuristic to per-view log-LCPDFs.
 
     Parameters
@@ -70,9 +70,6 @@ def choose(log_l: np.ndarray, labels: np.ndarray, heuristic: str = "ML_H2b", *,
         The uniform number a ``sample`` decision consumes.
     penalty : (K,) ndarray, optional
         Added to the ML_H2a/ML_H2b score.
-    outlier : float in [0, 1)
-        Weight of the uniform term mixed into each view's LCPDF before ML_H2a/ML_H2b combine
-        them (0 = the paper).
 
     Returns
     -------
@@ -85,7 +82,7 @@ def choose(log_l: np.ndarray, labels: np.ndarray, heuristic: str = "ML_H2b", *,
     penalty = np.zeros(n_labels) if penalty is None else np.asarray(penalty, dtype=np.float64)
     value = np.empty(labels.shape[1], dtype=np.float32)
     label = _relax.choose_label(np.ascontiguousarray(log_l, dtype=np.float64), h.code, code,
-                                float(tau), float(u), penalty, float(outlier),
+                                float(tau), float(u), penalty,
                                 np.ascontiguousarray(labels, dtype=np.float32), value,
                                 np.empty(n_labels))
     return int(label), value

@@ -39,7 +39,7 @@ def h_opt(sigma: float, n: int, d: int) -> float:
     Examples
     --------
     >>> round(h_opt(1.0, 3364, 49), 4)
-    0.8235
+    0.8177
     """
     return float(sigma) * (4.0 / (n * (d + 2.0))) ** (1.0 / (d + 4.0))
 
@@ -125,7 +125,7 @@ def adaptive_floor(info: dict) -> float:
 
 def log_lcpdf(
     volume: np.ndarray, temps: np.ndarray, site: tuple[int, int, int], models: ViewModels, *,
-    adaptive: float = 0.0, min_two_h2: float = 0.0, prune: float = PRUNE, exact_tail: bool = True,
+    adaptive: float = 0.0, min_two_h2: float = 0.0, prune: float = PRUNE, outlier: float = 0.0,
 ) -> np.ndarray:
     """Per-view log-LCPDF ``log L_v(lam_k)`` of one site over all labels.
 
@@ -139,18 +139,18 @@ def log_lcpdf(
         Per-site bandwidth ``2h^2 = max(adaptive * D_min, min_two_h2)`` when ``adaptive > 0``.
     prune : float
         Skip patches whose log weight is more than this below the best (``np.inf`` keeps all).
-    exact_tail : bool
-        If False, labels whose density underflows float64 get ``log(1e-280) - log Z`` instead of
-        their exact log-domain value (what the sampler uses when an outlier term hides them).
+    outlier : float in [0, 1)
+        If > 0, return the robust ``log((1 - outlier) L + outlier / K)`` instead (the default
+        sampler's per-view density, :class:`npmrf3d.config.DecisionRule`).
 
     Returns
     -------
-    (V, K) float64 ndarray; ``exp`` of each row sums to 1.
+    (V, K) float64 ndarray; ``exp`` of each row sums to 1 (also with ``outlier``).
     """
     out = np.empty((models.offsets.shape[0], models.labels.shape[0]), dtype=np.float64)
     i, j, k = (int(x) for x in site)
     site_log_lcpdfs(np.ascontiguousarray(volume, dtype=np.float32),
                     np.ascontiguousarray(temps, dtype=np.float32), i, j, k, models,
-                    float(adaptive), float(min_two_h2), float(prune), bool(exact_tail),
+                    float(adaptive), float(min_two_h2), float(prune), float(outlier),
                     make_buffers(models), out)
     return out

@@ -454,3 +454,29 @@ def test_prune_inf_survives_underflowing_weights():
                           env={**os.environ, "PYTHONPATH": str(root)})
     assert proc.returncode == 0, f"rc={proc.returncode}\n{proc.stdout}\n{proc.stderr[-2000:]}"
     assert proc.stdout.strip().endswith("ok")
+
+
+# --------------------------------------------------------------------------- robust (outlier) LCPDF
+
+
+@pytest.mark.parametrize("table", [True, False])
+@pytest.mark.parametrize("channels", [1, 3])
+def test_outlier_mixture_equals_the_mixed_naive_lcpdf(compiled, monkeypatch, table, channels):
+    """``outlier = a`` gives ``log((1 - a) L + a / K)`` of the naive LCPDF, with the kernel
+    table and without it, and also where the sharp centre kernel makes ``L`` underflow."""
+    if not table:
+        monkeypatch.setattr(parzen, "KERNEL_TABLE_BYTES", 0)
+    rng = np.random.default_rng(71 + channels)
+    views = ("front", "right", "top")
+    rule = DecisionRule(bandwidth=0.5, centre_bandwidth=0.01)
+    labels, _, models, _, ref = make_case(rng, channels=channels, window=3, views=views,
+                                          distinct_exemplars=False, rule=rule)
+    assert (models.kernel_tables.shape[1] > 0) == table
+    volume, temps, site = random_volume(rng, labels, (6, 6, 6), "random")
+    expected, spread = naive_for(views, ref, volume, temps, site, labels)
+    a = 0.05
+    mixed = np.log((1 - a) * np.exp(expected) + a / len(labels))
+    got = exact_log_lcpdf(volume, temps, site, models, spread, outlier=a)
+    np.testing.assert_allclose(np.exp(got).sum(axis=1), 1.0, rtol=1e-9)
+    np.testing.assert_allclose(got, mixed, rtol=1e-5, atol=1e-7)
+    assert got.min() >= np.log(a / len(labels)) - 1e-9

@@ -26,9 +26,6 @@ import numpy as np
 
 from ._jit import jit, jit_contract
 
-#: log(1e-280): the value of an underflowing label sum when the exact tail is not needed.
-TAIL_LOG = math.log(1e-280)
-
 
 @jit
 def gather_neighbours(volume, temps, i, j, k, offsets, values, trust):
@@ -93,15 +90,18 @@ def neighbour_distances(values, trust, patches_t, n_patches, dist):
 @jit
 def log_lcpdf_from_distances(
     dist, n_patches, centre_labels, labels, inv_two_h2, inv_two_hc2, adapt_eps,
-    min_two_h2, prune, log_norm_const, kernel_table, exact_tail, weights, nonzero, log_weights, out,
+    min_two_h2, prune, log_norm_const, kernel_table, outlier, weights, nonzero, log_weights, out,
 ):
     """Turn neighbour distances into the log-LCPDF over all labels (see module docstring).
 
     ``kernel_table`` (K, K) holds ``exp(-||lam_j - lam_k||^2 / (2 h_c^2))`` (or is (0, 0):
     then every term is computed in the log domain); where the table's sum underflows the
-    label falls back to the log domain, so both paths give the same result. With
-    ``exact_tail`` False such labels get ``log(1e-280) - log Z`` instead (for callers that mix
-    a uniform outlier term into the LCPDF, where anything below ~e^-50 is invisible).
+    label falls back to the log domain, so both paths give the same result.
+
+    With ``outlier = a > 0`` the result is the robust LCPDF ``log((1 - a) L(k) + a / K)``: each
+    view keeps a uniform share ``a``, so in a product of views one view cannot veto a value
+    the others agree on. Labels whose ``L(k)`` underflows float64 then get ``log(a / K)``
+    (exact to ~1e-270 relative), which spares the log-domain fallback.
     ``weights`` (K,) must be all zero on entry and is all zero again on exit; ``nonzero`` and
     ``log_weights`` are scratch (K,). Writes ``out`` (K,) and returns the number of distinct
     centre labels that carried weight.
@@ -149,12 +149,17 @@ def log_lcpdf_from_distances(
             row = kernel_table[jl]
             for kl in range(n_labels):
                 out[kl] += w * row[kl]
+    if outlier > 0.0 and kernel_table.shape[0] == n_labels:
+        scale = (1.0 - outlier) / math.exp(log_z)
+        floor = outlier / n_labels
+        for kl in range(n_labels):
+            out[kl] = math.log(out[kl] * scale + floor)
+        for a in range(n_nz):
+            weights[nonzero[a]] = 0.0
+        return n_nz
     for kl in range(n_labels):
         if out[kl] > 1e-280:
             out[kl] = math.log(out[kl]) - log_z
-            continue
-        if not exact_tail:
-            out[kl] = TAIL_LOG - log_z
             continue
         # log domain (no table, or the sum underflows): log-sum-exp over the weighted labels
         best = -np.inf
@@ -176,6 +181,9 @@ def log_lcpdf_from_distances(
                 d2 += d * d
             acc += math.exp(log_weights[a] - d2 * inv_two_hc2 - best)
         out[kl] = best + math.log(acc) - log_z
+    if outlier > 0.0:  # no kernel table: mix the exact values
+        for kl in range(n_labels):
+            out[kl] = math.log((1.0 - outlier) * math.exp(out[kl]) + outlier / n_labels)
     for a in range(n_nz):
         weights[nonzero[a]] = 0.0
     return n_nz

@@ -49,23 +49,8 @@ class ViewModels(NamedTuple):
 
 
 @jit
-def robust_log(log_p, outlier, n_labels):
-    """``log((1 - outlier) * p + outlier / K)``: an LCPDF mixed with a uniform outlier term."""
-    if outlier <= 0.0:
-        return log_p
-    a = math.log1p(-outlier) + log_p
-    b = math.log(outlier / n_labels)
-    top = max(a, b)
-    return top + math.log(math.exp(a - top) + math.exp(b - top))
-
-
-@jit
-def choose_label(log_l, heuristic, decision, tau, u, penalty, outlier, labels, value_out, score):
+def choose_label(log_l, heuristic, decision, tau, u, penalty, labels, value_out, score):
     """Combine per-view log-LCPDFs ``log_l`` (V, K) into one value.
-
-    With ``outlier > 0`` each view's LCPDF is first mixed with a uniform term
-    (:func:`robust_log`), so for ML_H2a/ML_H2b a value that one view finds impossible is not
-    vetoed: a value that two views agree on beats a compromise no view supports.
 
     Writes the chosen value into ``value_out`` (C,) and returns its label index (-1 for
     ML_H1b, whose average is generally not a label). ``penalty`` (K,) is added to the
@@ -97,13 +82,13 @@ def choose_label(log_l, heuristic, decision, tau, u, penalty, outlier, labels, v
         if heuristic == H2A:
             s = np.inf
             for v in range(n_views):
-                x = robust_log(log_l[v, kl], outlier, n_labels)
+                x = log_l[v, kl]
                 if x < s:
                     s = x
         else:
             s = 0.0
             for v in range(n_views):
-                s += robust_log(log_l[v, kl], outlier, n_labels)
+                s += log_l[v, kl]
         score[kl] = s + penalty[kl]
     best = 0
     for kl in range(1, n_labels):
@@ -114,12 +99,13 @@ def choose_label(log_l, heuristic, decision, tau, u, penalty, outlier, labels, v
         top = score[best]
         total = 0.0
         for kl in range(n_labels):
-            total += math.exp((score[kl] - top) / tau)
+            score[kl] = math.exp((score[kl] - top) / tau)
+            total += score[kl]
         target = u * total
         acc = 0.0
         chosen = best  # reached only if rounding leaves acc <= target at the end
         for kl in range(n_labels):
-            acc += math.exp((score[kl] - top) / tau)
+            acc += score[kl]
             if acc > target:
                 chosen = kl
                 break
@@ -129,7 +115,7 @@ def choose_label(log_l, heuristic, decision, tau, u, penalty, outlier, labels, v
 
 
 @jit
-def site_log_lcpdfs(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune, exact_tail,
+def site_log_lcpdfs(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune, outlier,
                     buffers, log_l):
     """Per-view log-LCPDF of site (i, j, k) into ``log_l`` (V, K)."""
     values, trust, dist, weights, nonzero, log_weights = buffers
@@ -141,7 +127,7 @@ def site_log_lcpdfs(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune
         log_lcpdf_from_distances(
             dist, n, models.centre_labels[v], models.labels, models.inv_two_h2[v],
             models.inv_two_hc2[v], adapt_eps, min_two_h2, prune, models.log_norm_const[v],
-            models.kernel_tables[v], exact_tail,
+            models.kernel_tables[v], outlier,
             weights, nonzero, log_weights, log_l[v],
         )
 
@@ -198,8 +184,8 @@ def icm_update_class(
                 new_labels[q] = -2
                 continue
             site_log_lcpdfs(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune,
-                            outlier <= 0.0, buffers, log_l)
-            chosen = choose_label(log_l, heuristic, decision, tau, uniforms[q], penalty, outlier,
+                            outlier, buffers, log_l)
+            chosen = choose_label(log_l, heuristic, decision, tau, uniforms[q], penalty,
                                   models.labels, value, score)
             old_labels[q] = labels_volume[i, j, k]
             new_labels[q] = chosen
