@@ -412,14 +412,17 @@ def write_run(
     text = _json_text(record)  # fail on a bad record before touching the disk
 
     target = out_dir.absolute()
-    target.parent.mkdir(parents=True, exist_ok=True)
-    staging = pathlib.Path(tempfile.mkdtemp(prefix=f".{target.name}.partial-", dir=target.parent))
+    # stage in the nearest existing ancestor, so that a failure leaves no new folders behind
+    anchor = target.parent
+    while not anchor.exists():
+        anchor = anchor.parent
+    staging = pathlib.Path(tempfile.mkdtemp(prefix=f".{target.name}.partial-", dir=anchor))
     try:
         np.save(staging / "volume.npy", volume, allow_pickle=False)
         write_volume_tiff(staging / "volume.tif", volume)
         save_figure(preview_figure(volume, exemplars, title=title), staging / "preview.png")
         (staging / "run.json").write_text(text, encoding="utf-8")
-        out_dir.mkdir(exist_ok=True)
+        out_dir.mkdir(parents=True, exist_ok=True)
         for name in RUN_FILES:
             os.replace(staging / name, out_dir / name)
     finally:

@@ -181,6 +181,10 @@ def test_write_run_failure_while_writing_leaves_nothing(tmp_path, rng, monkeypat
     with pytest.raises(OSError, match="disk full"):
         make_run(tmp_path / "run", rng)
     assert list(tmp_path.iterdir()) == []
+    # a nested output folder: no parent folder is created either
+    with pytest.raises(OSError, match="disk full"):
+        make_run(tmp_path / "a" / "b" / "run", rng)
+    assert list(tmp_path.iterdir()) == []
 
 
 # --------------------------------------------------------------------------- small helpers

@@ -120,6 +120,14 @@ def assert_matches(lib, ref, *, p_min=P_MIN):
     assert (lib[~mask] < np.log(p_min) + 1.0).all()
 
 
+def assert_same_mode(got, expected):
+    """The kernel's most probable label is a most probable label of the naive twin (labels
+    whose probabilities tie within float32 rounding may be ordered either way)."""
+    rows = np.arange(len(got))
+    np.testing.assert_allclose(expected[rows, got.argmax(axis=1)], expected.max(axis=1),
+                               rtol=RTOL, atol=ATOL)
+
+
 def assert_table_close(table, expected):
     """Kernel tables agree in the exponent: the kernel squares float32 label differences, so
     ``log`` of an entry carries a float32 relative error (not float64)."""
@@ -407,7 +415,7 @@ def test_property_log_lcpdf_matches_naive(compiled, seed, channels, window, n_vi
     expected, spread = naive_for(views, ref, volume, temps, site, labels)
     got = exact_log_lcpdf(volume, temps, site, models, spread)
     assert_matches(got, expected)
-    np.testing.assert_array_equal(got.argmax(axis=1), expected.argmax(axis=1))
+    assert_same_mode(got, expected)
 
 
 # --------------------------------------------------------------------------- known bug

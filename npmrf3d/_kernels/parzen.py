@@ -28,6 +28,16 @@ from ._jit import jit, jit_contract
 
 
 @jit
+def label_sq_distance(labels, jl, kl):
+    """``||lam_j - lam_k||^2`` accumulated in float64."""
+    d2 = 0.0
+    for c in range(labels.shape[1]):
+        d = labels[jl, c] - labels[kl, c]
+        d2 += d * d
+    return d2
+
+
+@jit
 def gather_neighbours(volume, temps, i, j, k, offsets, values, trust):
     """Copy the neighbour values and trust weights of site (i, j, k) into the buffers.
 
@@ -106,7 +116,7 @@ def log_lcpdf_from_distances(
     ``log_weights`` are scratch (K,). Writes ``out`` (K,) and returns the number of distinct
     centre labels that carried weight.
     """
-    n_labels, nc = labels.shape
+    n_labels = labels.shape[0]
     d_min = np.inf
     for p in range(n_patches):
         if dist[p] < d_min:
@@ -164,22 +174,13 @@ def log_lcpdf_from_distances(
         # log domain (no table, or the sum underflows): log-sum-exp over the weighted labels
         best = -np.inf
         for a in range(n_nz):
-            jl = nonzero[a]
-            d2 = 0.0
-            for c in range(nc):
-                d = labels[jl, c] - labels[kl, c]
-                d2 += d * d
-            v = log_weights[a] - d2 * inv_two_hc2
+            v = log_weights[a] - label_sq_distance(labels, nonzero[a], kl) * inv_two_hc2
             if v > best:
                 best = v
         acc = 0.0
         for a in range(n_nz):
-            jl = nonzero[a]
-            d2 = 0.0
-            for c in range(nc):
-                d = labels[jl, c] - labels[kl, c]
-                d2 += d * d
-            acc += math.exp(log_weights[a] - d2 * inv_two_hc2 - best)
+            v = log_weights[a] - label_sq_distance(labels, nonzero[a], kl) * inv_two_hc2
+            acc += math.exp(v - best)
         out[kl] = best + math.log(acc) - log_z
     if outlier > 0.0:  # no kernel table: mix the exact values
         for kl in range(n_labels):
@@ -192,16 +193,12 @@ def log_lcpdf_from_distances(
 @jit
 def label_log_norm_const(labels, inv_two_hc2):
     """``log c_j = log sum_k exp(-||lam_j - lam_k||^2 / (2 h_c^2))`` for every label j."""
-    n_labels, nc = labels.shape
+    n_labels = labels.shape[0]
     out = np.empty(n_labels, dtype=np.float64)
     for jl in range(n_labels):
         s = 0.0
         for kl in range(n_labels):
-            d2 = 0.0
-            for c in range(nc):
-                d = labels[jl, c] - labels[kl, c]
-                d2 += d * d
-            s += math.exp(-d2 * inv_two_hc2)
+            s += math.exp(-label_sq_distance(labels, jl, kl) * inv_two_hc2)
         out[jl] = math.log(s)
     return out
 
@@ -209,13 +206,9 @@ def label_log_norm_const(labels, inv_two_hc2):
 @jit
 def label_kernel_table(labels, inv_two_hc2):
     """``exp(-||lam_j - lam_k||^2 / (2 h_c^2))`` for all label pairs, (K, K) float64."""
-    n_labels, nc = labels.shape
+    n_labels = labels.shape[0]
     out = np.empty((n_labels, n_labels), dtype=np.float64)
     for jl in range(n_labels):
         for kl in range(n_labels):
-            d2 = 0.0
-            for c in range(nc):
-                d = labels[jl, c] - labels[kl, c]
-                d2 += d * d
-            out[jl, kl] = math.exp(-d2 * inv_two_hc2)
+            out[jl, kl] = math.exp(-label_sq_distance(labels, jl, kl) * inv_two_hc2)
     return out
