@@ -56,16 +56,16 @@ def gather_neighbours(volume, temps, i, j, k, offsets, values, trust):
 
 
 @jit_contract
-def neighbour_distances(values, trust, patches_t, n_patches, dist):
+def neighbour_distances(values, trust, patches_t, n_patches, dist, rows):
     """``dist[p] = sum_m trust[m] * sum_c (values[m*C+c] - patches_t[m*C+c, p])**2``.
 
     ``patches_t`` is the transposed patch matrix (M*C, n_max), so the inner loop runs over
     contiguous patches and vectorises; four rows are folded into each pass over ``dist`` to
-    halve its loads and stores. Rows of neighbours with zero trust are skipped.
+    halve its loads and stores. Rows of neighbours with zero trust are skipped; ``rows``
+    (M*C,) int64 is scratch for the indices of the rows kept.
     """
     n_m = trust.shape[0]
     nc = values.shape[0] // n_m
-    rows = np.empty(values.shape[0], dtype=np.int64)
     n_rows = 0
     for m in range(n_m):
         if trust[m] != 0.0:
@@ -112,6 +112,7 @@ def log_lcpdf_from_distances(
     view keeps a uniform share ``a``, so in a product of views one view cannot veto a value
     the others agree on. Labels whose ``L(k)`` underflows float64 then get ``log(a / K)``
     (exact to ~1e-270 relative), which spares the log-domain fallback.
+
     ``weights`` (K,) must be all zero on entry and is all zero again on exit; ``nonzero`` and
     ``log_weights`` are scratch (K,). Writes ``out`` (K,) and returns the number of distinct
     centre labels that carried weight.
@@ -150,41 +151,40 @@ def log_lcpdf_from_distances(
         acc += math.exp(log_weights[a] + log_norm_const[nonzero[a]] - top)
     log_z = top + math.log(acc)
     # linear domain with the kernel table (1 <= max W_j <= n, so no overflow); out holds sums
+    have_table = kernel_table.shape[0] == n_labels
     for kl in range(n_labels):
         out[kl] = 0.0
-    if kernel_table.shape[0] == n_labels:
+    if have_table:
         for a in range(n_nz):
             jl = nonzero[a]
             w = weights[jl]
             row = kernel_table[jl]
             for kl in range(n_labels):
                 out[kl] += w * row[kl]
-    if outlier > 0.0 and kernel_table.shape[0] == n_labels:
+    if outlier > 0.0 and have_table:
         scale = (1.0 - outlier) / math.exp(log_z)
         floor = outlier / n_labels
         for kl in range(n_labels):
             out[kl] = math.log(out[kl] * scale + floor)
-        for a in range(n_nz):
-            weights[nonzero[a]] = 0.0
-        return n_nz
-    for kl in range(n_labels):
-        if out[kl] > 1e-280:
-            out[kl] = math.log(out[kl]) - log_z
-            continue
-        # log domain (no table, or the sum underflows): log-sum-exp over the weighted labels
-        best = -np.inf
-        for a in range(n_nz):
-            v = log_weights[a] - label_sq_distance(labels, nonzero[a], kl) * inv_two_hc2
-            if v > best:
-                best = v
-        acc = 0.0
-        for a in range(n_nz):
-            v = log_weights[a] - label_sq_distance(labels, nonzero[a], kl) * inv_two_hc2
-            acc += math.exp(v - best)
-        out[kl] = best + math.log(acc) - log_z
-    if outlier > 0.0:  # no kernel table: mix the exact values
+    else:
         for kl in range(n_labels):
-            out[kl] = math.log((1.0 - outlier) * math.exp(out[kl]) + outlier / n_labels)
+            if out[kl] > 1e-280:
+                out[kl] = math.log(out[kl]) - log_z
+                continue
+            # log domain (no table, or the sum underflows): log-sum-exp over weighted labels
+            best = -np.inf
+            for a in range(n_nz):
+                v = log_weights[a] - label_sq_distance(labels, nonzero[a], kl) * inv_two_hc2
+                if v > best:
+                    best = v
+            acc = 0.0
+            for a in range(n_nz):
+                v = log_weights[a] - label_sq_distance(labels, nonzero[a], kl) * inv_two_hc2
+                acc += math.exp(v - best)
+            out[kl] = best + math.log(acc) - log_z
+        if outlier > 0.0:  # no kernel table: mix the exact values
+            for kl in range(n_labels):
+                out[kl] = math.log((1.0 - outlier) * math.exp(out[kl]) + outlier / n_labels)
     for a in range(n_nz):
         weights[nonzero[a]] = 0.0
     return n_nz

@@ -118,12 +118,12 @@ def choose_label(log_l, heuristic, decision, tau, u, penalty, labels, value_out,
 def site_log_lcpdfs(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune, outlier,
                     buffers, log_l):
     """Per-view log-LCPDF of site (i, j, k) into ``log_l`` (V, K)."""
-    values, trust, dist, weights, nonzero, log_weights = buffers
+    values, trust, dist, weights, nonzero, log_weights, rows = buffers
     n_views = models.offsets.shape[0]
     for v in range(n_views):
         gather_neighbours(volume, temps, i, j, k, models.offsets[v], values, trust)
         n = models.n_patches[v]
-        neighbour_distances(values, trust, models.patches_t[v], n, dist)
+        neighbour_distances(values, trust, models.patches_t[v], n, dist, rows)
         log_lcpdf_from_distances(
             dist, n, models.centre_labels[v], models.labels, models.inv_two_h2[v],
             models.inv_two_hc2[v], adapt_eps, min_two_h2, prune, models.log_norm_const[v],
@@ -134,7 +134,7 @@ def site_log_lcpdfs(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune
 
 @jit
 def make_buffers(models):
-    """Scratch arrays for one thread: values, trust, dist, weights, nonzero, log_weights."""
+    """Scratch arrays for one thread: values, trust, dist, weights, nonzero, log_weights, rows."""
     n_m = models.offsets.shape[1]
     n_labels = models.labels.shape[0]
     return (
@@ -144,6 +144,7 @@ def make_buffers(models):
         np.zeros(n_labels, dtype=np.float64),
         np.empty(n_labels, dtype=np.int64),
         np.empty(n_labels, dtype=np.float64),
+        np.empty(models.patches_t.shape[1], dtype=np.int64),
     )
 
 

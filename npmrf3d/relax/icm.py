@@ -71,13 +71,15 @@ def relax_icm(
     target = (1.0 - stop) * initial
     counts = np.bincount(labels_volume[labels_volume >= 0].ravel(), minlength=len(exemplar_freq))
     counts = counts.astype(np.int64)
+    penalty = np.zeros(len(exemplar_freq))
     updates = 0
     sweeps = 0
     while sweeps < max_sweeps and history[-1] > target:
         for c in rng.permutation(len(classes)):
             sites = classes[c]
             uniforms = rng.random(len(sites))
-            penalty = histogram_penalty(counts, exemplar_freq, histogram_weight)
+            if histogram_weight:  # counts change with every class; without the term it stays 0
+                penalty = histogram_penalty(counts, exemplar_freq, histogram_weight)
             old = np.empty(len(sites), dtype=np.int64)
             new = np.empty(len(sites), dtype=np.int64)
             icm_update_class(volume, labels_volume, temps, inherited, sites, uniforms, models,
