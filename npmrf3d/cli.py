@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import importlib
 import os
 import pathlib
 import sys
@@ -28,6 +29,9 @@ PROG = "npmrf3d"
 BUNDLED_PREFIX = "bundled:"
 _DEFAULT_RULE = VARIANTS["default"]
 _HEURISTIC_NAMES = ("ML_H1a", "ML_H1b", "ML_H2a", "ML_H2b")
+#: Modules that add further sub-commands: each has ``register(commands, formatter_class)``,
+#: which adds its parser and sets ``handler=fn`` with ``fn(args, argv) -> exit code``.
+_COMMAND_MODULES: tuple[str, ...] = ()
 
 
 # --------------------------------------------------------------------------- parser
@@ -227,6 +231,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "exemplars, heuristics and decision-rule variants.",
         formatter_class=_HelpFormatter,
     )
+    for module in _COMMAND_MODULES:
+        importlib.import_module(module).register(commands, _HelpFormatter)
     return parser
 
 
@@ -447,7 +453,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.command == "info":
             return _info()
-        return _synth(args, argv)
+        if args.command == "synth":
+            return _synth(args, argv)
+        return args.handler(args, argv)
     except ParameterError as exc:
         return _error(str(exc))
     except KeyboardInterrupt:
