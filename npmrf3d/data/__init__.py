@@ -1,4 +1,4 @@
-"""Bundled exemplar images (real photographs, public domain / CC0).
+"""Bundled exemplar images (real photographs and micrographs, public domain / CC0).
 
 =============  ==========  ================================================
 name           shape       content
@@ -7,9 +7,11 @@ name           shape       content
 ``grass``      128 x 128   grass (``skimage.data.grass``, 4x smaller)
 ``gravel``     128 x 128   gravel (``skimage.data.gravel``, 4x smaller)
 ``gravel64``   64 x 64     top-left 64 x 64 crop of ``gravel``
+``ihc``        128 x 128   colour tissue micrograph (``skimage.data.immunohistochemistry``, 4x smaller)
+``ihc64``      64 x 64     top-left 64 x 64 crop of ``ihc`` (colour)
 =============  ==========  ================================================
 
-All are 8-bit grey PNGs; origin, licence and recipe are in ``SOURCES.md`` next to them.
+``ihc`` and ``ihc64`` are 8-bit RGB, the others 8-bit grey PNGs; origin, licence and recipe are in ``SOURCES.md`` next to them.
 Load one with ``npmrf3d.io.read_array(npmrf3d.data.path(name))``.
 """
 
