@@ -59,10 +59,12 @@ def parse_overrides(items: list[str]) -> dict:
     out = {}
     for item in items:
         key, _, value = item.partition("=")
-        try:
-            out[key] = float(value)
-        except ValueError:
-            out[key] = value
+        for kind in (int, float, str):
+            try:
+                out[key] = kind(value)
+                break
+            except ValueError:
+                continue
     return out
 
 

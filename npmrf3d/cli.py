@@ -31,7 +31,7 @@ _DEFAULT_RULE = VARIANTS["default"]
 _HEURISTIC_NAMES = ("ML_H1a", "ML_H1b", "ML_H2a", "ML_H2b")
 #: Modules that add further sub-commands: each has ``register(commands, formatter_class)``,
 #: which adds its parser and sets ``handler=fn`` with ``fn(args, argv) -> exit code``.
-_COMMAND_MODULES: tuple[str, ...] = ()
+_COMMAND_MODULES: tuple[str, ...] = ("npmrf3d._cli_metrics",)
 
 
 # --------------------------------------------------------------------------- parser
@@ -100,10 +100,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="number of pyramid levels (the paper's scales), an integer from 1 to 8",
     )
     shape.add_argument(
-        "--upsample", default="1/8", metavar="{" + ",".join(UPSAMPLING) + "}",
+        "--upsample", default=None, metavar="{" + ",".join(UPSAMPLING) + "}",
         help="how a level initialises the next finer one: 1/8 keeps only the inherited voxel and "
              "draws the other 7 at random, 8/8 copies the parent into all 8 "
-             "(the paper uses 1/8 for ICM)",
+             "(default: none = the paper's choice, 1/8 for icm and 8/8 for anneal)",
     )
     shape.add_argument(
         "--inherit", default="resynth", metavar="{" + ",".join(INHERIT) + "}",
@@ -119,22 +119,52 @@ def build_parser() -> argparse.ArgumentParser:
              "argmax of the product",
     )
     method.add_argument(
-        "--relaxation", default="icm", metavar="{icm}",
-        help="relaxation algorithm; icm (iterated conditional modes with per-voxel temperatures) "
-             "is the only one",
+        "--relaxation", default="icm", metavar="{icm,anneal}",
+        help="relaxation algorithm: icm (iterated conditional modes with per-voxel temperatures; "
+             "options --xi --stop --max-sweeps) or anneal (simulated annealing with one global "
+             "temperature; options --sampler --schedule --t0 --t-end --proposals --proposal; "
+             "needs ML_H2a or ML_H2b)",
     )
     method.add_argument(
         "--xi", type=float, default=-3.0, metavar="X",
-        help="ICM cooling step, a negative number (more negative cools faster)",
+        help="icm: cooling step, a negative number (more negative cools faster)",
     )
     method.add_argument(
         "--stop", type=float, default=0.95, metavar="F",
-        help="stop a level once the global temperature fell by this fraction, in (0, 1] "
+        help="icm: stop a level once the global temperature fell by this fraction, in (0, 1] "
              "(1 = down to 0)",
     )
     method.add_argument(
         "--max-sweeps", type=int, default=30, metavar="N",
-        help="hard limit of sweeps per level, a positive integer",
+        help="icm: hard limit of sweeps per level, a positive integer",
+    )
+    method.add_argument(
+        "--sampler", default="metropolis", metavar="{metropolis,heat-bath}",
+        help="anneal: metropolis (the paper: one proposal per voxel and sweep, accepted by the "
+             "Metropolis rule) or heat-bath (this project's addition: draw the new value from the "
+             "tempered objective over all labels)",
+    )
+    method.add_argument(
+        "--schedule", default="geometric", metavar="{geometric,linear}",
+        help="anneal: how the global temperature falls from --t0 to --t-end within each level",
+    )
+    method.add_argument(
+        "--t0", type=float, default=1.0, metavar="T",
+        help="anneal: temperature of the first sweep of each level, a positive number",
+    )
+    method.add_argument(
+        "--t-end", type=float, default=0.05, metavar="T",
+        help="anneal: temperature of the last sweep of each level, in (0, t0] (0 allowed for the "
+             "linear schedule)",
+    )
+    method.add_argument(
+        "--proposals", type=int, default=10, metavar="P",
+        help="anneal: proposals (sweeps) per voxel per level, a positive integer",
+    )
+    method.add_argument(
+        "--proposal", default="exemplar", metavar="{exemplar,labels}",
+        help="anneal, metropolis: draw candidates from the exemplar's values (the paper) or "
+             "uniformly from the label set",
     )
     method.add_argument(
         "--variant", default="default", metavar="{" + ",".join(sorted(VARIANTS)) + "}",
@@ -337,7 +367,8 @@ def _synth(args: argparse.Namespace, argv: list[str]) -> int:
         size=_parse_size(args.size), window=args.window, levels=args.levels,
         heuristic=args.heuristic, relaxation=args.relaxation, views=args.views,
         upsample=args.upsample, inherit=args.inherit, xi=args.xi, stop=args.stop,
-        max_sweeps=args.max_sweeps, variant=args.variant, bandwidth=args.bandwidth,
+        max_sweeps=args.max_sweeps, sampler=args.sampler, schedule=args.schedule, t0=args.t0,
+        t_end=args.t_end, proposals=args.proposals, proposal=args.proposal, variant=args.variant, bandwidth=args.bandwidth,
         centre_bandwidth=args.centre_bandwidth, adaptive=args.adaptive, decision=args.decision,
         tau=args.tau, histogram_weight=args.histogram_weight, outlier=args.outlier,
         grey_levels=args.grey_levels,
@@ -430,7 +461,7 @@ def _info() -> int:
 
 
 #: Parameters whose library name differs from the option; messages name the option instead.
-_OPTION_NAMES = ("max_sweeps", "centre_bandwidth", "histogram_weight", "grey_levels")
+_OPTION_NAMES = ("max_sweeps", "centre_bandwidth", "histogram_weight", "grey_levels", "t_end")
 
 
 def _error(message: str) -> int:

@@ -61,7 +61,11 @@ VARIANTS: dict[str, DecisionRule] = {
 
 @dataclass(frozen=True)
 class SynthesisConfig:
-    """A validated NP-MRF synthesis run (see :func:`npmrf3d.synthesize` for the meaning)."""
+    """A validated NP-MRF synthesis run (see :func:`npmrf3d.synthesize` for the meaning).
+
+    ``xi``, ``stop`` and ``max_sweeps`` drive ICM; ``sampler`` ... ``proposal`` drive annealing;
+    both sets are always stored, the relaxation not chosen ignores its set.
+    """
 
     size: tuple[int, int, int]
     window: int = 7
@@ -74,6 +78,12 @@ class SynthesisConfig:
     xi: float = -3.0
     stop: float = 0.95
     max_sweeps: int = 30
+    sampler: str = "metropolis"
+    schedule: str = "geometric"
+    t0: float = 1.0
+    t_end: float = 0.05
+    proposals: int = 10
+    proposal: str = "exemplar"
     variant: str = "default"
     rule: DecisionRule = field(default_factory=DecisionRule)
     grey_levels: int | None = None

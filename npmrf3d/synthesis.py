@@ -19,15 +19,21 @@ from .neighborhood import VIEWS, colour_classes
 from .parzen import PRUNE, adaptive_floor, build_view_models
 from .pyramid import INHERIT, UPSAMPLING, LevelState, level_shape, random_state, upsample
 from .relax import RELAXATIONS
+from .relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
 
 __all__ = ["synthesize", "make_config"]
 
 ProgressCallback = Callable[[int, int, int, float], None]
 
 
+#: Up-sampling used when none is asked for: the paper's choice for each relaxation.
+DEFAULT_UPSAMPLE = {"icm": "1/8", "anneal": "8/8"}
+
+
 def make_config(
     *, size=32, window=7, levels=3, heuristic="ML_H2b", relaxation="icm", views=VIEWS,
-    upsample="1/8", inherit="resynth", xi=-3.0, stop=0.95, max_sweeps=30, variant="default",
+    upsample=None, inherit="resynth", xi=-3.0, stop=0.95, max_sweeps=30, sampler="metropolis",
+    schedule="geometric", t0=1.0, t_end=0.05, proposals=10, proposal="exemplar", variant="default",
     bandwidth=None, centre_bandwidth=None, adaptive=None, decision=None, tau=None,
     histogram_weight=None, outlier=None, grey_levels=None, palette=None, toroidal_exemplar=False,
     seed=None,
@@ -43,11 +49,22 @@ def make_config(
     heuristic = get_heuristic(heuristic).name
     relaxation = check.choice("relaxation", relaxation, RELAXATIONS)
     views = check.views(views, VIEWS)
+    if relaxation == "anneal" and not get_heuristic(heuristic).objective:
+        check.fail(f"heuristic {heuristic} cannot drive annealing: the Metropolis rule compares "
+                   f"objective values, and {heuristic} is defined by per-view argmax searches "
+                   f"with no objective; use ML_H2a or ML_H2b, or relaxation 'icm'")
+    upsample = DEFAULT_UPSAMPLE[relaxation] if upsample is None else upsample
     upsample = check.choice("upsample", upsample, UPSAMPLING)
     inherit = check.choice("inherit", inherit, INHERIT)
     xi = check.real("xi", xi, high=0.0, high_open=True)
     stop = check.real("stop", stop, low=0.0, high=1.0, low_open=True)
     max_sweeps = check.integer("max_sweeps", max_sweeps, low=1)
+    sampler = check.choice("sampler", sampler, SAMPLERS)
+    schedule = check.choice("schedule", schedule, SCHEDULES)
+    t0 = check.real("t0", t0, low=0.0, low_open=True)
+    t_end = check.real("t_end", t_end, low=0.0, low_open=schedule == "geometric", high=t0)
+    proposals = check.integer("proposals", proposals, low=1)
+    proposal = check.choice("proposal", proposal, PROPOSALS)
     variant = check.choice("variant", variant, VARIANTS)
     rule = VARIANTS[variant]
     overrides = {}
@@ -75,7 +92,8 @@ def make_config(
     return SynthesisConfig(
         size=dims, window=window, levels=levels, heuristic=heuristic, relaxation=relaxation,
         views=views, upsample=upsample, inherit=inherit, xi=xi, stop=stop, max_sweeps=max_sweeps,
-        variant=variant, rule=rule, grey_levels=grey_levels, palette=palette,
+        sampler=sampler, schedule=schedule, t0=t0, t_end=t_end, proposals=proposals,
+        proposal=proposal, variant=variant, rule=rule, grey_levels=grey_levels, palette=palette,
         toroidal_exemplar=bool(toroidal_exemplar), seed=seed,
     )
 
@@ -106,8 +124,9 @@ def resolve_exemplars(exemplar, exemplars: dict | None, views: tuple[str, ...], 
 
 def synthesize(
     exemplar=None, *, size=32, window=7, levels=3, heuristic="ML_H2b", relaxation="icm",
-    views=VIEWS, exemplars: dict | None = None, upsample="1/8", inherit="resynth", xi=-3.0,
-    stop=0.95, max_sweeps=30, variant="default", bandwidth=None, centre_bandwidth=None,
+    views=VIEWS, exemplars: dict | None = None, upsample=None, inherit="resynth", xi=-3.0,
+    stop=0.95, max_sweeps=30, sampler="metropolis", schedule="geometric", t0=1.0, t_end=0.05,
+    proposals=10, proposal="exemplar", variant="default", bandwidth=None, centre_bandwidth=None,
     adaptive=None, decision=None, tau=None, histogram_weight=None, outlier=None, grey_levels=None,
     palette=None, toroidal_exemplar=False, rng=None, progress: ProgressCallback | None = None,
     checkpoint: str | Path | None = None,
@@ -126,13 +145,16 @@ def synthesize(
     levels : int
         Number of pyramid levels (the paper's "scales").
     heuristic : {"ML_H1a", "ML_H1b", "ML_H2a", "ML_H2b"}
-    relaxation : {"icm"}
+    relaxation : {"icm", "anneal"}
+        ICM with per-voxel temperatures, or simulated annealing with one global temperature
+        (:mod:`npmrf3d.relax.anneal`; needs ML_H2a or ML_H2b).
     views : sequence of {"front", "right", "top"} (or a comma-separated string)
         Constrained views; see :mod:`npmrf3d.neighborhood` for the axis mapping.
     exemplars : dict view -> exemplar, optional
         A different exemplar for some views.
-    upsample : {"1/8", "8/8"}
-        How a level initialises the next finer one (SPEC.md section 5).
+    upsample : {"1/8", "8/8"} or None
+        How a level initialises the next finer one (SPEC.md section 5); None: the paper's
+        choice, ``1/8`` for ICM and ``8/8`` for annealing.
     inherit : {"resynth", "fixed"}
         Whether inherited voxels may still change (their temperature stays 0 either way).
     xi : float < 0
@@ -141,6 +163,19 @@ def synthesize(
         Stop a level once the global temperature fell by this fraction (1: down to 0).
     max_sweeps : int
         Hard limit of sweeps per level.
+    sampler : {"metropolis", "heat-bath"}
+        Annealing: the paper's Metropolis proposals, or a heat-bath draw from the tempered
+        objective over all labels (this project's addition).
+    schedule : {"geometric", "linear"}
+        Annealing: how the global temperature falls from ``t0`` to ``t_end`` within a level.
+    t0, t_end : float
+        Annealing: first and last temperature of each level (``0 < t_end <= t0``; ``t_end = 0``
+        allowed for the linear schedule).
+    proposals : int
+        Annealing: proposals per voxel per level (one per voxel per sweep).
+    proposal : {"exemplar", "labels"}
+        Annealing (Metropolis): candidates drawn from the exemplar's values (the paper) or
+        uniformly from the label set.
     variant : {"default", "literal"}
         Preset of the decision rule (:data:`npmrf3d.config.VARIANTS`); ``literal`` is the paper
         word for word, ``default`` the variant chosen by measurement (docs/quality.md).
@@ -178,7 +213,8 @@ def synthesize(
     config = make_config(
         size=size, window=window, levels=levels, heuristic=heuristic, relaxation=relaxation,
         views=views, upsample=upsample, inherit=inherit, xi=xi, stop=stop, max_sweeps=max_sweeps,
-        variant=variant, bandwidth=bandwidth, centre_bandwidth=centre_bandwidth, adaptive=adaptive,
+        sampler=sampler, schedule=schedule, t0=t0, t_end=t_end, proposals=proposals,
+        proposal=proposal, variant=variant, bandwidth=bandwidth, centre_bandwidth=centre_bandwidth, adaptive=adaptive,
         decision=decision, tau=tau, histogram_weight=histogram_weight, outlier=outlier,
         grey_levels=grey_levels,
         palette=palette, toroidal_exemplar=toroidal_exemplar, seed=seed,
@@ -223,19 +259,20 @@ def run(config: SynthesisConfig, per_view: dict[str, np.ndarray], rng: np.random
                                          rule=rule, toroidal=config.toroidal_exemplar)
         classes = colour_classes(shape, config.window)
 
-        def on_sweep(sweep, temperature, level=level):
+        specific, most_sweeps, start_temperature = _relaxation_options(config, state)
+
+        def on_sweep(sweep, temperature, level=level, most_sweeps=most_sweeps):
             if progress is not None:
-                progress(level, sweep, config.max_sweeps, temperature)
+                progress(level, sweep, most_sweeps, temperature)
 
         if progress is not None:
-            progress(level, 0, config.max_sweeps, float(state.temps.sum(dtype=np.float64)))
+            progress(level, 0, most_sweeps, start_temperature)
         level_history, level_stats = RELAXATIONS[config.relaxation](
             state.volume, state.labels_volume, state.temps, state.inherited, models, classes,
-            heuristic=heuristic.code, decision=DECISIONS[rule.decision], tau=rule.tau, xi=config.xi,
-            stop=config.stop, max_sweeps=config.max_sweeps, resynth=config.inherit == "resynth",
+            heuristic=heuristic.code, resynth=config.inherit == "resynth",
             adaptive=rule.adaptive, min_two_h2=adaptive_floor(info), prune=PRUNE,
-            histogram_weight=rule.histogram_weight, outlier=rule.outlier, exemplar_freq=label_freq, rng=rng,
-            on_sweep=on_sweep,
+            histogram_weight=rule.histogram_weight, outlier=rule.outlier, exemplar_freq=label_freq,
+            rng=rng, on_sweep=on_sweep, **specific,
         )
         history.append(level_history)
         timings[f"level_{level}"] = time.perf_counter() - t0
@@ -246,6 +283,18 @@ def run(config: SynthesisConfig, per_view: dict[str, np.ndarray], rng: np.random
     timings["total"] = time.perf_counter() - t_start
     return SynthesisResult(volume=state.volume, history=history, config=config, timings=timings,
                            labels=labels, stats=stats)
+
+
+def _relaxation_options(config: SynthesisConfig, state: LevelState) -> tuple[dict, int, float]:
+    """(keyword arguments of the chosen relaxation, sweeps at most, temperature at the start)."""
+    if config.relaxation == "anneal":
+        options = {"sampler": config.sampler, "schedule": config.schedule, "t0": config.t0,
+                   "t_end": config.t_end, "proposals": config.proposals, "proposal": config.proposal}
+        return options, config.proposals, config.t0
+    rule = config.rule
+    options = {"decision": DECISIONS[rule.decision], "tau": rule.tau, "xi": config.xi,
+               "stop": config.stop, "max_sweeps": config.max_sweeps}
+    return options, config.max_sweeps, float(state.temps.sum(dtype=np.float64))
 
 
 def _config_key(config: SynthesisConfig) -> str:

@@ -74,11 +74,40 @@ def test_synth_help_lists_every_option_with_its_default(capsys):
             assert "default" in action.help or action.default is not None
     for expected in ("(default: 7)", "(default: 32)", "(default: 3)", "(default: ML_H2b)",
                      "(default: icm)", "(default: -3.0)", "(default: 0.95)", "(default: 30)",
-                     "(default: 1/8)", "(default: resynth)", "(default: front,right,top)",
+                     "1/8 for icm and 8/8 for anneal", "(default: resynth)", "(default: front,right,top)",
                      "(default: default)", "(default: 0)", "(default: npmrf3d-out)",
-                     "the paper uses 1/8 for ICM", "word for word", "docs/quality.md",
+                     "(default: metropolis)", "(default: geometric)", "(default: 10)",
+                     "(default: 0.05)", "(default: exemplar)", "this project's addition",
+                     "needs ML_H2a or ML_H2b", "word for word", "docs/quality.md",
                      "'default' variant uses 0.1", "bundled:gravel64"):
         assert expected in text, expected
+
+
+@pytest.mark.parametrize("heuristic", ["ML_H1a", "ML_H1b"])
+def test_annealing_with_objective_free_heuristic_exits_2_naming_the_valid_ones(capsys, tmp_path, heuristic):
+    out = tmp_path / "run"
+    code, _, err = run_cli(capsys, "synth", "--relaxation", "anneal", "--heuristic", heuristic,
+                           "--out", str(out))
+    assert code == 2
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert f"{heuristic} cannot drive annealing" in err and "use ML_H2a or ML_H2b" in err
+    assert not out.exists()
+
+
+def test_anneal_run_writes_a_colour_run(capsys, tmp_path):
+    out = tmp_path / "run"
+    code, _, err = run_cli(capsys, "synth", "bundled:ihc64", "--relaxation", "anneal",
+                           "--sampler", "heat-bath", "--palette", "16", "--size", "8",
+                           "--levels", "2", "--window", "3", "--proposals", "2", "--out", str(out),
+                           "--quiet")
+    assert code == 0, err
+    import json
+
+    record = json.loads((out / "run.json").read_text())
+    assert record["config"]["relaxation"] == "anneal" and record["config"]["upsample"] == "8/8"
+    assert record["config"]["sampler"] == "heat-bath" and record["labels"] == 16
+    assert len(record["history"]) == 2 and len(record["history"][0]) == 3
+    assert np.load(out / "volume.npy").shape == (8, 8, 8, 3)
 
 
 def test_info_prints_version_and_registries(capsys):

@@ -213,7 +213,7 @@ def test_build_view_models_matches_naive(compiled, channels, window):
 # --------------------------------------------------------------------------- log_lcpdf
 
 
-@pytest.mark.parametrize("channels", [1, 3])
+@pytest.mark.parametrize("channels", [1, 2, 3, 4])
 @pytest.mark.parametrize("window", [3, 5])
 @pytest.mark.parametrize("temps_mode", ["zeros", "ones", "random"])
 @pytest.mark.parametrize(("views", "distinct"), [(("front",), False), (VIEWS3, False),

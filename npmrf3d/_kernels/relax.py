@@ -78,6 +78,23 @@ def choose_label(log_l, heuristic, decision, tau, u, penalty, labels, value_out,
         for c in range(nc):
             value_out[c] = labels[chosen, c]
         return chosen
+    objective_scores(log_l, heuristic, penalty, score)
+    if decision == SAMPLE:
+        chosen = sample_index(score, tau, u)
+    else:
+        chosen = argmax_index(score)
+    for c in range(nc):
+        value_out[c] = labels[chosen, c]
+    return chosen
+
+
+@jit
+def objective_scores(log_l, heuristic, penalty, score):
+    """The ML_H2a (min over views) or ML_H2b (sum over views) objective of every label.
+
+    ``score[k] = combine_v(log_l[v, k]) + penalty[k]``; ``log_l`` (V, K), ``score`` (K,) out.
+    """
+    n_views, n_labels = log_l.shape
     for kl in range(n_labels):
         if heuristic == H2A:
             s = np.inf
@@ -90,28 +107,55 @@ def choose_label(log_l, heuristic, decision, tau, u, penalty, labels, value_out,
             for v in range(n_views):
                 s += log_l[v, kl]
         score[kl] = s + penalty[kl]
+
+
+@jit
+def argmax_index(score):
+    """Index of the largest score (the first one on ties)."""
     best = 0
-    for kl in range(1, n_labels):
+    for kl in range(1, score.shape[0]):
         if score[kl] > score[best]:
             best = kl
-    chosen = best
-    if decision == SAMPLE:
-        top = score[best]
-        total = 0.0
-        for kl in range(n_labels):
-            score[kl] = math.exp((score[kl] - top) / tau)
-            total += score[kl]
-        target = u * total
-        acc = 0.0
-        chosen = best  # reached only if rounding leaves acc <= target at the end
-        for kl in range(n_labels):
-            acc += score[kl]
-            if acc > target:
-                chosen = kl
-                break
-    for c in range(nc):
-        value_out[c] = labels[chosen, c]
-    return chosen
+    return best
+
+
+@jit
+def sample_index(score, tau, u):
+    """Index drawn from ``exp(score / tau) / Z`` with the uniform ``u`` in [0, 1).
+
+    ``score`` is overwritten with the unnormalised probabilities. ``tau <= 0`` is the limit
+    ``tau -> 0``: the argmax.
+    """
+    best = argmax_index(score)
+    if not tau > 0.0:
+        return best
+    top = score[best]
+    total = 0.0
+    for kl in range(score.shape[0]):
+        score[kl] = math.exp((score[kl] - top) / tau)
+        total += score[kl]
+    target = u * total
+    acc = 0.0
+    for kl in range(score.shape[0]):
+        acc += score[kl]
+        if acc > target:
+            return kl
+    return best  # reached only if rounding leaves acc <= target at the end
+
+
+@jit
+def metropolis_accept(delta, temperature, u):
+    """Metropolis rule: accept a change of the objective by ``delta`` at ``temperature``.
+
+    Always when ``delta >= 0``; otherwise with probability ``exp(delta / temperature)``,
+    decided by the pre-drawn uniform ``u`` in [0, 1). At ``temperature <= 0`` a worse value
+    is never accepted (greedy).
+    """
+    if delta >= 0.0:
+        return True
+    if not temperature > 0.0:
+        return False
+    return u < math.exp(delta / temperature)
 
 
 @jit
@@ -200,3 +244,57 @@ def icm_update_class(
                                    (j + models.union_offsets[r, 1]) % n2,
                                    (k + models.union_offsets[r, 2]) % n3]
                 temps[i, j, k] = max(0.0, (xi + total) / n_union)
+
+
+METROPOLIS, HEAT_BATH = 0, 1
+
+
+@jit_parallel
+def anneal_update_class(
+    volume, labels_volume, temps, inherited, sites, candidates, uniforms, models, heuristic,
+    sampler, temperature, resynth, adapt_eps, min_two_h2, prune, penalty, outlier, old_labels,
+    new_labels,
+):
+    """One annealing step at every site of one colour class, at global ``temperature``.
+
+    ``sampler`` METROPOLIS: the site's current label is replaced by ``candidates[q]`` if
+    :func:`metropolis_accept` agrees on the change of the heuristic's objective (ML_H2a or
+    ML_H2b, plus ``penalty``). HEAT_BATH: the new label is drawn from
+    ``exp(objective / temperature) / Z`` over all labels (this project's addition).
+    Inherited sites are skipped unless ``resynth``. ``temps`` only sets the neighbours' trust
+    (all zero during annealing: every neighbour counts). ``old_labels``/``new_labels`` receive
+    the label indices (-2 where not visited). Randomness comes only from ``candidates`` and
+    ``uniforms``, drawn by the caller: the result does not depend on the number of threads.
+    """
+    n_sites = sites.shape[0]
+    n_views = models.offsets.shape[0]
+    n_labels = models.labels.shape[0]
+    nc = volume.shape[3]
+    n_chunks = (n_sites + CHUNK - 1) // CHUNK
+    for chunk in prange(n_chunks):
+        buffers = make_buffers(models)
+        log_l = np.empty((n_views, n_labels), dtype=np.float64)
+        score = np.empty(n_labels, dtype=np.float64)
+        for q in range(chunk * CHUNK, min(n_sites, (chunk + 1) * CHUNK)):
+            i, j, k = sites[q, 0], sites[q, 1], sites[q, 2]
+            if inherited[i, j, k] and not resynth:
+                old_labels[q] = -2
+                new_labels[q] = -2
+                continue
+            site_log_lcpdfs(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune,
+                            outlier, buffers, log_l)
+            objective_scores(log_l, heuristic, penalty, score)
+            current = labels_volume[i, j, k]
+            if sampler == HEAT_BATH:
+                chosen = sample_index(score, temperature, uniforms[q])
+            else:
+                chosen = candidates[q]
+                if current >= 0 and not metropolis_accept(score[chosen] - score[current],
+                                                          temperature, uniforms[q]):
+                    chosen = current
+            old_labels[q] = current
+            new_labels[q] = chosen
+            if chosen != current:
+                labels_volume[i, j, k] = chosen
+                for c in range(nc):
+                    volume[i, j, k, c] = models.labels[chosen, c]

@@ -1,7 +1,8 @@
-"""Relaxation algorithms: one module each (``icm``; annealing comes next)."""
+"""Relaxation algorithms, one module each: ``icm`` (per-voxel temperatures) and ``anneal``."""
 
+from .anneal import relax_anneal
 from .icm import relax_icm
 
-RELAXATIONS = {"icm": relax_icm}
+RELAXATIONS = {"icm": relax_icm, "anneal": relax_anneal}
 
-__all__ = ["RELAXATIONS", "relax_icm"]
+__all__ = ["RELAXATIONS", "relax_anneal", "relax_icm"]

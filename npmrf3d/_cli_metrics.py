@@ -1,0 +1,285 @@
+"""``npmrf3d metrics EXEMPLAR VOLUME``: compare a volume with its exemplars (SPEC.md section 7).
+
+Prints a table (one row per view plus the mean, one column per metric of
+:data:`npmrf3d.metrics.METRICS`) and writes ``histograms.png`` and ``metrics.json`` (last) into
+the output folder, each atomically and only after every number was computed, so a user error
+leaves no file behind. See ``docs/metrics.md`` for the definitions.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import pathlib
+import shutil
+from datetime import datetime, timezone
+from typing import Any
+
+import numpy as np
+
+from . import _validation as check
+from . import io
+from .cli import BUNDLED_PREFIX, PROG, _exemplar_source
+from .errors import ParameterError
+from .neighborhood import VIEWS
+
+__all__ = ["OUT_FILES", "register"]
+
+#: Files written by the command, in the order they are written (``metrics.json`` last).
+OUT_FILES = ("histograms.png", "metrics.json")
+_CHANNEL_COLOURS = ("tab:red", "tab:green", "tab:blue")
+
+
+def register(commands: argparse._SubParsersAction, formatter_class: type) -> None:
+    """Add the ``metrics`` sub-command; its handler is ``handler(args, argv) -> exit code``."""
+    parser = commands.add_parser(
+        "metrics",
+        help="compare a volume's slices with the exemplar(s): histogram KL, autocorrelation, "
+             "orientation, sliced Wasserstein",
+        description=(
+            "Compare each constrained view's exemplar with all the volume's slices orthogonal\n"
+            "to that view (pooled) and print one row per view plus the mean. Lower is better;\n"
+            "0 = indistinguishable by that measure. Definitions and settings: docs/metrics.md.\n"
+            f"Writes {' and '.join(OUT_FILES)} into the output folder.\n\n"
+            "Integer images are scaled as synth does (uint8 / 255, uint16 / 65535), so a\n"
+            "float volume written by synth compares with the 8-bit exemplar it came from.\n\n"
+            "examples:\n"
+            "  npmrf3d metrics bundled:gravel64 npmrf3d-out/volume.npy\n"
+            "  npmrf3d metrics wood.png wood/volume.tif --views front,top --out wood/metrics"
+        ),
+        formatter_class=formatter_class,
+    )
+    parser.add_argument(
+        "exemplar", metavar="EXEMPLAR",
+        help="2D exemplar image (.png, .jpg, .bmp, .gif, .tif or .npy) compared with every view, "
+             f"or '{BUNDLED_PREFIX}NAME' for a bundled one",
+    )
+    parser.add_argument(
+        "volume", metavar="VOLUME",
+        help="the volume: a .npy array (N1,N2,N3) or (N1,N2,N3,C), or a .tif written by synth",
+    )
+    parser.add_argument(
+        "--views", default=",".join(VIEWS), metavar="V[,V...]",
+        help=f"comma-separated views to compare, 1 to 3 distinct names of {', '.join(VIEWS)}",
+    )
+    for view in VIEWS:
+        parser.add_argument(
+            f"--exemplar-{view}", default=None, metavar="PATH",
+            help=f"a different exemplar file (or {BUNDLED_PREFIX}NAME) for the {view} view "
+                 f"(default: none = EXEMPLAR)",
+        )
+    parser.add_argument(
+        "--out", default=None, metavar="DIR",
+        help="folder for metrics.json and histograms.png; created if missing "
+             "(default: the folder holding VOLUME)",
+    )
+    parser.add_argument(
+        "--overwrite", action="store_true",
+        help="replace metrics.json and histograms.png already in --out instead of refusing",
+    )
+    parser.set_defaults(handler=run)
+
+
+# --------------------------------------------------------------------------- checks and inputs
+
+
+def _check_out(out: pathlib.Path, overwrite: bool) -> None:
+    if out.exists():
+        if not out.is_dir():
+            raise ParameterError(f"output folder '{out}' exists and is not a folder")
+        previous = [name for name in OUT_FILES if (out / name).exists()]
+        if previous and not overwrite:
+            raise ParameterError(
+                f"output folder '{out}' already holds {', '.join(previous)}; "
+                "pass --overwrite or choose another --out"
+            )
+        if not os.access(out, os.W_OK | os.X_OK):
+            raise ParameterError(f"output folder '{out}' is not writable")
+        return
+    ancestor = out.absolute().parent
+    while not ancestor.exists():
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise ParameterError(
+            f"output folder '{out}' cannot be created: '{ancestor}' is not a folder")
+    if not os.access(ancestor, os.W_OK | os.X_OK):
+        raise ParameterError(
+            f"output folder '{out}' cannot be created: '{ancestor}' is not writable")
+
+
+def _stored_dtype(path: pathlib.Path) -> np.dtype | None:
+    """dtype of the array stored in a .npy or TIFF file (None if it cannot be told)."""
+    try:
+        if path.suffix.lower() == ".npy":
+            return np.load(path, mmap_mode="r", allow_pickle=False).dtype
+        import tifffile
+
+        with tifffile.TiffFile(path) as tif:
+            return tif.series[0].dtype
+    except Exception:  # read_volume reports unreadable files with a clear message
+        return None
+
+
+def _read_volume(text: str) -> tuple[np.ndarray, str]:
+    """The volume as float (N1, N2, N3, C), integers scaled like exemplars; and its stored dtype."""
+    if not text.strip():
+        raise ParameterError("volume file name is empty")
+    path = pathlib.Path(text)
+    volume = io.read_volume(path)
+    bad = int((~np.isfinite(volume)).sum())
+    if bad:
+        raise ParameterError(f"volume file '{path}' contains {bad} NaN or Inf values; "
+                             "clean or mask them first")
+    dtype = _stored_dtype(path)
+    if dtype == np.uint8:
+        volume = volume / np.float32(255.0)
+    elif dtype == np.uint16:
+        volume = volume / np.float32(65535.0)
+    return volume, str(dtype) if dtype is not None else "unknown"
+
+
+def _read_exemplars(args: argparse.Namespace, views: tuple[str, ...]
+                    ) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    from .exemplar import load_exemplar
+
+    extra = [v for v in VIEWS if getattr(args, f"exemplar_{v}") is not None and v not in views]
+    if extra:
+        raise ParameterError(
+            f"--exemplar-{extra[0]} is given but {extra[0]} is not among --views "
+            f"({','.join(views)})"
+        )
+    arrays: dict[str, np.ndarray] = {}
+    sources: dict[str, str] = {}
+    cache: dict[str, np.ndarray] = {}
+    for view in views:
+        own = getattr(args, f"exemplar_{view}")
+        path, name = _exemplar_source(own if own is not None else args.exemplar)
+        if name not in cache:
+            label = f"exemplar for view {view}" if own is not None else "exemplar"
+            cache[name] = load_exemplar(path, name=label)
+        arrays[view], sources[view] = cache[name], name
+    return arrays, sources
+
+
+# --------------------------------------------------------------------------- outputs
+
+
+def _table(result: dict[str, Any]) -> str:
+    from .metrics import METRICS
+
+    rows = [*result["per_view"].items(), ("mean", result["mean"])]
+    width = max(len(name) for name, _ in rows)
+    head = f"{'view':<{width}}  " + "  ".join(f"{m:>{max(len(m), 10)}}" for m in METRICS)
+    lines = [head]
+    for name, values in rows:
+        lines.append(f"{name:<{width}}  "
+                     + "  ".join(f"{values[m]:>{max(len(m), 10)}.4g}" for m in METRICS))
+    return "\n".join(lines)
+
+
+def _figure(histograms: dict[str, dict[str, Any]], result: dict[str, Any], title: str):
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+
+    views = list(histograms)
+    fig = Figure(figsize=(4.2 * len(views), 6.6))  # fixed margins: a layout engine is slow
+    axes = fig.subplots(2, len(views), squeeze=False,
+                        gridspec_kw=dict(left=0.8 / (4.2 * len(views)), right=0.98, bottom=0.08,
+                                         top=0.9, wspace=0.35, hspace=0.45))
+    for col, view in enumerate(views):
+        h, scores = histograms[view], result["per_view"][view]
+        ax = axes[0, col]
+        values = h["values"]
+        channels = len(values["exemplar"])
+        handles = [Line2D([], [], color="k", lw=1.6, label="exemplar"),
+                   Line2D([], [], color="k", lw=1.2, ls="--", label="volume")]
+        for c in range(channels):
+            colour = (_CHANNEL_COLOURS[c] if channels == 3 else f"C{c}") if channels > 1 else "k"
+            edges = values["edges"][c]
+            ax.stairs(values["exemplar"][c], edges, color=colour, lw=1.6)
+            ax.stairs(values["volume"][c], edges, color=colour, lw=1.2, ls="--")
+            if channels > 1:
+                handles.append(Line2D([], [], color=colour, lw=4, label=f"channel {c}"))
+        ax.set_title(f"{view}: values, KL {scores['histogram_kl']:.3g}")
+        ax.set_xlabel("value" if channels == 1 else "channel value")
+        ax.set_ylabel("probability")
+        ax.legend(handles=handles, fontsize="x-small")
+        ax = axes[1, col]
+        o = h["orientation"]
+        degrees = np.degrees(o["edges"])
+        ax.stairs(o["exemplar"], degrees, color="k", lw=1.6, label="exemplar")
+        ax.stairs(o["volume"], degrees, color="tab:orange", lw=1.2, ls="--", label="volume")
+        ax.set_title(f"{view}: orientation, KL {scores['orientation_kl']:.3g}")
+        ax.set_xlabel("gradient angle (degrees from the column axis)")
+        ax.set_ylabel("weighted share")
+        ax.set_xlim(0, 180)
+        ax.legend(fontsize="x-small")
+    fig.suptitle(title)
+    return fig
+
+
+def _write(out: pathlib.Path, fig, record: dict[str, Any]) -> None:
+    """Write the two files atomically; on failure remove what this call created."""
+    from .plotting import save_figure
+
+    missing = []
+    folder = out.absolute()
+    while not folder.exists():
+        missing.append(folder)
+        folder = folder.parent
+    new = [out / name for name in OUT_FILES if not (out / name).exists()]
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        save_figure(fig, out / OUT_FILES[0])
+        io.write_json(out / OUT_FILES[1], record)
+    except BaseException:
+        if missing:  # the folder is ours: remove it whole
+            shutil.rmtree(missing[-1], ignore_errors=True)
+        else:
+            for path in new:
+                path.unlink(missing_ok=True)
+        raise
+
+
+def run(args: argparse.Namespace, argv: list[str]) -> int:
+    """Handler of ``npmrf3d metrics``; returns the exit code (errors raise ParameterError)."""
+    from . import metrics
+
+    views = check.views(args.views, VIEWS)
+    if args.out is not None and not args.out.strip():
+        raise ParameterError("--out must name a folder; got an empty string")
+    out = pathlib.Path(args.out) if args.out is not None else pathlib.Path(args.volume).parent
+    _check_out(out, args.overwrite)
+    volume, stored = _read_volume(args.volume)
+    exemplars, sources = _read_exemplars(args, views)
+    result = metrics.evaluate(volume, exemplars, views=views)
+    histograms = {view: metrics.view_histograms(volume, exemplars[view], view) for view in views}
+    title = f"{pathlib.Path(args.volume).name} versus {', '.join(sorted(set(sources.values())))}"
+    fig = _figure(histograms, result, title)
+    record = {
+        "command": "metrics",
+        "argv": [PROG, *argv],
+        "inputs": {
+            "volume": args.volume,
+            "volume_shape": list(volume.shape),
+            "volume_dtype": stored,
+            "exemplars": sources,
+            "exemplar_shapes": {view: list(a.shape) for view, a in exemplars.items()},
+        },
+        "views": list(views),
+        "metrics": list(metrics.METRICS),
+        "per_view": result["per_view"],
+        "mean": result["mean"],
+        "settings": result["settings"],
+        "details": result["details"],
+        "versions": io.package_versions(),
+        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+    }
+    try:
+        _write(out, fig, record)
+    except OSError as exc:
+        raise ParameterError(
+            f"cannot write into output folder '{out}': {exc.strerror or exc}") from exc
+    print(_table(result))
+    print(f"wrote {out}{os.sep}: {', '.join(OUT_FILES)}")
+    return 0
