@@ -13,8 +13,13 @@ from npmrf3d._kernels.relax import (
     HEAT_BATH,
     METROPOLIS,
     anneal_update_class,
+    anneal_update_class_serial,
+    icm_update_class,
+    icm_update_class_serial,
+    make_buffers,
     metropolis_accept,
     sample_index,
+    site_log_lcpdfs_at,
 )
 from npmrf3d.config import VARIANTS
 from npmrf3d.errors import ParameterError
@@ -150,6 +155,52 @@ def test_anneal_class_update_equals_a_literal_per_site_loop(channels, sampler, h
     others = np.ones(shape, dtype=bool)
     others[tuple(sites.T)] = False
     np.testing.assert_array_equal(lab[others], before[others])
+
+
+@pytest.mark.parametrize("channels", [1, 3, 4])
+@pytest.mark.parametrize("outlier", [0.0, 0.01])
+def test_lcpdf_at_two_labels_equals_the_full_lcpdf(channels, outlier):
+    """Metropolis evaluates only the current and the proposed label (log domain, no table)."""
+    rng, labels, freq, rule, models, info, lab, volume = _tiny_level(channels, seed=channels)
+    temps = rng.random(lab.shape).astype(np.float32) * 0.5
+    for _ in range(5):
+        site = tuple(int(x) for x in rng.integers(0, 8, size=3))
+        full = parzen.log_lcpdf(volume, temps, site, models, outlier=outlier)
+        query = rng.integers(0, len(labels), size=2).astype(np.int64)
+        out = np.empty((3, 2))
+        site_log_lcpdfs_at(volume, temps, *site, models, 0.0, 0.0, PRUNE, outlier, query,
+                           make_buffers(models), out)
+        np.testing.assert_allclose(out, full[:, query], rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("sampler", [METROPOLIS, HEAT_BATH])
+def test_small_class_serial_kernels_equal_the_parallel_ones(sampler):
+    """Classes below PARALLEL_MIN_SITES run serially: the same code, the same result."""
+    rng, labels, freq, rule, models, info, lab, volume = _tiny_level(3)
+    sites = colour_classes(lab.shape, 3)[2]
+    k = len(labels)
+    candidates = rng.integers(0, k, size=len(sites)).astype(np.int64)
+    uniforms = rng.random(len(sites))
+    penalty = rng.normal(0.0, 0.3, size=k)
+    temps = rng.random(lab.shape).astype(np.float32)
+    inherited = rng.random(lab.shape) < 0.3
+    code = get_heuristic("ML_H2b").code
+    results = []
+    for kernel in (anneal_update_class, anneal_update_class_serial):
+        v, lb, old, new = volume.copy(), lab.copy(), np.empty(len(sites), np.int64), np.empty(len(sites), np.int64)
+        kernel(v, lb, np.zeros_like(temps), inherited, sites, candidates, uniforms, models, code,
+               sampler, 0.5, False, rule.adaptive, adaptive_floor(info), PRUNE, penalty,
+               rule.outlier, old, new)
+        results.append((v, lb, old, new))
+    for kernel in (icm_update_class, icm_update_class_serial):
+        v, lb, t = volume.copy(), lab.copy(), temps.copy()
+        old, new = np.empty(len(sites), np.int64), np.empty(len(sites), np.int64)
+        kernel(v, lb, t, inherited, sites, uniforms, models, code, 1, 0.2, -3.0, True,
+               rule.adaptive, adaptive_floor(info), PRUNE, penalty, rule.outlier, old, new)
+        results.append((v, lb, t, old, new))
+    for a, b in ((0, 1), (2, 3)):
+        for x, y in zip(results[a], results[b]):
+            np.testing.assert_array_equal(x, y)
 
 
 def test_greedy_at_zero_temperature_never_lowers_a_site_objective():

@@ -52,7 +52,12 @@ def test_volume_does_not_depend_on_thread_count(tmp_path):
         import sys, numpy as np, numba, npmrf3d
         assert numba.get_num_threads() == int(sys.argv[2])
         res = npmrf3d.synthesize(None, size=16, window=5, levels=2, rng=11)
-        np.save(sys.argv[1], res.volume)
+        vols = [res.volume]
+        for sampler in ("metropolis", "heat-bath"):
+            vols.append(npmrf3d.synthesize(npmrf3d.data.path("ihc64"), size=16, window=5,
+                                           levels=2, relaxation="anneal", sampler=sampler,
+                                           palette=16, proposals=2, rng=11).volume)
+        np.save(sys.argv[1], np.concatenate(vols, axis=3))
         """
     )
     volumes = []

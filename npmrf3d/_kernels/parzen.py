@@ -98,26 +98,15 @@ def neighbour_distances(values, trust, patches_t, n_patches, dist, rows):
 
 
 @jit
-def log_lcpdf_from_distances(
-    dist, n_patches, centre_labels, labels, inv_two_h2, inv_two_hc2, adapt_eps,
-    min_two_h2, prune, log_norm_const, kernel_table, outlier, weights, nonzero, log_weights, out,
-):
-    """Turn neighbour distances into the log-LCPDF over all labels (see module docstring).
+def label_weights(dist, n_patches, centre_labels, inv_two_h2, adapt_eps, min_two_h2, prune,
+                  log_norm_const, weights, nonzero, log_weights):
+    """Patch weights summed per centre label, and the log normaliser ``log sum_j W_j c_j``.
 
-    ``kernel_table`` (K, K) holds ``exp(-||lam_j - lam_k||^2 / (2 h_c^2))`` (or is (0, 0):
-    then every term is computed in the log domain); where the table's sum underflows the
-    label falls back to the log domain, so both paths give the same result.
-
-    With ``outlier = a > 0`` the result is the robust LCPDF ``log((1 - a) L(k) + a / K)``: each
-    view keeps a uniform share ``a``, so in a product of views one view cannot veto a value
-    the others agree on. Labels whose ``L(k)`` underflows float64 then get ``log(a / K)``
-    (exact to ~1e-270 relative), which spares the log-domain fallback.
-
-    ``weights`` (K,) must be all zero on entry and is all zero again on exit; ``nonzero`` and
-    ``log_weights`` are scratch (K,). Writes ``out`` (K,) and returns the number of distinct
-    centre labels that carried weight.
+    ``W_j = sum_{p: y_p = j} exp(-(D_p - D_min) / (2 h^2))`` (patches more than ``prune`` below
+    the best skipped) goes to ``weights[j]`` for the ``n_nz`` labels listed in ``nonzero``,
+    ``log W_j`` to ``log_weights[:n_nz]``. Returns ``(n_nz, log_z)``; the caller must reset
+    ``weights`` at the listed labels to 0.
     """
-    n_labels = labels.shape[0]
     d_min = np.inf
     for p in range(n_patches):
         if dist[p] < d_min:
@@ -138,7 +127,6 @@ def log_lcpdf_from_distances(
             nonzero[n_nz] = lab
             n_nz += 1
         weights[lab] += wp
-    # normaliser: log sum_j W_j c_j
     top = -np.inf
     for a in range(n_nz):
         jl = nonzero[a]
@@ -149,7 +137,65 @@ def log_lcpdf_from_distances(
     acc = 0.0
     for a in range(n_nz):
         acc += math.exp(log_weights[a] + log_norm_const[nonzero[a]] - top)
-    log_z = top + math.log(acc)
+    return n_nz, top + math.log(acc)
+
+
+@jit
+def log_lcpdf_at_labels(
+    dist, n_patches, centre_labels, labels, inv_two_h2, inv_two_hc2, adapt_eps, min_two_h2,
+    prune, log_norm_const, outlier, query, weights, nonzero, log_weights, out,
+):
+    """The log-LCPDF of :func:`log_lcpdf_from_distances` at the labels ``query`` (Q,) only.
+
+    Costs O(patches + Q * weighted labels) instead of O(K * weighted labels): what a
+    Metropolis step needs (the current and the proposed label) with thousands of colours.
+    Writes ``out`` (Q,). Same buffer contract as :func:`log_lcpdf_from_distances`.
+    """
+    n_labels = labels.shape[0]
+    n_nz, log_z = label_weights(dist, n_patches, centre_labels, inv_two_h2, adapt_eps,
+                                min_two_h2, prune, log_norm_const, weights, nonzero, log_weights)
+    for q in range(query.shape[0]):
+        kl = query[q]
+        best = -np.inf
+        for a in range(n_nz):
+            v = log_weights[a] - label_sq_distance(labels, nonzero[a], kl) * inv_two_hc2
+            if v > best:
+                best = v
+        acc = 0.0
+        for a in range(n_nz):
+            v = log_weights[a] - label_sq_distance(labels, nonzero[a], kl) * inv_two_hc2
+            acc += math.exp(v - best)
+        value = best + math.log(acc) - log_z
+        if outlier > 0.0:
+            value = math.log((1.0 - outlier) * math.exp(value) + outlier / n_labels)
+        out[q] = value
+    for a in range(n_nz):
+        weights[nonzero[a]] = 0.0
+
+
+@jit
+def log_lcpdf_from_distances(
+    dist, n_patches, centre_labels, labels, inv_two_h2, inv_two_hc2, adapt_eps,
+    min_two_h2, prune, log_norm_const, kernel_table, outlier, weights, nonzero, log_weights, out,
+):
+    """Turn neighbour distances into the log-LCPDF over all labels (see module docstring).
+
+    ``kernel_table`` (K, K) holds ``exp(-||lam_j - lam_k||^2 / (2 h_c^2))`` (or is (0, 0):
+    then every term is computed in the log domain); where the table's sum underflows the
+    label falls back to the log domain, so both paths give the same result.
+
+    With ``outlier = a > 0`` the result is the robust LCPDF ``log((1 - a) L(k) + a / K)``: each
+    view keeps a uniform share ``a``, so in a product of views one view cannot veto a value
+    the others agree on. Labels whose ``L(k)`` underflows float64 then get ``log(a / K)``
+    (exact to ~1e-270 relative), which spares the log-domain fallback.
+
+    ``weights`` (K,) must be all zero on entry and is all zero again on exit; ``nonzero`` and
+    ``log_weights`` are scratch (K,). Writes ``out`` (K,) and returns the number of distinct
+    centre labels that carried weight.
+    """
+    n_labels = labels.shape[0]
+    n_nz, log_z = label_weights(dist, n_patches, centre_labels, inv_two_h2, adapt_eps,
+                                min_two_h2, prune, log_norm_const, weights, nonzero, log_weights)
     # linear domain with the kernel table (1 <= max W_j <= n, so no overflow); out holds sums
     have_table = kernel_table.shape[0] == n_labels
     for kl in range(n_labels):

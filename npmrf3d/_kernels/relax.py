@@ -13,7 +13,12 @@ from typing import NamedTuple
 import numpy as np
 
 from ._jit import jit, jit_parallel, prange
-from .parzen import gather_neighbours, log_lcpdf_from_distances, neighbour_distances
+from .parzen import (
+    gather_neighbours,
+    log_lcpdf_at_labels,
+    log_lcpdf_from_distances,
+    neighbour_distances,
+)
 
 H1A, H1B, H2A, H2B = 0, 1, 2, 3
 ARGMAX, SAMPLE = 0, 1
@@ -177,6 +182,22 @@ def site_log_lcpdfs(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune
 
 
 @jit
+def site_log_lcpdfs_at(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune, outlier,
+                       query, buffers, log_q):
+    """Per-view log-LCPDF of site (i, j, k) at the labels ``query`` (Q,) into ``log_q`` (V, Q)."""
+    values, trust, dist, weights, nonzero, log_weights, rows = buffers
+    for v in range(models.offsets.shape[0]):
+        gather_neighbours(volume, temps, i, j, k, models.offsets[v], values, trust)
+        n = models.n_patches[v]
+        neighbour_distances(values, trust, models.patches_t[v], n, dist, rows)
+        log_lcpdf_at_labels(
+            dist, n, models.centre_labels[v], models.labels, models.inv_two_h2[v],
+            models.inv_two_hc2[v], adapt_eps, min_two_h2, prune, models.log_norm_const[v],
+            outlier, query, weights, nonzero, log_weights, log_q[v],
+        )
+
+
+@jit
 def make_buffers(models):
     """Scratch arrays for one thread: values, trust, dist, weights, nonzero, log_weights, rows."""
     n_m = models.offsets.shape[1]
@@ -193,6 +214,50 @@ def make_buffers(models):
 
 
 CHUNK = 8
+#: Classes with fewer sites run in the calling thread: starting a parallel region costs more
+#: than it saves there (milliseconds when the cores are busy), and the result is the same.
+PARALLEL_MIN_SITES = 64
+
+
+@jit
+def icm_update_sites(
+    start, stop, volume, labels_volume, temps, inherited, sites, uniforms, models, heuristic,
+    decision, tau, xi, resynth, adapt_eps, min_two_h2, prune, penalty, outlier, old_labels,
+    new_labels,
+):
+    """The ICM update of sites ``start .. stop - 1`` of one class (see :func:`icm_update_class`)."""
+    n_views = models.offsets.shape[0]
+    n_labels = models.labels.shape[0]
+    nc = volume.shape[3]
+    n1, n2, n3 = temps.shape
+    n_union = models.union_offsets.shape[0]
+    buffers = make_buffers(models)
+    log_l = np.empty((n_views, n_labels), dtype=np.float64)
+    score = np.empty(n_labels, dtype=np.float64)
+    value = np.empty(nc, dtype=np.float32)
+    for q in range(start, stop):
+        i, j, k = sites[q, 0], sites[q, 1], sites[q, 2]
+        is_inherited = inherited[i, j, k]
+        if not (temps[i, j, k] > 0.0 or (resynth and is_inherited)):
+            old_labels[q] = -2
+            new_labels[q] = -2
+            continue
+        site_log_lcpdfs(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune,
+                        outlier, buffers, log_l)
+        chosen = choose_label(log_l, heuristic, decision, tau, uniforms[q], penalty,
+                              models.labels, value, score)
+        old_labels[q] = labels_volume[i, j, k]
+        new_labels[q] = chosen
+        labels_volume[i, j, k] = chosen
+        for c in range(nc):
+            volume[i, j, k, c] = value[c]
+        if not is_inherited:
+            total = 0.0
+            for r in range(n_union):
+                total += temps[(i + models.union_offsets[r, 0]) % n1,
+                               (j + models.union_offsets[r, 1]) % n2,
+                               (k + models.union_offsets[r, 2]) % n3]
+            temps[i, j, k] = max(0.0, (xi + total) / n_union)
 
 
 @jit_parallel
@@ -210,43 +275,82 @@ def icm_update_class(
     caller before this call: the result does not depend on the number of threads.
     """
     n_sites = sites.shape[0]
-    n_views = models.offsets.shape[0]
-    n_labels = models.labels.shape[0]
-    nc = volume.shape[3]
-    n1, n2, n3 = temps.shape
-    n_union = models.union_offsets.shape[0]
     n_chunks = (n_sites + CHUNK - 1) // CHUNK
     for chunk in prange(n_chunks):
-        buffers = make_buffers(models)
-        log_l = np.empty((n_views, n_labels), dtype=np.float64)
-        score = np.empty(n_labels, dtype=np.float64)
-        value = np.empty(nc, dtype=np.float32)
-        for q in range(chunk * CHUNK, min(n_sites, (chunk + 1) * CHUNK)):
-            i, j, k = sites[q, 0], sites[q, 1], sites[q, 2]
-            is_inherited = inherited[i, j, k]
-            if not (temps[i, j, k] > 0.0 or (resynth and is_inherited)):
-                old_labels[q] = -2
-                new_labels[q] = -2
-                continue
-            site_log_lcpdfs(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune,
-                            outlier, buffers, log_l)
-            chosen = choose_label(log_l, heuristic, decision, tau, uniforms[q], penalty,
-                                  models.labels, value, score)
-            old_labels[q] = labels_volume[i, j, k]
-            new_labels[q] = chosen
-            labels_volume[i, j, k] = chosen
-            for c in range(nc):
-                volume[i, j, k, c] = value[c]
-            if not is_inherited:
-                total = 0.0
-                for r in range(n_union):
-                    total += temps[(i + models.union_offsets[r, 0]) % n1,
-                                   (j + models.union_offsets[r, 1]) % n2,
-                                   (k + models.union_offsets[r, 2]) % n3]
-                temps[i, j, k] = max(0.0, (xi + total) / n_union)
+        icm_update_sites(chunk * CHUNK, min(n_sites, (chunk + 1) * CHUNK), volume,
+                         labels_volume, temps, inherited, sites, uniforms, models, heuristic,
+                         decision, tau, xi, resynth, adapt_eps, min_two_h2, prune, penalty,
+                         outlier, old_labels, new_labels)
+
+
+@jit
+def icm_update_class_serial(
+    volume, labels_volume, temps, inherited, sites, uniforms, models, heuristic, decision,
+    tau, xi, resynth, adapt_eps, min_two_h2, prune, penalty, outlier, old_labels, new_labels,
+):
+    """:func:`icm_update_class` in the calling thread (for small classes; same result)."""
+    icm_update_sites(0, sites.shape[0], volume, labels_volume, temps, inherited, sites,
+                     uniforms, models, heuristic, decision, tau, xi, resynth, adapt_eps,
+                     min_two_h2, prune, penalty, outlier, old_labels, new_labels)
 
 
 METROPOLIS, HEAT_BATH = 0, 1
+
+
+@jit
+def penalty_pair(penalty, pair, out):
+    """``out[q] = penalty[pair[q]]``: the penalty of the labels a Metropolis step compares."""
+    for q in range(pair.shape[0]):
+        out[q] = penalty[pair[q]]
+    return out
+
+
+@jit
+def anneal_update_sites(
+    start, stop, volume, labels_volume, temps, inherited, sites, candidates, uniforms, models,
+    heuristic, sampler, temperature, resynth, adapt_eps, min_two_h2, prune, penalty, outlier,
+    old_labels, new_labels,
+):
+    """The annealing step of sites ``start .. stop - 1`` of one class (see
+    :func:`anneal_update_class`)."""
+    n_views = models.offsets.shape[0]
+    n_labels = models.labels.shape[0]
+    nc = volume.shape[3]
+    buffers = make_buffers(models)
+    log_l = np.empty((n_views, n_labels), dtype=np.float64)
+    score = np.empty(n_labels, dtype=np.float64)
+    pair = np.empty(2, dtype=np.int64)
+    log_pair = np.empty((n_views, 2), dtype=np.float64)
+    pen2 = np.empty(2, dtype=np.float64)
+    two = np.empty(2, dtype=np.float64)
+    for q in range(start, stop):
+        i, j, k = sites[q, 0], sites[q, 1], sites[q, 2]
+        if inherited[i, j, k] and not resynth:
+            old_labels[q] = -2
+            new_labels[q] = -2
+            continue
+        current = labels_volume[i, j, k]
+        if sampler == HEAT_BATH:
+            site_log_lcpdfs(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune,
+                            outlier, buffers, log_l)
+            objective_scores(log_l, heuristic, penalty, score)
+            chosen = sample_index(score, temperature, uniforms[q])
+        else:
+            chosen = candidates[q]
+            if current >= 0 and chosen != current:
+                pair[0] = current
+                pair[1] = chosen
+                site_log_lcpdfs_at(volume, temps, i, j, k, models, adapt_eps, min_two_h2,
+                                   prune, outlier, pair, buffers, log_pair)
+                objective_scores(log_pair, heuristic, penalty_pair(penalty, pair, pen2), two)
+                if not metropolis_accept(two[1] - two[0], temperature, uniforms[q]):
+                    chosen = current
+        old_labels[q] = current
+        new_labels[q] = chosen
+        if chosen != current:
+            labels_volume[i, j, k] = chosen
+            for c in range(nc):
+                volume[i, j, k, c] = models.labels[chosen, c]
 
 
 @jit_parallel
@@ -259,7 +363,8 @@ def anneal_update_class(
 
     ``sampler`` METROPOLIS: the site's current label is replaced by ``candidates[q]`` if
     :func:`metropolis_accept` agrees on the change of the heuristic's objective (ML_H2a or
-    ML_H2b, plus ``penalty``). HEAT_BATH: the new label is drawn from
+    ML_H2b, plus ``penalty``); only these two labels' LCPDFs are computed, so the cost does
+    not grow with the number of labels. HEAT_BATH: the new label is drawn from
     ``exp(objective / temperature) / Z`` over all labels (this project's addition).
     Inherited sites are skipped unless ``resynth``. ``temps`` only sets the neighbours' trust
     (all zero during annealing: every neighbour counts). ``old_labels``/``new_labels`` receive
@@ -267,34 +372,21 @@ def anneal_update_class(
     ``uniforms``, drawn by the caller: the result does not depend on the number of threads.
     """
     n_sites = sites.shape[0]
-    n_views = models.offsets.shape[0]
-    n_labels = models.labels.shape[0]
-    nc = volume.shape[3]
     n_chunks = (n_sites + CHUNK - 1) // CHUNK
     for chunk in prange(n_chunks):
-        buffers = make_buffers(models)
-        log_l = np.empty((n_views, n_labels), dtype=np.float64)
-        score = np.empty(n_labels, dtype=np.float64)
-        for q in range(chunk * CHUNK, min(n_sites, (chunk + 1) * CHUNK)):
-            i, j, k = sites[q, 0], sites[q, 1], sites[q, 2]
-            if inherited[i, j, k] and not resynth:
-                old_labels[q] = -2
-                new_labels[q] = -2
-                continue
-            site_log_lcpdfs(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune,
-                            outlier, buffers, log_l)
-            objective_scores(log_l, heuristic, penalty, score)
-            current = labels_volume[i, j, k]
-            if sampler == HEAT_BATH:
-                chosen = sample_index(score, temperature, uniforms[q])
-            else:
-                chosen = candidates[q]
-                if current >= 0 and not metropolis_accept(score[chosen] - score[current],
-                                                          temperature, uniforms[q]):
-                    chosen = current
-            old_labels[q] = current
-            new_labels[q] = chosen
-            if chosen != current:
-                labels_volume[i, j, k] = chosen
-                for c in range(nc):
-                    volume[i, j, k, c] = models.labels[chosen, c]
+        anneal_update_sites(chunk * CHUNK, min(n_sites, (chunk + 1) * CHUNK), volume,
+                            labels_volume, temps, inherited, sites, candidates, uniforms, models,
+                            heuristic, sampler, temperature, resynth, adapt_eps, min_two_h2,
+                            prune, penalty, outlier, old_labels, new_labels)
+
+
+@jit
+def anneal_update_class_serial(
+    volume, labels_volume, temps, inherited, sites, candidates, uniforms, models, heuristic,
+    sampler, temperature, resynth, adapt_eps, min_two_h2, prune, penalty, outlier, old_labels,
+    new_labels,
+):
+    """:func:`anneal_update_class` in the calling thread (for small classes; same result)."""
+    anneal_update_sites(0, sites.shape[0], volume, labels_volume, temps, inherited, sites,
+                        candidates, uniforms, models, heuristic, sampler, temperature, resynth,
+                        adapt_eps, min_two_h2, prune, penalty, outlier, old_labels, new_labels)

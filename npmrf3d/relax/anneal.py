@@ -31,7 +31,14 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .._kernels.relax import HEAT_BATH, METROPOLIS, ViewModels, anneal_update_class
+from .._kernels.relax import (
+    HEAT_BATH,
+    METROPOLIS,
+    PARALLEL_MIN_SITES,
+    ViewModels,
+    anneal_update_class,
+    anneal_update_class_serial,
+)
 from .icm import histogram_penalty
 
 __all__ = ["SAMPLERS", "SCHEDULES", "PROPOSALS", "geometric_schedule", "linear_schedule",
@@ -135,9 +142,11 @@ def relax_anneal(
                 penalty = histogram_penalty(counts, exemplar_freq, histogram_weight)
             old = np.empty(len(sites), dtype=np.int64)
             new = np.empty(len(sites), dtype=np.int64)
-            anneal_update_class(volume, labels_volume, temps, inherited, sites, candidates,
-                                uniforms, models, heuristic, code, float(temperature), resynth,
-                                adaptive, min_two_h2, prune, penalty, outlier, old, new)
+            parallel = len(sites) >= PARALLEL_MIN_SITES
+            update = anneal_update_class if parallel else anneal_update_class_serial
+            update(volume, labels_volume, temps, inherited, sites, candidates, uniforms, models,
+                   heuristic, code, float(temperature), resynth, adaptive, min_two_h2, prune,
+                   penalty, outlier, old, new)
             visited = old != -2
             moved = visited & (old != new)
             sweep_updates += int(visited.sum())

@@ -13,7 +13,12 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .._kernels.relax import ViewModels, icm_update_class
+from .._kernels.relax import (
+    PARALLEL_MIN_SITES,
+    ViewModels,
+    icm_update_class,
+    icm_update_class_serial,
+)
 
 
 def histogram_penalty(counts: np.ndarray, exemplar_freq: np.ndarray, weight: float) -> np.ndarray:
@@ -82,9 +87,11 @@ def relax_icm(
                 penalty = histogram_penalty(counts, exemplar_freq, histogram_weight)
             old = np.empty(len(sites), dtype=np.int64)
             new = np.empty(len(sites), dtype=np.int64)
-            icm_update_class(volume, labels_volume, temps, inherited, sites, uniforms, models,
-                             heuristic, decision, tau, xi, resynth, adaptive, min_two_h2, prune,
-                             penalty, outlier, old, new)
+            parallel = len(sites) >= PARALLEL_MIN_SITES
+            update = icm_update_class if parallel else icm_update_class_serial
+            update(volume, labels_volume, temps, inherited, sites, uniforms, models, heuristic,
+                   decision, tau, xi, resynth, adaptive, min_two_h2, prune, penalty, outlier,
+                   old, new)
             visited = old != -2
             updates += int(visited.sum())
             if histogram_weight:
