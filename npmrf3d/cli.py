@@ -31,7 +31,7 @@ _DEFAULT_RULE = VARIANTS["default"]
 _HEURISTIC_NAMES = ("ML_H1a", "ML_H1b", "ML_H2a", "ML_H2b")
 #: Modules that add further sub-commands: each has ``register(commands, formatter_class)``,
 #: which adds its parser and sets ``handler=fn`` with ``fn(args, argv) -> exit code``.
-_COMMAND_MODULES: tuple[str, ...] = ("npmrf3d._cli_metrics",)
+_COMMAND_MODULES: tuple[str, ...] = ("npmrf3d._cli_metrics", "npmrf3d.studies.cli", "npmrf3d.baselines.cli")
 
 
 # --------------------------------------------------------------------------- parser
@@ -139,10 +139,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="icm: hard limit of sweeps per level, a positive integer",
     )
     method.add_argument(
-        "--sampler", default="metropolis", metavar="{metropolis,heat-bath}",
-        help="anneal: metropolis (the paper: one proposal per voxel and sweep, accepted by the "
-             "Metropolis rule) or heat-bath (this project's addition: draw the new value from the "
-             "tempered objective over all labels)",
+        "--sampler", default="heat-bath", metavar="{heat-bath,metropolis}",
+        help="anneal: heat-bath (this project's addition and the default, chosen by measurement: "
+             "draw the new value from the tempered objective over all labels) or metropolis (the "
+             "paper: one proposal per voxel and sweep, accepted by the Metropolis rule; needs many "
+             "more proposals)",
     )
     method.add_argument(
         "--schedule", default="geometric", metavar="{geometric,linear}",

@@ -78,7 +78,7 @@ class SynthesisConfig:
     xi: float = -3.0
     stop: float = 0.95
     max_sweeps: int = 30
-    sampler: str = "metropolis"
+    sampler: str = "heat-bath"
     schedule: str = "geometric"
     t0: float = 1.0
     t_end: float = 0.05

@@ -21,7 +21,7 @@ ADAPTIVE_FLOOR = 0.05
 #: Patches whose log weight is more than this below the best contribute < e^-40: skipped.
 PRUNE = 40.0
 #: Largest memory for the label kernel tables (beyond it every label term is computed in logs).
-KERNEL_TABLE_BYTES = 256 * 2**20
+KERNEL_TABLE_BYTES = 512 * 2**20
 
 
 def h_opt(sigma: float, n: int, d: int) -> float:

@@ -32,7 +32,7 @@ DEFAULT_UPSAMPLE = {"icm": "1/8", "anneal": "8/8"}
 
 def make_config(
     *, size=32, window=7, levels=3, heuristic="ML_H2b", relaxation="icm", views=VIEWS,
-    upsample=None, inherit="resynth", xi=-3.0, stop=0.95, max_sweeps=30, sampler="metropolis",
+    upsample=None, inherit="resynth", xi=-3.0, stop=0.95, max_sweeps=30, sampler="heat-bath",
     schedule="geometric", t0=1.0, t_end=0.05, proposals=10, proposal="exemplar", variant="default",
     bandwidth=None, centre_bandwidth=None, adaptive=None, decision=None, tau=None,
     histogram_weight=None, outlier=None, grey_levels=None, palette=None, toroidal_exemplar=False,
@@ -125,7 +125,7 @@ def resolve_exemplars(exemplar, exemplars: dict | None, views: tuple[str, ...], 
 def synthesize(
     exemplar=None, *, size=32, window=7, levels=3, heuristic="ML_H2b", relaxation="icm",
     views=VIEWS, exemplars: dict | None = None, upsample=None, inherit="resynth", xi=-3.0,
-    stop=0.95, max_sweeps=30, sampler="metropolis", schedule="geometric", t0=1.0, t_end=0.05,
+    stop=0.95, max_sweeps=30, sampler="heat-bath", schedule="geometric", t0=1.0, t_end=0.05,
     proposals=10, proposal="exemplar", variant="default", bandwidth=None, centre_bandwidth=None,
     adaptive=None, decision=None, tau=None, histogram_weight=None, outlier=None, grey_levels=None,
     palette=None, toroidal_exemplar=False, rng=None, progress: ProgressCallback | None = None,
@@ -163,9 +163,10 @@ def synthesize(
         Stop a level once the global temperature fell by this fraction (1: down to 0).
     max_sweeps : int
         Hard limit of sweeps per level.
-    sampler : {"metropolis", "heat-bath"}
-        Annealing: the paper's Metropolis proposals, or a heat-bath draw from the tempered
-        objective over all labels (this project's addition).
+    sampler : {"heat-bath", "metropolis"}
+        Annealing: a heat-bath draw from the tempered objective over all labels (this
+        project's addition, the default: better volumes for the same number of sweeps, see
+        docs/quality.md), or the paper's Metropolis proposals.
     schedule : {"geometric", "linear"}
         Annealing: how the global temperature falls from ``t0`` to ``t_end`` within a level.
     t0, t_end : float

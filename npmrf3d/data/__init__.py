@@ -1,17 +1,27 @@
 """Bundled exemplar images (real photographs and micrographs, public domain / CC0).
 
-=============  ==========  ================================================
-name           shape       content
-=============  ==========  ================================================
-``brick``      128 x 128   brick wall (``skimage.data.brick``, 4x smaller)
-``grass``      128 x 128   grass (``skimage.data.grass``, 4x smaller)
-``gravel``     128 x 128   gravel (``skimage.data.gravel``, 4x smaller)
-``gravel64``   64 x 64     top-left 64 x 64 crop of ``gravel``
-``ihc``        128 x 128   colour tissue micrograph (``skimage.data.immunohistochemistry``, 4x smaller)
-``ihc64``      64 x 64     top-left 64 x 64 crop of ``ihc`` (colour)
-=============  ==========  ================================================
+==================  =============  ==============================================
+name                shape          content (scikit-image source)
+==================  =============  ==============================================
+``brick``           128 x 128      brick wall (``brick``, 4x smaller)
+``grass``           128 x 128      grass (``grass``, 4x smaller)
+``gravel``          128 x 128      gravel (``gravel``, 4x smaller)
+``gravel64``        64 x 64        top-left crop of ``gravel`` (the default)
+``ihc``             128 x 128 x 3  stained tissue micrograph (``immunohistochemistry``)
+``ihc64``           64 x 64 x 3    top-left crop of ``ihc``
+``hubble``          128 x 128 x 3  galaxies on black (``hubble_deep_field``)
+``lawn``            128 x 128      lawn from above (``camera``)
+``microaneurysms``  96 x 96        retina with vessels and lesions (``microaneurysms``)
+``phase_bands``     128 x 128      banded phase-image background (``cell``)
+``pompeii_coins``   128 x 128      coins on a tray (``coins``)
+``retina_vessels``  128 x 128 x 3  fundus photograph, vessels (``retina``)
+``rocket_truss``    80 x 80 x 3    launch-tower truss (``rocket``)
+``stripes``         80 x 80 x 3    flag stripes (``astronaut``)
+``tabby_fur``       80 x 80 x 3    cat fur (``chelsea``)
+``wood``            128 x 128 x 3  wooden table grain (``coffee``)
+==================  =============  ==============================================
 
-``ihc`` and ``ihc64`` are 8-bit RGB, the others 8-bit grey PNGs; origin, licence and recipe are in ``SOURCES.md`` next to them.
+8-bit grey or RGB PNGs; origin, licence and the exact recipe of each are in ``SOURCES.md``.
 Load one with ``npmrf3d.io.read_array(npmrf3d.data.path(name))``.
 """
 

@@ -1,0 +1,277 @@
+"""Command line of the baselines: ``npmrf3d baseline kopf [EXEMPLAR] ...`` (NP_K).
+
+Registered by :mod:`npmrf3d.cli` through ``register(commands, formatter_class)``. Same
+conventions as ``npmrf3d synth``: every option shows its default in ``--help``; a tqdm bar per
+level on stderr (``--quiet`` turns it off); the run folder holds ``volume.npy``, ``volume.tif``,
+``preview.png`` and ``run.json``; user mistakes are one line on stderr with exit code 2, raised
+before any synthesis work and without leaving files behind.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import pathlib
+import sys
+import time
+from datetime import datetime, timezone
+
+from .. import data, io
+from ..errors import ParameterError
+from ..neighborhood import VIEWS
+
+__all__ = ["register"]
+
+#: Library parameter names whose messages should name the command-line option instead.
+_OPTION_NAMES = ("histogram_bins", "histogram_weight", "mean_shift", "constraint_weight",
+                 "iterations", "variance", "grid", "eps", "window", "levels")
+
+
+def register(commands, formatter_class) -> None:
+    """Add ``baseline`` with its nested sub-command ``kopf`` to the ``npmrf3d`` parser."""
+    from ..cli import BUNDLED_PREFIX
+    from .kopf import DEFAULT_HISTOGRAM_WEIGHT, DEFAULT_MEAN_SHIFT, UPSAMPLING
+
+    baseline = commands.add_parser(
+        "baseline",
+        help="synthesise with a baseline method the NP-MRF sampler is compared with (kopf)",
+        description="Baseline methods, with the same outputs as 'npmrf3d synth'.",
+        formatter_class=formatter_class,
+    )
+    methods = baseline.add_subparsers(dest="baseline", metavar="METHOD", required=True)
+    kopf = methods.add_parser(
+        "kopf",
+        help="NP_K: texture optimisation with histogram matching (Kopf et al. 2007)",
+        description=(
+            "NP_K (Kopf et al. 2007): minimise the robust distance between the volume's\n"
+            "axis-orthogonal 2D neighbourhoods and their nearest exemplar neighbourhoods\n"
+            "(PCA + approximate kd-tree search on a sparse grid, IRLS averaging, histogram\n"
+            f"matching), coarse to fine. Writes {', '.join(io.RUN_FILES)} into the output folder.\n\n"
+            "examples:\n"
+            "  npmrf3d baseline kopf                                # bundled exemplar, 32^3\n"
+            "  npmrf3d baseline kopf bundled:ihc --size 128 --out ihc-kopf\n"
+            "  npmrf3d baseline kopf wood.png --views front,right    # two constrained views"
+        ),
+        formatter_class=formatter_class,
+    )
+    kopf.add_argument(
+        "exemplar", nargs="?", default=f"{BUNDLED_PREFIX}{data.DEFAULT_EXEMPLAR}", metavar="EXEMPLAR",
+        help="2D exemplar image (.png, .jpg, .bmp, .gif, .tif or .npy) used for every view; "
+             f"omitted = the bundled default exemplar, or '{BUNDLED_PREFIX}NAME' for a bundled one "
+             f"({', '.join(data.available())})",
+    )
+    shape = kopf.add_argument_group("volume and pyramid")
+    shape.add_argument("--size", default="32", metavar="N",
+                       help="output size in voxels: N for an N^3 cube or N1,N2,N3; each divisible "
+                            "by 2**(levels-1) and by grid at every level")
+    shape.add_argument("--window", type=int, default=8, metavar="W",
+                       help="side of the square 2D neighbourhoods, an integer >= 2 (the paper: 8)")
+    shape.add_argument("--levels", type=int, default=3, metavar="L",
+                       help="resolution levels, coarse to fine, 1 to 8 (the paper: 3)")
+    shape.add_argument("--iterations", default="5", metavar="N[,N...]",
+                       help="search + optimisation iterations per level: one number, or one per "
+                            "level (coarsest first)")
+    shape.add_argument("--upsample", default="trilinear", metavar="{" + ",".join(UPSAMPLING) + "}",
+                       help="initialisation of a finer level: trilinear interpolation (the paper), "
+                            "or the project's pyramid (8/8 copies the parent into all children, 1/8 "
+                            "into one and draws the others from the exemplar)")
+    method = kopf.add_argument_group("energy and search")
+    method.add_argument("--r", type=float, default=0.8, metavar="R",
+                        help="exponent of the robust energy ||s - e||^r, in (0, 2]")
+    method.add_argument("--eps", type=float, default=2.0, metavar="E",
+                        help="error bound of the approximate nearest-neighbour search "
+                             "(cKDTree eps), >= 0; 0 = exact in the PCA space")
+    method.add_argument("--variance", type=float, default=0.95, metavar="F",
+                        help="fraction of the neighbourhood variance kept by the PCA, in (0, 1]")
+    method.add_argument("--grid", type=int, default=2, metavar="M",
+                        help="spacing of the sparse grid of searched neighbourhoods (1 = all)")
+    method.add_argument("--histogram-bins", type=int, default=16, metavar="B",
+                        help="bins of each channel's histogram, >= 2")
+    method.add_argument("--histogram-weight", type=float, default=DEFAULT_HISTOGRAM_WEIGHT, metavar="W",
+                        help="strength of the histogram re-weighting, >= 0 (0 = off, 1 = the "
+                             "paper's formula with histograms as voxel counts)")
+    method.add_argument("--mean-shift", default=",".join(str(h) for h in DEFAULT_MEAN_SHIFT),
+                        metavar="H0,H1",
+                        help="mean-shift bandwidths at the start and end of each level, as multiples "
+                             "of the exemplar's standard deviation; one number for a fixed "
+                             "bandwidth, 'none' for the plain weighted average")
+    views = kopf.add_argument_group("views, exemplars and constraints")
+    views.add_argument("--views", default=",".join(VIEWS), metavar="V[,V...]",
+                       help=f"comma-separated views in the energy, 1 to 3 distinct names of "
+                            f"{', '.join(VIEWS)}")
+    for view in VIEWS:
+        views.add_argument(f"--exemplar-{view}", default=None, metavar="PATH",
+                           help=f"a different exemplar file (or {BUNDLED_PREFIX}NAME) for the {view} "
+                                f"view (default: none = EXEMPLAR)")
+    views.add_argument("--constraint", default=None, metavar="PATH",
+                       help="voxel constraints: a .npy or .tif volume (N1, N2, N3[, C]) of target "
+                            "values (default: none)")
+    views.add_argument("--constraint-weight", default=None, metavar="W|PATH",
+                       help="constraint weights: a number >= 0 or a .npy/.tif volume (N1, N2, N3) "
+                            "(default: none = 1 everywhere when --constraint is given)")
+    run = kopf.add_argument_group("run")
+    run.add_argument("--seed", type=int, default=0, metavar="S",
+                     help="random seed, a non-negative integer; the result depends on it only")
+    run.add_argument("--out", default="npmrf3d-kopf-out", metavar="DIR",
+                     help="output folder for the run files; created if missing")
+    run.add_argument("--overwrite", action="store_true",
+                     help="replace the files of a previous run in --out instead of refusing")
+    run.add_argument("--quiet", action="store_true",
+                     help="print nothing but errors (no progress bars, no summary)")
+    kopf.set_defaults(handler=_kopf)
+
+
+def _parse_iterations(text: str):
+    parts = [p.strip() for p in str(text).split(",")]
+    try:
+        numbers = [int(p) for p in parts]
+    except ValueError:
+        raise ParameterError(f"--iterations must be an integer or comma-separated integers; got {text!r}") from None
+    return numbers[0] if len(numbers) == 1 else tuple(numbers)
+
+
+def _parse_mean_shift(text: str):
+    if str(text).strip().lower() in ("none", "off", ""):
+        return None
+    parts = [p.strip() for p in str(text).split(",")]
+    try:
+        numbers = [float(p) for p in parts]
+    except ValueError:
+        raise ParameterError(f"--mean-shift must be 'none', a number or two comma-separated numbers; "
+                             f"got {text!r}") from None
+    if len(numbers) > 2:
+        raise ParameterError(f"--mean-shift must be 'none', a number or two comma-separated numbers; "
+                             f"got {text!r}")
+    return numbers[0] if len(numbers) == 1 else tuple(numbers)
+
+
+def _constraint_weight(text: str | None):
+    if text is None:
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        pass
+    weights = io.read_volume(text)
+    if weights.shape[3] != 1:
+        raise ParameterError(f"--constraint-weight volume '{text}' must have one channel; "
+                             f"got shape {weights.shape}")
+    return weights[..., 0]
+
+
+class _Progress:
+    """One tqdm bar per level on stderr: iterations done, mean energy as postfix."""
+
+    def __init__(self, size, enabled: bool):
+        self.size = size
+        self.enabled = enabled
+        self.bar = None
+
+    def __call__(self, level: int, iteration: int, iterations: int, energy: float) -> None:
+        if not self.enabled:
+            return
+        if iteration == 0 or self.bar is None:
+            self.close()
+            from tqdm import tqdm
+
+            from ..pyramid import level_shape
+
+            shape = level_shape(self.size, level)
+            side = f"{shape[0]}^3" if len(set(shape)) == 1 else "x".join(map(str, shape))
+            self.bar = tqdm(total=iterations, desc=f"level {level} ({side})", unit="iter",
+                            file=sys.stderr, leave=True, dynamic_ncols=True)
+            return
+        self.bar.set_postfix(E=f"{energy:.4g}", refresh=False)
+        self.bar.update(iteration - self.bar.n)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+
+def _option_message(message: str) -> str:
+    for name in _OPTION_NAMES:
+        if message.startswith(f"{name} must "):
+            return "--" + name.replace("_", "-") + message[len(name):]
+    return message
+
+
+def _kopf(args: argparse.Namespace, argv: list[str]) -> int:
+    try:
+        return _run(args, argv)
+    except ParameterError as exc:
+        raise ParameterError(_option_message(str(exc))) from None
+
+
+def _run(args: argparse.Namespace, argv: list[str]) -> int:
+    import numpy as np
+
+    from ..cli import PROG, _check_out, _exemplar_source, _parse_size
+    from ..synthesis import resolve_exemplars
+    from .kopf import _constraint_arrays, make_kopf_config, run_kopf
+
+    t_start = time.perf_counter()
+    constraint = io.read_volume(args.constraint) if args.constraint is not None else None
+    weight = _constraint_weight(args.constraint_weight)
+    config = make_kopf_config(
+        size=_parse_size(args.size), window=args.window, levels=args.levels,
+        views=args.views, iterations=_parse_iterations(args.iterations), r=args.r, eps=args.eps,
+        variance=args.variance, grid=args.grid, histogram_bins=args.histogram_bins,
+        histogram_weight=args.histogram_weight, mean_shift=_parse_mean_shift(args.mean_shift),
+        upsample=args.upsample, constrained=constraint is not None, seed=args.seed,
+    )
+    if not args.out.strip():
+        raise ParameterError("--out must name a folder; got an empty string")
+    out = pathlib.Path(args.out)
+    _check_out(out, args.overwrite)
+
+    exemplar, exemplar_name = _exemplar_source(args.exemplar)
+    per_view_sources, names = {}, {}
+    for view in VIEWS:
+        source, name = _exemplar_source(getattr(args, f"exemplar_{view}"))
+        if source is not None:
+            per_view_sources[view], names[view] = source, name
+    per_view = resolve_exemplars(exemplar, per_view_sources, config.views, _config_fit(config))
+    sources = {view: names.get(view, exemplar_name) for view in config.views}
+    channels = next(iter(per_view.values())).shape[2]
+    target, tau = _constraint_arrays(constraint, weight, config.size, channels)
+
+    progress = _Progress(config.size, enabled=not args.quiet)
+    try:
+        result = run_kopf(config, per_view, np.random.default_rng(config.seed), constraint=target,
+                          constraint_weight=tau, progress=progress, t_start=t_start)
+    finally:
+        progress.close()
+
+    record = {
+        "command": "baseline kopf",
+        "argv": [PROG, *argv],
+        "config": result.config.to_dict(),
+        "seed": config.seed,
+        "exemplars": sources,
+        "constraint": args.constraint,
+        "constraint_weight": args.constraint_weight,
+        "versions": io.package_versions(),
+        "threads": result.stats["threads"],
+        "timings": result.timings,
+        "history": result.history,
+        "stats": result.stats,
+        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+    }
+    title = (f"NP_K (Kopf et al. 2007), window {config.window}, {config.levels} levels, "
+             f"seed {config.seed}")
+    io.write_run(out, volume=result.volume, exemplars=per_view, record=record,
+                 overwrite=args.overwrite, title=title)
+    if not args.quiet:
+        shape = "x".join(str(n) for n in result.volume.shape)
+        print(f"wrote {out}{os.sep}: {', '.join(io.RUN_FILES)}")
+        print(f"volume {shape} (N1xN2xN3xC), {result.timings['total']:.1f} s")
+    return 0
+
+
+def _config_fit(config):
+    """What :func:`npmrf3d.synthesis.resolve_exemplars` checks the exemplars against."""
+    import types
+
+    return types.SimpleNamespace(window=config.window, levels=config.levels, toroidal_exemplar=False)

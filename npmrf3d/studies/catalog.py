@@ -1,0 +1,313 @@
+"""The studies of SPEC.md section 8 (and the 2D->3D ground-truth study), declared as data.
+
+Each entry of :data:`STUDIES` is a :class:`~npmrf3d.studies.grid.Study`: methods crossed with
+the exemplars, seeds and sizes of a ``full`` and a ``quick`` variant. Change a comparison by
+editing its declaration here; the runner, the figures and the report need nothing else.
+
+Full variants run at 32^3 with 2 pyramid levels on the exemplars' top-left 64 x 64 pixels (the
+scale at which SPEC.md section 4 measured the method; the paper's 64^3 and 3 levels are one
+``--size 64 --levels 3`` away). Quick variants are tiny (8^3 to 16^3, one level or two, small
+windows, two sweeps) so that the tests run every study.
+
+Exemplars
+---------
+Names resolve with :func:`load_exemplar`:
+
+* a bundled exemplar (:func:`npmrf3d.data.available`): real photographs and micrographs from
+  scikit-image, CC0 / public domain (``npmrf3d/data/SOURCES.md``);
+* ``etr:<name>``: a terrain photograph of Debian's ``extremetuxracer-data`` package, read at
+  run time from :data:`ETR_DIR` when the package is installed (GPL-2+, never bundled);
+* any other string is an image file path (``.png``, ``.tif``, ``.npy`` ...).
+"""
+
+from __future__ import annotations
+
+import pathlib
+
+import numpy as np
+
+from npmrf3d.errors import ParameterError
+
+from .grid import Method, Scale, Study
+
+__all__ = [
+    "COLOUR_EXEMPLARS",
+    "ETR_DIR",
+    "GREY_EXEMPLARS",
+    "LAYERED_EXEMPLARS",
+    "STUDIES",
+    "STUDY_EXEMPLARS",
+    "etr_available",
+    "get_study",
+    "load_exemplar",
+]
+
+#: The ~15 real exemplars of the comparison with NP_K: grey and colour, stochastic and
+#: structured, layered/anisotropic, micro-structure-like (all bundled, see SOURCES.md).
+STUDY_EXEMPLARS: tuple[str, ...] = (
+    # grey
+    "gravel", "brick", "grass", "lawn", "microaneurysms", "phase_bands", "pompeii_coins",
+    # colour
+    "ihc", "hubble", "wood", "tabby_fur", "retina_vessels", "rocket_truss", "stripes",
+)
+#: Grey exemplars (ICM versus annealing on 32 grey levels, the heuristics).
+GREY_EXEMPLARS: tuple[str, ...] = ("gravel64", "brick", "lawn", "phase_bands")
+#: Colour exemplars (annealing in colour).
+COLOUR_EXEMPLARS: tuple[str, ...] = ("ihc64", "hubble", "wood", "tabby_fur", "retina_vessels")
+#: Layered / anisotropic exemplars whose layers run along the image rows (two versus three views).
+LAYERED_EXEMPLARS: tuple[str, ...] = ("stripes", "wood", "tabby_fur", "phase_bands", "brick")
+
+#: Where Debian's extremetuxracer-data package puts its terrain photographs (GPL-2+).
+ETR_DIR = pathlib.Path("/usr/share/games/etr/terrains")
+_ETR_PREFIX = "etr:"
+_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".gif", ".tif", ".tiff", ".npy")
+
+
+def etr_available(folder: pathlib.Path | None = None) -> list[str]:
+    """Names ``etr:<stem>`` of the installed Extreme Tux Racer terrain photographs (may be empty)."""
+    folder = ETR_DIR if folder is None else pathlib.Path(folder)
+    if not folder.is_dir():
+        return []
+    return sorted(f"{_ETR_PREFIX}{p.stem}" for p in folder.iterdir()
+                  if p.suffix.lower() in _IMAGE_SUFFIXES)
+
+
+def load_exemplar(name: str, crop: int | None = None) -> np.ndarray:
+    """A study exemplar as float32 ``(H, W, C)``; ``crop`` keeps the top-left ``crop x crop``.
+
+    Raises
+    ------
+    ParameterError
+        Unknown name, missing file, or an ``etr:`` name without the Debian package installed.
+
+    Examples
+    --------
+    >>> load_exemplar("gravel64", crop=16).shape
+    (16, 16, 1)
+    """
+    import npmrf3d
+    from npmrf3d import data
+
+    if name in data.available():
+        image = npmrf3d.load_exemplar(data.path(name))
+    elif name.startswith(_ETR_PREFIX):
+        stem = name[len(_ETR_PREFIX):]
+        if not ETR_DIR.is_dir():
+            raise ParameterError(
+                f"exemplar {name!r} is an Extreme Tux Racer terrain photograph, read at run time "
+                f"from {ETR_DIR}, which does not exist: install Debian's extremetuxracer-data "
+                f"package (GPL-2+, so it is not bundled with npmrf3d) or choose another exemplar")
+        files = [p for p in sorted(ETR_DIR.iterdir())
+                 if p.stem == stem and p.suffix.lower() in _IMAGE_SUFFIXES]
+        if not files:
+            raise ParameterError(f"no terrain photograph {stem!r} in {ETR_DIR}; installed: "
+                                 f"{', '.join(etr_available()) or 'none'}")
+        image = npmrf3d.load_exemplar(files[0])
+    elif pathlib.Path(name).suffix.lower() in _IMAGE_SUFFIXES:
+        image = npmrf3d.load_exemplar(name)
+    else:
+        raise ParameterError(
+            f"unknown exemplar {name!r}: use a bundled name ({', '.join(data.available())}), "
+            f"'etr:NAME' for an installed Extreme Tux Racer terrain, or an image file path")
+    if crop is not None:
+        image = np.ascontiguousarray(image[:crop, :crop])
+    return image
+
+
+# --------------------------------------------------------------------------- the studies
+
+# Shared pieces of the declarations.
+_FULL = dict(seeds=(0, 1), sizes=(32,), levels=2, crop=64)
+_QUICK = dict(exemplars=("gravel64",), seeds=(0,), sizes=(8,), levels=1, crop=24,
+              common=(("window", 3), ("max_sweeps", 2)))
+_ANNEAL = (("relaxation", "anneal"), ("sampler", "metropolis"), ("schedule", "geometric"),
+           ("proposals", 8))
+_QUICK_ANNEAL = (("proposals", 2),)
+
+
+def _m(name: str, algorithm: str = "npmrf", **params) -> Method:
+    return Method(name, algorithm, tuple(params.items()))
+
+
+HEURISTICS = Study(
+    name="heuristics",
+    title="Heuristics compared: ML_H1a, ML_H1b, ML_H2a, ML_H2b",
+    question="Which way of making one voxel value from three 2D views gives the best volumes?",
+    notes="The paper's settings: ICM, 7x7 windows, random visiting order, 8/8 up-sampling, "
+          "resynth, xi = -3, stop at 95 %. The four heuristics run the literal decision rule "
+          "(argmax, h_opt), as in the paper; ML_H2b with the default (measured) rule is the "
+          "reference of what works. ML_H1a/ML_H1b have no objective and can only use argmax.",
+    common=(("relaxation", "icm"), ("window", 7), ("upsample", "8/8"), ("inherit", "resynth"),
+            ("xi", -3.0), ("stop", 0.95), ("max_sweeps", 30)),
+    methods=(
+        _m("ML_H1a", heuristic="ML_H1a", variant="literal"),
+        _m("ML_H1b", heuristic="ML_H1b", variant="literal"),
+        _m("ML_H2a", heuristic="ML_H2a", variant="literal"),
+        _m("ML_H2b", heuristic="ML_H2b", variant="literal"),
+        _m("ML_H2b-default", heuristic="ML_H2b", variant="default"),
+    ),
+    full=Scale(exemplars=GREY_EXEMPLARS, **_FULL),
+    quick=Scale(**_QUICK),
+)
+
+COOLING = Study(
+    name="cooling",
+    title="ICM cooling: xi = -1 versus -3, full versus 95 % stop",
+    question="How fast should voxels cool, and does stopping at 95 % of the global temperature "
+             "lose anything against cooling down to 0?",
+    notes="ML_H2b, default decision rule, 7x7, 8/8, resynth. The temperature figure shows the "
+          "global temperature (sum of voxel temperatures) after each sweep, levels one after "
+          "the other; its numbers are in temperature.csv.",
+    common=(("relaxation", "icm"), ("heuristic", "ML_H2b"), ("window", 7), ("upsample", "8/8"),
+            ("inherit", "resynth"), ("max_sweeps", 60)),
+    methods=(
+        _m("xi-1-full", xi=-1.0, stop=1.0),
+        _m("xi-1-stop95", xi=-1.0, stop=0.95),
+        _m("xi-3-full", xi=-3.0, stop=1.0),
+        _m("xi-3-stop95", xi=-3.0, stop=0.95),
+    ),
+    full=Scale(exemplars=("gravel64", "ihc64", "brick"), **_FULL),
+    quick=Scale(**{**_QUICK, "common": (("window", 3), ("max_sweeps", 4))}),
+    figures=("temperature",),
+)
+
+NEIGHBOURHOOD = Study(
+    name="neighbourhood",
+    title="Neighbourhood size (9x9, 11x11) crossed with 1/8 versus 8/8 up-sampling",
+    question="Do larger neighbourhoods capture larger structures, and which up-sampling keeps "
+             "them across scales?",
+    notes="ML_H2b, ICM, default decision rule, resynth, xi = -3, stop at 95 %. The quick "
+          "variant uses 3x3 and 5x5 windows (8^3 volumes are too small for 9x9).",
+    common=(("relaxation", "icm"), ("heuristic", "ML_H2b"), ("inherit", "resynth"),
+            ("xi", -3.0), ("stop", 0.95), ("max_sweeps", 30)),
+    methods=(
+        _m("w9-1of8", window=9, upsample="1/8"),
+        _m("w9-8of8", window=9, upsample="8/8"),
+        _m("w11-1of8", window=11, upsample="1/8"),
+        _m("w11-8of8", window=11, upsample="8/8"),
+    ),
+    full=Scale(exemplars=("gravel64", "brick", "pompeii_coins"), **_FULL),
+    quick=Scale(exemplars=("gravel64",), seeds=(0,), sizes=(8,), levels=2, crop=24,
+                common=(("max_sweeps", 2),),
+                methods=(_m("w3-1of8", window=3, upsample="1/8"),
+                         _m("w3-8of8", window=3, upsample="8/8"),
+                         _m("w5-1of8", window=5, upsample="1/8"),
+                         _m("w5-8of8", window=5, upsample="8/8"))),
+)
+
+ICM_VS_ANNEAL = Study(
+    name="icm_vs_anneal",
+    title="ICM versus simulated annealing on 32-level grey exemplars",
+    question="Does ICM lose the exemplar's dynamics (grey-level range) where annealing keeps it?",
+    notes="ML_H2b, 7x7, exemplars re-quantised to 32 grey levels. ICM uses 1/8 up-sampling, "
+          "annealing 8/8 (each relaxation's default); annealing: Metropolis, geometric "
+          "schedule, 8 proposals per voxel and level.",
+    common=(("heuristic", "ML_H2b"), ("window", 7), ("grey_levels", 32)),
+    methods=(
+        _m("ICM", relaxation="icm", max_sweeps=30),
+        _m("ICM-literal", relaxation="icm", variant="literal", max_sweeps=30),
+        Method("anneal", "npmrf", _ANNEAL),
+    ),
+    full=Scale(exemplars=GREY_EXEMPLARS, **_FULL),
+    quick=Scale(**{**_QUICK, "common": (("window", 3), ("max_sweeps", 2), *_QUICK_ANNEAL)}),
+)
+
+COLOUR = Study(
+    name="colour",
+    title="Colour exemplars with simulated annealing and ML_H2b",
+    question="Does annealing with ML_H2b reproduce colour textures (SPEC.md section 4 measured "
+             "it close to an exact crop on two of four photographs)?",
+    notes="ML_H2b, 7x7, 64-colour palette (k-means), geometric schedule, 8 proposals per voxel "
+          "and level; Metropolis and heat-bath sampling, with ICM as the reference.",
+    common=(("heuristic", "ML_H2b"), ("window", 7), ("palette", 64)),
+    methods=(
+        Method("anneal-metropolis", "npmrf", _ANNEAL),
+        Method("anneal-heat-bath", "npmrf",
+               tuple((k, "heat-bath" if k == "sampler" else v) for k, v in _ANNEAL)),
+        _m("ICM", relaxation="icm", max_sweeps=30),
+    ),
+    full=Scale(exemplars=COLOUR_EXEMPLARS, **_FULL),
+    quick=Scale(**{**_QUICK, "exemplars": ("ihc64",),
+                   "common": (("window", 3), ("max_sweeps", 2), ("palette", 16), *_QUICK_ANNEAL)}),
+)
+
+NPK = Study(
+    name="npk",
+    title="ML_H2b (annealing) versus NP_K on ~15 real exemplars",
+    question="How does the NP-MRF with annealing compare with texture optimisation (NP_K) on "
+             "histogram KL, autocorrelation L2 and orientation KL?",
+    notes="ML_H2b: annealing as in the colour study (64-colour palette for colour exemplars, 64 "
+          "levels for grey ones). NP_K: Kopf et al. 2007 as implemented in "
+          "npmrf3d.baselines.kopf with its default settings and the study's levels. 'control' is "
+          "the structureless control (voxels drawn independently from the exemplar): a method "
+          "no better than it made no structure.",
+    common=(("heuristic", "ML_H2b"), ("window", 7), ("palette", 64), *_ANNEAL),
+    methods=(
+        _m("ML_H2b-anneal"),
+        _m("NP_K", "kopf", window=8),
+        _m("control", "control"),
+    ),
+    full=Scale(exemplars=STUDY_EXEMPLARS, seeds=(0,), sizes=(32,), levels=2, crop=64),
+    quick=Scale(exemplars=("gravel64",), seeds=(0,), sizes=(8,), levels=1, crop=24,
+                common=(("window", 3), ("palette", 16), *_QUICK_ANNEAL),
+                methods=(_m("ML_H2b-anneal"), _m("NP_K", "kopf", window=4, iterations=1),
+                         _m("control", "control"))),
+)
+
+VIEWS = Study(
+    name="views",
+    title="Two versus three constrained views on layered exemplars",
+    question="For layered textures, does constraining only the two views that contain the "
+             "layering direction (front and top) avoid the conflict a third view creates?",
+    notes="The exemplars' layers run along the image rows, i.e. along axis i in the front "
+          "(i, j) and top (i, k) views; the right view (j, k) would ask for layers along j too. "
+          "ML_H2b, ICM, default rule, 7x7. Metrics are computed on the constrained views only.",
+    common=(("relaxation", "icm"), ("heuristic", "ML_H2b"), ("window", 7), ("max_sweeps", 30)),
+    methods=(
+        _m("3views", views="front,right,top"),
+        _m("2views", views="front,top"),
+    ),
+    full=Scale(exemplars=LAYERED_EXEMPLARS, **_FULL),
+    quick=Scale(**{**_QUICK, "exemplars": ("stripes",)}),
+)
+
+GROUNDTRUTH = Study(
+    name="groundtruth",
+    title="2D -> 3D ground truth: one slice of a real volume in, the volume itself as the truth",
+    question="Given one slice of a real 3-D micro-structure, how close in 3-D (two-point "
+             "correlation along each axis, phase or grey-level fractions, slice metrics along "
+             "all three axes) do the methods get, against a structureless control?",
+    notes="The exemplar is one slice of --volume (default: the middle slice across axis 0), "
+          "used for all three views. 'real' is a crop of the real volume (the floor set by "
+          "finite size); 'control' draws voxels independently from the exemplar. Slice "
+          "metrics compare each view's slices with the real volume's middle slice in that view.",
+    common=(("heuristic", "ML_H2b"), ("window", 7), ("max_sweeps", 30)),
+    methods=(
+        _m("ML_H2b-icm", relaxation="icm"),
+        Method("ML_H2b-anneal", "npmrf", _ANNEAL),
+        _m("NP_K", "kopf", window=8),
+        _m("control", "control"),
+        _m("real", "real"),
+    ),
+    full=Scale(exemplars=("volume",), seeds=(0,), sizes=(64,), levels=2),
+    quick=Scale(exemplars=("volume",), seeds=(0,), sizes=(16,), levels=1,
+                common=(("window", 3), ("max_sweeps", 2), *_QUICK_ANNEAL),
+                methods=(_m("ML_H2b-icm", relaxation="icm"),
+                         Method("ML_H2b-anneal", "npmrf", _ANNEAL),
+                         _m("NP_K", "kopf", window=4, iterations=1),
+                         _m("control", "control"), _m("real", "real"))),
+    figures=("two_point",),
+    needs_volume=True,
+)
+
+#: Every study by name, in the order of SPEC.md section 8 (ground truth last).
+STUDIES: dict[str, Study] = {s.name: s for s in (
+    HEURISTICS, COOLING, NEIGHBOURHOOD, ICM_VS_ANNEAL, COLOUR, NPK, VIEWS, GROUNDTRUTH)}
+
+
+def get_study(name: str) -> Study:
+    """The study called ``name`` (:class:`ParameterError` listing the names otherwise)."""
+    try:
+        return STUDIES[name]
+    except KeyError:
+        raise ParameterError(f"study must be one of {', '.join(STUDIES)}; got {name!r}") from None

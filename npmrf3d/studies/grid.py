@@ -1,0 +1,293 @@
+"""Studies declared as data: a :class:`Study` is a grid of runs, a :class:`RunSpec` is one run.
+
+A study crosses exemplars x methods x seeds x sizes. It has two variants, ``quick`` (tiny,
+run by the tests) and ``full`` (the real comparison), each a :class:`Scale` that states its
+exemplars, seeds, sizes, pyramid levels, an optional exemplar crop and, when the quick
+variant needs smaller settings than the full one (e.g. windows 3/5 instead of 9/11), its own
+list of methods. Nothing is code: :mod:`npmrf3d.studies.catalog` only declares values.
+
+Parameters reach the algorithms like this:
+
+* ``npmrf`` methods call :func:`npmrf3d.synthesize` with ``study.common``, then
+  ``scale.common``, then the method's own ``params`` (later ones win) plus ``size``,
+  ``levels`` and ``rng=seed``; keyword arguments are passed through unchanged, so settings of
+  newer samplers (``relaxation="anneal"``, ``proposals``, ``schedule``, ``t0``, ``t_end``,
+  ``sampler``) need nothing here.
+* ``kopf`` methods call :func:`npmrf3d.baselines.kopf.kopf_synthesize` with only the
+  method's ``params`` plus ``size``, ``levels``, ``views`` and ``rng``.
+* ``control`` is the structureless control: voxels drawn independently from the exemplar.
+* ``real`` (ground-truth study only) is a crop of the real volume itself: the floor.
+
+Examples
+--------
+>>> study = Study(
+...     name="demo", title="Demo", question="Does it run?",
+...     methods=(Method("H2b", params=(("heuristic", "ML_H2b"),)), Method("control", "control")),
+...     full=Scale(exemplars=("gravel64",), seeds=(0, 1), sizes=(32,), levels=2),
+...     quick=Scale(exemplars=("gravel64",), seeds=(0,), sizes=(8,), levels=1, crop=32),
+... )
+>>> [run.run_id for run in study.runs("quick")]
+['gravel64-H2b-s0', 'gravel64-control-s0']
+>>> study.runs("full")[1].kwargs()["rng"]
+1
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import asdict, dataclass, replace
+from typing import Any
+
+from npmrf3d.errors import ParameterError
+
+__all__ = ["ALGORITHMS", "MODES", "Method", "RunSpec", "Scale", "Study", "run_id"]
+
+#: What a method can be (see the module docstring).
+ALGORITHMS = ("npmrf", "kopf", "control", "real")
+#: The two variants every study declares.
+MODES = ("quick", "full")
+
+Params = tuple[tuple[str, Any], ...]
+
+
+def _params(value) -> Params:
+    """Mapping or pairs -> a sorted tuple of (name, value) pairs (hashable, frozen)."""
+    items = value.items() if isinstance(value, dict) else value
+    return tuple(sorted((str(k), v) for k, v in items))
+
+
+@dataclass(frozen=True)
+class Method:
+    """One column of a study: an algorithm with fixed parameters.
+
+    Attributes
+    ----------
+    name : str
+        Short label used in run ids, tables and figures (letters, digits, ``-``, ``_``, ``.``).
+    algorithm : {"npmrf", "kopf", "control", "real"}
+    params : tuple of (name, value) pairs
+        Keyword arguments for the algorithm (a dict is accepted and frozen).
+    """
+
+    name: str
+    algorithm: str = "npmrf"
+    params: Params = ()
+
+    def __post_init__(self):
+        object.__setattr__(self, "params", _params(self.params))
+        if self.algorithm not in ALGORITHMS:
+            raise ParameterError(f"method {self.name!r}: algorithm must be one of "
+                                 f"{', '.join(ALGORITHMS)}; got {self.algorithm!r}")
+        if not re.fullmatch(r"[A-Za-z0-9_.+-]+", self.name):
+            raise ParameterError(f"method name must use letters, digits, '_', '.', '+', '-'; "
+                                 f"got {self.name!r}")
+
+
+@dataclass(frozen=True)
+class Scale:
+    """The ``quick`` or ``full`` variant of a study.
+
+    Attributes
+    ----------
+    exemplars : tuple of str
+        Exemplar names (see :func:`npmrf3d.studies.catalog.load_exemplar`).
+    seeds : tuple of int
+    sizes : tuple of int
+        Volume sides (cubes).
+    levels : int
+        Pyramid levels of every ``npmrf`` and ``kopf`` run.
+    crop : int or None
+        Use only the top-left ``crop x crop`` pixels of each exemplar (quick runs).
+    common : tuple of (name, value) pairs
+        Extra ``npmrf`` keyword arguments for this variant (e.g. ``max_sweeps``).
+    methods : tuple of Method or None
+        Replaces the study's methods in this variant (None: the study's).
+    """
+
+    exemplars: tuple[str, ...]
+    seeds: tuple[int, ...] = (0,)
+    sizes: tuple[int, ...] = (32,)
+    levels: int = 2
+    crop: int | None = None
+    common: Params = ()
+    methods: tuple[Method, ...] | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "common", _params(self.common))
+        object.__setattr__(self, "exemplars", tuple(self.exemplars))
+        object.__setattr__(self, "seeds", tuple(int(s) for s in self.seeds))
+        object.__setattr__(self, "sizes", tuple(int(s) for s in self.sizes))
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """Everything one run needs; picklable, so it travels to Dask workers as is.
+
+    ``reference`` is the path of a real volume (ground-truth study) or None; ``slice_axis`` and
+    ``slice_index`` then say which of its slices is the exemplar.
+    """
+
+    study: str
+    run_id: str
+    exemplar: str
+    method: str
+    algorithm: str
+    seed: int
+    size: int
+    levels: int
+    params: Params = ()
+    crop: int | None = None
+    reference: str | None = None
+    slice_axis: int = 0
+    slice_index: int | None = None
+
+    def kwargs(self) -> dict[str, Any]:
+        """Keyword arguments for the algorithm (without the exemplar and progress)."""
+        out = dict(self.params)
+        if self.algorithm in ("npmrf", "kopf"):
+            out.update(size=self.size, levels=self.levels, rng=self.seed)
+        return out
+
+    @property
+    def views(self) -> tuple[str, ...]:
+        """Constrained views of this run (the ``views`` parameter, default all three)."""
+        from npmrf3d.neighborhood import VIEWS
+
+        value = dict(self.params).get("views", VIEWS)
+        if isinstance(value, str):
+            value = [v.strip() for v in value.split(",") if v.strip()]
+        return tuple(value)
+
+    def to_dict(self) -> dict[str, Any]:
+        out = asdict(self)
+        out["params"] = dict(self.params)
+        return out
+
+
+def run_id(exemplar: str, method: str, seed: int, size: int | None = None) -> str:
+    """Folder name of a run: ``<exemplar>-<method>[-n<size>]-s<seed>``, file-system safe.
+
+    >>> run_id("etr:snow", "NP_K", 2)
+    'etr_snow-NP_K-s2'
+    """
+    stem = re.sub(r"[^A-Za-z0-9_.+-]+", "_", exemplar).strip("_") or "exemplar"
+    middle = f"-n{size}" if size is not None else ""
+    return f"{stem}-{method}{middle}-s{seed}"
+
+
+@dataclass(frozen=True)
+class Study:
+    """A named comparison: methods crossed with the exemplars, seeds and sizes of a variant.
+
+    Attributes
+    ----------
+    name : str
+        Command-line name (``npmrf3d study NAME``) and output folder.
+    title, question : str
+        What is compared and what the study answers (shown in the report).
+    methods : tuple of Method
+    full, quick : Scale
+    common : tuple of (name, value) pairs
+        ``npmrf`` keyword arguments shared by every run of the study.
+    figures : tuple of str
+        Extra figures besides ``metrics.png`` and ``slices.png``: ``"temperature"`` (global
+        temperature curves), ``"two_point"`` (ground-truth two-point correlations).
+    needs_volume : bool
+        The study compares with a real 3-D volume (``--volume``).
+    notes : str
+        Further explanation for the report.
+    """
+
+    name: str
+    title: str
+    question: str
+    methods: tuple[Method, ...]
+    full: Scale
+    quick: Scale
+    common: Params = ()
+    figures: tuple[str, ...] = ()
+    needs_volume: bool = False
+    notes: str = ""
+
+    def __post_init__(self):
+        object.__setattr__(self, "common", _params(self.common))
+        names = [m.name for m in self.methods]
+        if len(set(names)) != len(names):
+            raise ParameterError(f"study {self.name}: method names must be distinct; got {names}")
+
+    def scale(self, mode: str) -> Scale:
+        if mode not in MODES:
+            raise ParameterError(f"mode must be one of {', '.join(MODES)}; got {mode!r}")
+        return self.quick if mode == "quick" else self.full
+
+    def runs(self, mode: str = "full", *, seeds=None, exemplars=None, sizes=None,
+             levels: int | None = None, reference: str | None = None, slice_axis: int = 0,
+             slice_index: int | None = None) -> tuple[RunSpec, ...]:
+        """The grid of one variant, as run specifications in a fixed order.
+
+        ``seeds``, ``exemplars``, ``sizes`` and ``levels`` replace the variant's values when given.
+        ``reference`` (a real volume) is required when :attr:`needs_volume`.
+        """
+        scale = self.scale(mode)
+        seeds = tuple(int(s) for s in (scale.seeds if seeds is None else seeds))
+        sizes = tuple(int(s) for s in (scale.sizes if sizes is None else sizes))
+        exemplars = tuple(scale.exemplars if exemplars is None else exemplars)
+        levels = scale.levels if levels is None else int(levels)
+        if self.needs_volume:
+            if reference is None:
+                raise ParameterError(f"study {self.name} compares with a real 3-D volume: "
+                                     f"give one with --volume FILE (.npy or .tif)")
+            stem = re.sub(r"\W+", "_", str(reference).replace("\\", "/").rsplit("/", 1)[-1]
+                          .rsplit(".", 1)[0])
+            exemplars = (f"{stem}.axis{slice_axis}",)
+        if not seeds or not sizes or not exemplars:
+            raise ParameterError(f"study {self.name}: seeds, sizes and exemplars must not be empty")
+        methods = self.methods if scale.methods is None else scale.methods
+        common = dict(self.common)
+        common.update(scale.common)
+        specs = []
+        for exemplar in exemplars:
+            for method in methods:
+                params = dict(common) if method.algorithm == "npmrf" else {}
+                params.update(method.params)
+                for size in sizes:
+                    for seed in seeds:
+                        specs.append(RunSpec(
+                            study=self.name,
+                            run_id=run_id(exemplar, method.name, seed,
+                                          size if len(sizes) > 1 else None),
+                            exemplar=exemplar, method=method.name, algorithm=method.algorithm,
+                            seed=seed, size=size, levels=levels, params=_params(params),
+                            crop=scale.crop,
+                            reference=None if reference is None else str(reference),
+                            slice_axis=slice_axis, slice_index=slice_index,
+                        ))
+        ids = [s.run_id for s in specs]
+        if len(set(ids)) != len(ids):
+            raise ParameterError(f"study {self.name}: run ids are not unique (repeated seeds, "
+                                 f"sizes or exemplars?)")
+        return tuple(specs)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain description of the declaration (for ``study.json`` and the report)."""
+
+        def method(m: Method) -> dict:
+            return {"name": m.name, "algorithm": m.algorithm, "params": dict(m.params)}
+
+        def scale(s: Scale) -> dict:
+            d = asdict(s)
+            d["common"] = dict(s.common)
+            d["methods"] = None if s.methods is None else [method(m) for m in s.methods]
+            return d
+
+        return {
+            "name": self.name, "title": self.title, "question": self.question,
+            "notes": self.notes, "common": dict(self.common),
+            "methods": [method(m) for m in self.methods],
+            "quick": scale(self.quick), "full": scale(self.full),
+            "figures": list(self.figures), "needs_volume": self.needs_volume,
+        }
+
+    def with_scale(self, mode: str, **changes) -> "Study":
+        """A copy whose ``mode`` variant has some fields replaced (tests, ad-hoc runs)."""
+        return replace(self, **{mode: replace(self.scale(mode), **changes)})

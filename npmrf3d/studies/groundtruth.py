@@ -1,0 +1,212 @@
+"""2D -> 3D ground truth: one slice of a real volume in, the real volume as the reference.
+
+Materials scientists hold real 3-D scans (micro-CT, FIB-SEM ...) and ask whether a volume
+synthesised from one 2-D section has the right 3-D structure. The ``groundtruth`` study
+(:data:`npmrf3d.studies.catalog.GROUNDTRUTH`) takes one slice of a real volume as the exemplar,
+synthesises volumes with several methods and compares each with the real volume:
+
+* **two-point correlation along each axis** (:func:`two_point`): for a phase volume (at most
+  :data:`MAX_PHASES` distinct values in the exemplar) ``S2(r) = P(x(s) = p and x(s + r e_a) = p)``
+  for every phase ``p`` but the first (for a binary volume: the phase of the larger value);
+  for a grey volume the normalised autocovariance ``rho(r)``. Lags ``0..max_lag``, the
+  non-periodic estimator (mean over the pairs that lie inside the volume), so real scans
+  and toroidal syntheses are measured alike. ``two_point_l2`` is the L2 distance of the
+  curves to the real volume's, per axis and averaged.
+* **phase / grey-level fractions** (:func:`fractions`): share of voxels per phase (each voxel
+  assigned to the nearest phase value), or a :data:`GREY_BINS`-bin histogram over the real
+  volume's range; ``fraction_l1`` is the L1 distance to the real volume's fractions.
+* **slice metrics along all three axes**: the study metrics (:func:`npmrf3d.studies.runner.
+  evaluate_metrics`) of each view's slices against the real volume's middle slice in that view.
+
+Grey values are the mean over channels. Slices follow :mod:`npmrf3d.neighborhood`:
+across axis 0 ``volume[i]`` (rows j, columns k), across axis 1 ``volume[:, j]`` (rows i,
+columns k), across axis 2 ``volume[:, :, k]`` (rows i, columns j).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from npmrf3d.errors import ParameterError
+
+__all__ = [
+    "GREY_BINS",
+    "MAX_PHASES",
+    "compare",
+    "exemplar_slice",
+    "fit_size",
+    "fractions",
+    "load_reference",
+    "phases_of",
+    "reference_slices",
+    "two_point",
+]
+
+#: An exemplar with at most this many distinct grey values is a phase image.
+MAX_PHASES = 16
+#: Bins of the grey-level fractions of non-phase volumes.
+GREY_BINS = 16
+#: Largest lag of the two-point correlations (capped at half the smallest side).
+MAX_LAG = 32
+
+
+def load_reference(path) -> np.ndarray:
+    """The real volume as float32 ``(N1, N2, N3, C)`` (``.npy`` or ``.tif``, see
+    :func:`npmrf3d.io.read_volume`)."""
+    from npmrf3d.io import read_volume
+
+    return read_volume(path)
+
+
+def exemplar_slice(volume: np.ndarray, axis: int = 0, index: int | None = None) -> np.ndarray:
+    """The slice across ``axis`` at ``index`` (default: the middle) as an ``(H, W, C)`` image.
+
+    >>> v = np.arange(24, dtype=np.float32).reshape(2, 3, 4, 1)
+    >>> exemplar_slice(v, 2, 0)[..., 0].tolist()
+    [[0.0, 4.0, 8.0], [12.0, 16.0, 20.0]]
+    """
+    if axis not in (0, 1, 2):
+        raise ParameterError(f"slice axis must be 0, 1 or 2; got {axis!r}")
+    n = volume.shape[axis]
+    index = n // 2 if index is None else int(index)
+    if not 0 <= index < n:
+        raise ParameterError(f"slice index must be in [0, {n - 1}] for axis {axis}; got {index}")
+    return np.ascontiguousarray(np.take(volume, index, axis=axis))
+
+
+def reference_slices(volume: np.ndarray) -> dict[str, np.ndarray]:
+    """The real volume's middle slice in each view (front, right, top), as exemplar images."""
+    return {"front": exemplar_slice(volume, 2), "right": exemplar_slice(volume, 0),
+            "top": exemplar_slice(volume, 1)}
+
+
+def fit_size(shape, size: int, levels: int) -> int:
+    """``size`` limited to the real volume's smallest side, rounded down to a multiple of
+    ``2**(levels - 1)``.
+
+    >>> fit_size((50, 64, 64), 64, 2)
+    50
+    >>> fit_size((50, 64, 64), 64, 3)
+    48
+    """
+    step = 2 ** (levels - 1)
+    side = min(int(size), *(int(n) for n in shape[:3]))
+    side -= side % step
+    if side < step:
+        raise ParameterError(f"the real volume {tuple(shape[:3])} is too small for {levels} levels")
+    return side
+
+
+def _grey(volume: np.ndarray) -> np.ndarray:
+    v = np.asarray(volume, dtype=np.float64)
+    return v.mean(axis=-1) if v.ndim == 4 else v
+
+
+def phases_of(exemplar: np.ndarray) -> np.ndarray | None:
+    """Sorted distinct grey values of the exemplar if there are at most :data:`MAX_PHASES`
+    (a phase image), else None."""
+    values = np.unique(_grey(exemplar))
+    return values if len(values) <= MAX_PHASES else None
+
+
+def _nearest_phase(grey: np.ndarray, phases: np.ndarray) -> np.ndarray:
+    edges = (phases[1:] + phases[:-1]) / 2
+    return np.searchsorted(edges, grey)
+
+
+def two_point(volume: np.ndarray, axis: int, max_lag: int, phases: np.ndarray | None) -> np.ndarray:
+    """Two-point correlation along ``axis`` for lags ``0..max_lag``.
+
+    Returns
+    -------
+    (P, max_lag + 1) float64 ndarray
+        Phase volumes: one row ``S2`` per phase but the first (``S2(0)`` is the phase
+        fraction). Grey volumes: one row, the normalised autocovariance (1 at lag 0, 0 for a
+        constant volume).
+
+    Examples
+    --------
+    >>> v = np.zeros((4, 2, 2)); v[::2] = 1
+    >>> two_point(v, 0, 2, np.array([0.0, 1.0]))[0].tolist()
+    [0.5, 0.0, 0.5]
+    """
+    grey = _grey(volume)
+    if grey.ndim != 3:
+        raise ParameterError(f"expected a 3-D volume; got shape {np.shape(volume)}")
+    if phases is None:
+        x = grey - grey.mean()
+        var = float((x * x).mean())
+        fields = [x / np.sqrt(var) if var > 0 else np.zeros_like(x)]
+    else:
+        labels = _nearest_phase(grey, phases)
+        fields = [(labels == p).astype(np.float64) for p in range(1, len(phases))] or \
+                 [(labels == 0).astype(np.float64)]
+    n = grey.shape[axis]
+    out = np.zeros((len(fields), max_lag + 1))
+    for row, f in enumerate(fields):
+        for r in range(max_lag + 1):
+            if r >= n:
+                out[row, r] = np.nan
+                continue
+            a = np.take(f, np.arange(0, n - r), axis=axis)
+            b = np.take(f, np.arange(r, n), axis=axis)
+            out[row, r] = float((a * b).mean())
+    return out
+
+
+def fractions(volume: np.ndarray, phases: np.ndarray | None, value_range: tuple[float, float]) -> np.ndarray:
+    """Phase fractions (nearest phase value) or a :data:`GREY_BINS`-bin grey histogram over
+    ``value_range`` (values outside are clipped into the end bins), summing to 1."""
+    grey = _grey(volume).ravel()
+    if phases is not None:
+        counts = np.bincount(_nearest_phase(grey, phases), minlength=len(phases))
+    else:
+        lo, hi = value_range
+        hi = hi if hi > lo else lo + 1.0
+        counts = np.histogram(np.clip(grey, lo, hi), bins=GREY_BINS, range=(lo, hi))[0]
+    return counts / max(counts.sum(), 1)
+
+
+def compare(volume: np.ndarray, real: np.ndarray, exemplar: np.ndarray, *,
+            max_lag: int | None = None) -> dict:
+    """All ground-truth measures of ``volume`` against the real volume.
+
+    Parameters
+    ----------
+    volume, real : (N1, N2, N3, C) ndarrays
+        Synthesised and real volume (sizes may differ).
+    exemplar : (H, W, C) ndarray
+        The slice the volume was made from (decides whether this is a phase image).
+    max_lag : int, optional
+        Largest lag (default: ``min(32, smallest side // 2)`` over both volumes).
+
+    Returns
+    -------
+    dict
+        ``two_point`` and ``two_point_real`` (axis -> curves), ``two_point_l2`` (axis -> float),
+        ``two_point_l2_mean``, ``fractions``, ``fractions_real``, ``fraction_l1``, ``phases``
+        (list or None), ``max_lag`` and ``slice_metrics`` (see the module docstring).
+    """
+    from .runner import evaluate_metrics
+
+    phases = phases_of(exemplar)
+    if max_lag is None:
+        max_lag = max(1, min(MAX_LAG, min(volume.shape[:3]) // 2, min(real.shape[:3]) // 2))
+    grey_real = _grey(real)
+    value_range = (float(grey_real.min()), float(grey_real.max()))
+    out: dict = {"phases": None if phases is None else phases.tolist(), "max_lag": int(max_lag),
+                 "two_point": {}, "two_point_real": {}, "two_point_l2": {}}
+    for axis in range(3):
+        mine = two_point(volume, axis, max_lag, phases)
+        theirs = two_point(real, axis, max_lag, phases)
+        out["two_point"][f"axis{axis}"] = mine.tolist()
+        out["two_point_real"][f"axis{axis}"] = theirs.tolist()
+        out["two_point_l2"][f"axis{axis}"] = float(np.sqrt(np.nansum((mine - theirs) ** 2)))
+    out["two_point_l2_mean"] = float(np.mean(list(out["two_point_l2"].values())))
+    mine_f = fractions(volume, phases, value_range)
+    real_f = fractions(real, phases, value_range)
+    out["fractions"] = mine_f.tolist()
+    out["fractions_real"] = real_f.tolist()
+    out["fraction_l1"] = float(np.abs(mine_f - real_f).sum())
+    out["slice_metrics"] = evaluate_metrics(volume, reference_slices(real))
+    return out

@@ -1,0 +1,581 @@
+"""Run a study's grid on Dask (or serially) and write its runs, table and figures.
+
+Layout of the output (``OUT`` is ``--out``)::
+
+    OUT/<study>/study.json            declaration, options, scheduler, versions, wall time
+    OUT/<study>/results.csv           one row per run (status, timings, metrics)
+    OUT/<study>/*.png, *.csv          figures and the numbers behind them
+    OUT/<study>/<run_id>/             volume.npy, volume.tif, preview.png, run.json, metrics.json
+                                      or error.json for a failed run
+
+Behaviour
+---------
+* **Schedulers**: ``scheduler=None`` (or ``"local"``) starts a ``dask.distributed``
+  ``LocalCluster`` of ``workers`` single-threaded worker processes whose numba kernels use
+  ``threads`` threads each, with ``workers x threads <= cores`` (``NUMBA_NUM_THREADS`` is set
+  in the workers' environment before they start, and again inside each task); an address
+  (``tcp://host:8786``) connects to an existing scheduler, whose workers keep their own
+  ``NUMBA_NUM_THREADS``; ``"serial"`` runs in this process, one run after the other. The
+  dashboard address is printed (it needs ``bokeh`` to be served).
+* **Same results everywhere**: every run is seeded by its own seed only and numba kernels do
+  not depend on the thread count, so Dask and serial execution write identical volumes.
+* **Resumable**: a run whose folder holds ``run.json`` and ``metrics.json`` is finished and is
+  skipped (its row is read back from disk); a failed run is tried again.
+* **Failures**: an exception in a run writes ``error.json`` (message and traceback) into its
+  folder and a ``failed`` row; the other runs go on.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import logging
+import math
+import os
+import pathlib
+import socket
+import sys
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from datetime import datetime, timezone
+from typing import Any
+
+import numpy as np
+
+from npmrf3d.errors import ParameterError
+
+from .grid import RunSpec, Study
+
+__all__ = [
+    "StudyOutcome",
+    "evaluate_metrics",
+    "execute_run",
+    "is_finished",
+    "plan_workers",
+    "read_results",
+    "run_study",
+    "structureless",
+]
+
+#: The files that mark a finished run.
+FINISHED_FILES = ("run.json", "metrics.json")
+#: The metrics of the studies (the paper's three first).
+HEADLINE_METRICS = ("histogram_kl", "autocorrelation_l2", "orientation_kl", "sliced_wasserstein")
+#: Leading columns of results.csv; metric columns follow, ``error`` comes last.
+BASE_COLUMNS = ("study", "run_id", "exemplar", "method", "algorithm", "seed", "size", "levels",
+                "status", "seconds", "wall_seconds", "threads", "largest_value_share")
+_FALLBACK_MAX_LAG = 32
+
+
+# --------------------------------------------------------------------------- metrics
+
+
+def evaluate_metrics(volume: np.ndarray, exemplars: dict[str, np.ndarray],
+                     views: Sequence[str] | None = None) -> dict:
+    """:func:`npmrf3d.metrics.evaluate` when it exists, else a small adapter over the older
+    ``histogram_kl`` / ``autocorrelation_error`` (same output layout, fewer metrics)."""
+    from npmrf3d import metrics
+
+    views = tuple(exemplars) if views is None else tuple(views)
+    exemplars = {v: exemplars[v] for v in views}
+    if hasattr(metrics, "evaluate"):
+        return metrics.evaluate(volume, exemplars, views=list(views))
+    per_view = {}
+    for view, exemplar in exemplars.items():  # pragma: no cover - until metrics.evaluate lands
+        slices = metrics.view_slices(volume, view)
+        lag = max(1, min(_FALLBACK_MAX_LAG, *(s // 2 for s in exemplar.shape[:2]),
+                         *(s // 2 for s in slices.shape[1:3])))
+        per_view[view] = {
+            "histogram_kl": metrics.histogram_kl(exemplar, slices),
+            "autocorrelation_l2": metrics.autocorrelation_error(exemplar, volume, view, lag),
+        }
+    names = list(next(iter(per_view.values())))
+    mean = {n: float(np.mean([pv[n] for pv in per_view.values()])) for n in names}
+    return {"per_view": per_view, "mean": mean, "settings": {"implementation": "fallback"}}
+
+
+def structureless(exemplar: np.ndarray, size: int, rng) -> np.ndarray:
+    """The structureless control: ``size^3`` voxels drawn independently from the exemplar's
+    pixels (same histogram, no spatial structure).
+
+    >>> structureless(np.ones((4, 4, 1), np.float32), 2, 0).shape
+    (2, 2, 2, 1)
+    """
+    generator = np.random.default_rng(rng)
+    flat = np.asarray(exemplar, dtype=np.float32).reshape(-1, exemplar.shape[-1])
+    picks = generator.integers(0, len(flat), size=size ** 3)
+    return flat[picks].reshape(size, size, size, flat.shape[1])
+
+
+# --------------------------------------------------------------------------- one run
+
+
+def is_finished(run_dir: pathlib.Path) -> bool:
+    """True when ``run_dir`` holds a complete run (``run.json`` and ``metrics.json``)."""
+    return all((pathlib.Path(run_dir) / name).is_file() for name in FINISHED_FILES)
+
+
+def _use_threads(threads: int | None) -> int:
+    import numba
+
+    if threads is not None:
+        numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
+    return int(numba.get_num_threads())
+
+
+def _config_dict(result) -> Any:
+    config = getattr(result, "config", None)
+    if config is None:
+        return None
+    if hasattr(config, "to_dict"):
+        return config.to_dict()
+    from npmrf3d.io import to_jsonable
+
+    try:
+        return to_jsonable(config)
+    except TypeError:
+        return repr(config)
+
+
+def _synthesise(spec: RunSpec, exemplar: np.ndarray, real: np.ndarray | None):
+    """(volume, per-view exemplars, result or None) for one run."""
+    views = spec.views
+    per_view = {v: exemplar for v in views}
+    kwargs = spec.kwargs()
+    if spec.algorithm == "npmrf":
+        import npmrf3d
+
+        result = npmrf3d.synthesize(exemplar, **kwargs)
+        return result.volume, per_view, result
+    if spec.algorithm == "kopf":
+        try:
+            from npmrf3d.baselines.kopf import kopf_synthesize
+        except ImportError as exc:
+            raise RuntimeError(
+                f"the NP_K baseline (npmrf3d.baselines.kopf.kopf_synthesize) is not available "
+                f"in this installation: {exc}") from exc
+        result = kopf_synthesize(exemplar, **kwargs)
+        return result.volume, per_view, result
+    if spec.algorithm == "control":
+        return structureless(exemplar, spec.size, spec.seed), per_view, None
+    if spec.algorithm == "real":
+        if real is None:
+            raise ParameterError("method 'real' needs a reference volume (ground-truth study)")
+        n = spec.size
+        return np.ascontiguousarray(real[:n, :n, :n]), per_view, None
+    raise ParameterError(f"unknown algorithm {spec.algorithm!r}")
+
+
+def execute_run(spec: RunSpec, study_dir: str, threads: int | None = None) -> dict:
+    """Run one specification and write its folder; never raises (a failure is a row).
+
+    Parameters
+    ----------
+    spec : RunSpec
+    study_dir : str
+        The study's output folder; the run goes to ``study_dir/spec.run_id``.
+    threads : int, optional
+        Numba threads for this run (None: leave the process's setting).
+
+    Returns
+    -------
+    dict
+        The run's row of ``results.csv`` (``status`` ``done`` or ``failed``).
+    """
+    from npmrf3d import io
+
+    run_dir = pathlib.Path(study_dir) / spec.run_id
+    t_start = time.perf_counter()
+    try:
+        used_threads = _use_threads(threads)
+        (run_dir / "error.json").unlink(missing_ok=True)
+        real = None
+        if spec.reference is not None:
+            from . import groundtruth
+
+            real = groundtruth.load_reference(spec.reference)
+            exemplar = groundtruth.exemplar_slice(real, spec.slice_axis, spec.slice_index)
+        else:
+            from .catalog import load_exemplar
+
+            exemplar = load_exemplar(spec.exemplar, spec.crop)
+        volume, per_view, result = _synthesise(spec, exemplar, real)
+        if real is not None:
+            from . import groundtruth
+
+            truth = groundtruth.compare(volume, real, exemplar)
+            scores = truth.pop("slice_metrics")
+        else:
+            truth, scores = None, evaluate_metrics(volume, per_view, spec.views)
+        from npmrf3d.metrics import largest_value_share
+
+        measured = {"metrics": scores, "largest_value_share": largest_value_share(volume)}
+        if truth is not None:
+            measured["groundtruth"] = truth
+        wall = time.perf_counter() - t_start
+        timings = dict(getattr(result, "timings", None) or {"total": wall})
+        record = {
+            "command": "study",
+            "study": spec.study,
+            "run_id": spec.run_id,
+            "spec": spec.to_dict(),
+            "seed": spec.seed,
+            "config": _config_dict(result),
+            "exemplars": {v: spec.exemplar for v in per_view},
+            "versions": io.package_versions(),
+            "threads": used_threads,
+            "host": socket.gethostname(),
+            "pid": os.getpid(),
+            "timings": timings,
+            "wall_seconds": wall,
+            "history": getattr(result, "history", None),
+            "stats": getattr(result, "stats", None),
+            "labels": None if result is None or getattr(result, "labels", None) is None
+            else int(len(result.labels)),
+            "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        }
+        title = f"{spec.study}: {spec.method} on {spec.exemplar}, seed {spec.seed}"
+        (run_dir / "metrics.json").unlink(missing_ok=True)  # finished = both files, written last
+        io.write_run(run_dir, volume=volume, exemplars=per_view, record=record, overwrite=True,
+                     title=title)
+        io.write_json(run_dir / "metrics.json", measured)
+        return make_row(spec, "done", record, measured)
+    except Exception as exc:  # a failed run is recorded, the others go on
+        return record_failure(spec, study_dir, exc, time.perf_counter() - t_start)
+
+
+def record_failure(spec: RunSpec, study_dir, exc: BaseException, wall: float = math.nan) -> dict:
+    """Write ``error.json`` for a failed run and return its row."""
+    from npmrf3d import io
+
+    message = f"{type(exc).__name__}: {exc}".strip()
+    error = {
+        "run_id": spec.run_id,
+        "error": message,
+        "traceback": "".join(traceback.format_exception(exc)),
+        "spec": spec.to_dict(),
+        "wall_seconds": wall,
+        "host": socket.gethostname(),
+        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+    }
+    run_dir = pathlib.Path(study_dir) / spec.run_id
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        io.write_json(run_dir / "error.json", error)
+    except Exception:  # pragma: no cover - e.g. the disk is full; the row still says why
+        pass
+    return make_row(spec, "failed", {"wall_seconds": wall}, None, error=message)
+
+
+def make_row(spec: RunSpec, status: str, record: dict | None, measured: dict | None, *,
+             error: str = "") -> dict:
+    """The ``results.csv`` row of a run (metric columns ``mean_<metric>``, ``<view>_<metric>``)."""
+    record = record or {}
+    timings = record.get("timings") or {}
+    row: dict[str, Any] = {
+        "study": spec.study, "run_id": spec.run_id, "exemplar": spec.exemplar,
+        "method": spec.method, "algorithm": spec.algorithm, "seed": spec.seed,
+        "size": spec.size, "levels": spec.levels, "status": status,
+        "seconds": timings.get("total", math.nan), "wall_seconds": record.get("wall_seconds", math.nan),
+        "threads": record.get("threads", ""),
+        "largest_value_share": (measured or {}).get("largest_value_share", math.nan),
+    }
+    if measured:
+        scores = measured.get("metrics") or {}
+        for name, value in (scores.get("mean") or {}).items():
+            row[f"mean_{name}"] = value
+        for view, values in (scores.get("per_view") or {}).items():
+            for name, value in values.items():
+                row[f"{view}_{name}"] = value
+        truth = measured.get("groundtruth")
+        if truth:
+            for axis, value in truth["two_point_l2"].items():
+                row[f"two_point_l2_{axis}"] = value
+            row["two_point_l2"] = truth["two_point_l2_mean"]
+            row["fraction_l1"] = truth["fraction_l1"]
+    row["error"] = error
+    return row
+
+
+def _load_row(spec: RunSpec, run_dir: pathlib.Path) -> dict:
+    record = json.loads((run_dir / "run.json").read_text(encoding="utf-8"))
+    measured = json.loads((run_dir / "metrics.json").read_text(encoding="utf-8"))
+    return make_row(spec, "skipped", record, measured)
+
+
+# --------------------------------------------------------------------------- schedulers
+
+
+class _ProgressBar:
+    """tqdm over runs on stderr, opened at the first finished run (after the scheduler line)."""
+
+    def __init__(self, name: str, total: int, enabled: bool):
+        self.name, self.total, self.enabled, self.bar = name, total, enabled, None
+
+    def start(self) -> None:
+        if self.enabled and self.bar is None:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=self.total, desc=self.name, unit="run", file=sys.stderr,
+                            dynamic_ncols=True)
+
+    def __call__(self, row: dict) -> None:
+        self.start()
+        if self.bar is not None:
+            self.bar.update(1)
+            if row["status"] == "failed":
+                self.bar.write(f"run {row['run_id']} failed: {row['error']}", file=sys.stderr)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def plan_workers(workers: int | None, threads: int | None, cores: int | None = None) -> tuple[int, int]:
+    """(workers, numba threads per worker) with ``workers * threads <= cores``.
+
+    >>> plan_workers(None, None, 8)
+    (8, 1)
+    >>> plan_workers(2, None, 8)
+    (2, 4)
+    >>> plan_workers(None, 3, 8)
+    (2, 3)
+    """
+    cores = max(1, int(cores or os.cpu_count() or 1))
+    if workers is not None and workers < 1:
+        raise ParameterError(f"--workers must be a positive integer; got {workers}")
+    if threads is not None and threads < 1:
+        raise ParameterError(f"--threads must be a positive integer; got {threads}")
+    if workers is None:
+        threads = 1 if threads is None else threads
+        workers = max(1, cores // threads)
+    elif threads is None:
+        threads = max(1, cores // workers)
+    if workers * threads > cores:
+        raise ParameterError(f"{workers} workers x {threads} numba threads exceed the {cores} "
+                             f"cores of this machine; use fewer --workers or --threads")
+    return workers, threads
+
+
+def _start_local_cluster(workers: int, threads: int):
+    from distributed import LocalCluster
+
+    single = str(1)
+    env = {"NUMBA_NUM_THREADS": str(threads), "OMP_NUM_THREADS": single,
+           "OPENBLAS_NUM_THREADS": single, "MKL_NUM_THREADS": single}
+    return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                        dashboard_address=":0", silence_logs=logging.WARNING, env=env)
+
+
+def _dashboard(client) -> str:
+    try:
+        import bokeh  # noqa: F401
+    except ImportError:
+        return f"{client.dashboard_link} (not served: install bokeh to see it)"
+    return str(client.dashboard_link)
+
+
+def _run_dask(pending, study_dir, scheduler, workers, threads, echo, bar):
+    from distributed import Client, as_completed
+
+    cluster = None
+    if scheduler in (None, "local"):
+        workers, threads = plan_workers(workers, threads)
+        cluster = _start_local_cluster(workers, threads)
+        client = Client(cluster)
+        where = f"local cluster: {workers} workers x {threads} numba threads"
+        task_threads = threads
+    else:
+        client = Client(scheduler, timeout="30s")
+        where = f"scheduler {scheduler}"
+        task_threads = threads  # None: the workers' own NUMBA_NUM_THREADS
+    rows = {}
+    try:
+        echo(f"{where}; dashboard: {_dashboard(client)}")
+        bar.start()
+        futures = {}
+        for spec in pending:
+            future = client.submit(execute_run, spec, str(study_dir), task_threads, pure=False,
+                                   key=f"{spec.study}-{spec.run_id}-{os.urandom(4).hex()}")
+            futures[future] = spec
+        for future in as_completed(futures):
+            spec = futures[future]
+            try:
+                rows[spec.run_id] = future.result()
+            except Exception as exc:  # the worker died or the task could not run
+                rows[spec.run_id] = record_failure(spec, study_dir, exc)
+            bar(rows[spec.run_id])
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    return rows, {"scheduler": where, "workers": workers, "threads": task_threads}
+
+
+def _run_serial(pending, study_dir, threads, echo, bar):
+    echo("serial: one run after the other in this process")
+    bar.start()
+    rows = {}
+    for spec in pending:
+        rows[spec.run_id] = execute_run(spec, str(study_dir), threads)
+        bar(rows[spec.run_id])
+    return rows, {"scheduler": "serial", "workers": 1, "threads": threads}
+
+
+# --------------------------------------------------------------------------- a study
+
+
+@dataclasses.dataclass
+class StudyOutcome:
+    """What :func:`run_study` did."""
+
+    study_dir: pathlib.Path
+    rows: list[dict]
+    counts: dict[str, int]
+    wall_seconds: float
+    figures: list[pathlib.Path]
+
+
+def _write_csv(path: pathlib.Path, rows: list[dict], head: Sequence[str] = ()) -> pathlib.Path:
+    from npmrf3d.io import atomic_write
+
+    columns = list(head)
+    for row in rows:
+        columns += [k for k in row if k not in columns and k != "error"]
+    if any("error" in row for row in rows):
+        columns.append("error")
+
+    def write(tmp):
+        with open(tmp, "w", newline="", encoding="utf-8") as handle:
+            writer = csv.DictWriter(handle, fieldnames=columns, restval="")
+            writer.writeheader()
+            for row in rows:
+                writer.writerow({k: _csv_value(v) for k, v in row.items()})
+
+    return atomic_write(path, write)
+
+
+def _csv_value(value):
+    if isinstance(value, float):
+        return "" if math.isnan(value) else repr(value)
+    return value
+
+
+def read_results(path) -> list[dict]:
+    """Rows of a ``results.csv`` (numbers stay strings)."""
+    with open(path, newline="", encoding="utf-8") as handle:
+        return list(csv.DictReader(handle))
+
+
+def run_study(study: Study, *, mode: str = "quick", out="study-results", scheduler: str | None = None,
+              workers: int | None = None, threads: int | None = None, seeds=None, exemplars=None,
+              sizes=None, levels: int | None = None, volume=None, slice_axis: int = 0,
+              slice_index: int | None = None, progress: bool = True,
+              echo: Callable[[str], None] | None = print) -> StudyOutcome:
+    """Run (or resume) a study and write its runs, ``results.csv``, figures and ``study.json``.
+
+    Parameters
+    ----------
+    study : Study
+    mode : {"quick", "full"}
+    out : path
+        Results root; the study writes into ``out/<study.name>``.
+    scheduler : None, "local", "serial" or an address
+        See the module docstring.
+    workers, threads : int, optional
+        Local cluster size and numba threads per worker (see :func:`plan_workers`); ``threads``
+        also applies to serial runs (None: numba's default) and to an existing scheduler's
+        workers (None: their ``NUMBA_NUM_THREADS``).
+    seeds, exemplars, sizes, levels : optional
+        Replace the variant's values.
+    volume : path, optional
+        The real volume of the ground-truth study.
+    slice_axis, slice_index : int
+        Which slice of ``volume`` is the exemplar (default: the middle one across axis 0).
+    progress : bool
+        A tqdm bar over the runs on stderr.
+    echo : callable or None
+        Where the one-line messages go (None: nowhere).
+
+    Returns
+    -------
+    StudyOutcome
+    """
+    from npmrf3d import io
+
+    echo = echo or (lambda message: None)
+    t_start = time.perf_counter()
+    reference = None
+    if volume is not None:
+        from . import groundtruth
+
+        reference = str(pathlib.Path(volume).absolute())
+        shape = groundtruth.load_reference(reference).shape
+        base_sizes = sizes if sizes is not None else study.scale(mode).sizes
+        lv = levels if levels is not None else study.scale(mode).levels
+        sizes = sorted({groundtruth.fit_size(shape, s, lv) for s in base_sizes})
+    elif study.needs_volume:
+        raise ParameterError(f"study {study.name} compares with a real 3-D volume: give one with "
+                             f"--volume FILE (.npy or .tif)")
+    specs = study.runs(mode, seeds=seeds, exemplars=exemplars, sizes=sizes, levels=levels,
+                       reference=reference, slice_axis=slice_axis, slice_index=slice_index)
+    study_dir = pathlib.Path(out).absolute() / study.name
+    if study_dir.exists() and not study_dir.is_dir():
+        raise ParameterError(f"output '{study_dir}' exists and is not a folder")
+    study_dir.mkdir(parents=True, exist_ok=True)
+    started = datetime.now(timezone.utc).isoformat(timespec="seconds")
+
+    rows: dict[str, dict] = {}
+    pending = []
+    for spec in specs:
+        run_dir = study_dir / spec.run_id
+        if is_finished(run_dir):
+            try:
+                rows[spec.run_id] = _load_row(spec, run_dir)
+                continue
+            except (OSError, ValueError, KeyError):  # unreadable: run it again
+                pass
+        pending.append(spec)
+    echo(f"study {study.name} ({mode}): {len(specs)} runs, {len(specs) - len(pending)} already "
+         f"finished, {len(pending)} to run -> {study_dir}")
+
+    info = {"scheduler": "none (nothing to run)", "workers": 0, "threads": threads}
+    if pending:
+        progress_bar = _ProgressBar(study.name, len(pending), enabled=progress)
+        try:
+            if scheduler == "serial":
+                new, info = _run_serial(pending, study_dir, threads, echo, progress_bar)
+            else:
+                new, info = _run_dask(pending, study_dir, scheduler, workers, threads, echo,
+                                      progress_bar)
+        finally:
+            progress_bar.close()
+        rows.update(new)
+
+    ordered = [rows[s.run_id] for s in specs]
+    _write_csv(study_dir / "results.csv", ordered, BASE_COLUMNS)
+    from .report import make_figures
+
+    figures = make_figures(study, study_dir, specs, ordered)
+    counts = {status: sum(r["status"] == status for r in ordered) for status in ("done", "skipped", "failed")}
+    wall = time.perf_counter() - t_start
+    io.write_json(study_dir / "study.json", {
+        "study": study.to_dict(),
+        "mode": mode,
+        "options": {"seeds": seeds, "exemplars": exemplars, "sizes": sizes, "levels": levels,
+                    "volume": reference, "slice_axis": slice_axis, "slice_index": slice_index},
+        "runs": [s.to_dict() for s in specs],
+        **info,
+        "versions": io.package_versions(),
+        "started": started,
+        "finished": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "wall_seconds": wall,
+        "counts": counts,
+        "figures": [f.name for f in figures],
+    })
+    echo(f"study {study.name}: {counts['done']} done, {counts['skipped']} skipped, "
+         f"{counts['failed']} failed in {wall:.1f} s; table {study_dir / 'results.csv'}")
+    return StudyOutcome(study_dir=study_dir, rows=ordered, counts=counts, wall_seconds=wall,
+                        figures=figures)

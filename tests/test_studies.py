@@ -1,0 +1,337 @@
+"""Studies on Dask: declarations, every study in quick mode, resuming, failures, serial == Dask,
+the HTML report and the 2D -> 3D ground-truth measures."""
+
+from __future__ import annotations
+
+import html.parser
+import json
+import logging
+
+import numpy as np
+import pytest
+
+from npmrf3d import cli
+from npmrf3d.errors import ParameterError
+from npmrf3d.studies import STUDIES, Method, Scale, Study, get_study, run_study
+from npmrf3d.studies import catalog, groundtruth, report, runner
+
+TINY = Scale(exemplars=("gravel64",), seeds=(0,), sizes=(8,), levels=1, crop=24,
+             common=(("window", 3), ("max_sweeps", 2)))
+
+
+def _study(name, *methods):
+    return Study(name=name, title=name, question="?", methods=methods, full=TINY, quick=TINY)
+
+
+GOOD = Method("H2b", params=(("heuristic", "ML_H2b"),))
+CONTROL = Method("control", "control")
+BROKEN = Method("broken", params=(("window", 4),))  # even window: a ParameterError in the run
+
+
+@pytest.fixture(scope="module")
+def blobs(tmp_path_factory):
+    from skimage.data import binary_blobs
+
+    volume = binary_blobs(length=32, n_dim=3, volume_fraction=0.4, rng=3).astype(np.uint8)
+    path = tmp_path_factory.mktemp("volume") / "blobs.npy"
+    np.save(path, volume)
+    return path
+
+
+@pytest.fixture(scope="module")
+def quick_results(tmp_path_factory, blobs):
+    """Every study in quick mode, serially, into one results root."""
+    out = tmp_path_factory.mktemp("results")
+    outcomes = {}
+    for name, study in STUDIES.items():
+        outcomes[name] = run_study(study, mode="quick", out=out, scheduler="serial",
+                                   volume=blobs if study.needs_volume else None,
+                                   progress=False, echo=None)
+    return out, outcomes
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=":0", silence_logs=logging.ERROR,
+                                  env={"NUMBA_NUM_THREADS": "1"}) as local:
+        yield local.scheduler_address
+
+
+# --------------------------------------------------------------------------- declarations
+
+
+def test_catalog_declares_the_seven_studies_and_ground_truth():
+    assert list(STUDIES) == ["heuristics", "cooling", "neighbourhood", "icm_vs_anneal", "colour",
+                             "npk", "views", "groundtruth"]
+    for study in STUDIES.values():
+        kw = {"reference": "x.npy"} if study.needs_volume else {}
+        for mode in ("quick", "full"):
+            runs = study.runs(mode, **kw)
+            assert runs and len({r.run_id for r in runs}) == len(runs)
+        quick = study.runs("quick", **kw)
+        assert max(r.size for r in quick) <= 16 and max(r.levels for r in quick) <= 2
+        assert {r.seed for r in quick} == {0}
+    assert {r.method for r in STUDIES["heuristics"].runs()} >= {"ML_H1a", "ML_H1b", "ML_H2a",
+                                                                "ML_H2b"}
+    npk = STUDIES["npk"].runs("full")
+    assert {r.algorithm for r in npk} == {"npmrf", "kopf", "control"}
+    assert len({r.exemplar for r in npk}) >= 14
+    assert all(dict(r.params)["relaxation"] == "anneal" for r in npk if r.algorithm == "npmrf")
+    views = {dict(r.params)["views"] for r in STUDIES["views"].runs()}
+    assert views == {"front,right,top", "front,top"}
+    with pytest.raises(ParameterError, match="heuristics, cooling"):
+        get_study("nope")
+    with pytest.raises(ParameterError, match="--volume"):
+        STUDIES["groundtruth"].runs("quick")
+
+
+def test_overrides_and_kwargs():
+    study = STUDIES["cooling"]
+    runs = study.runs("full", seeds=[5, 6], exemplars=["brick"], sizes=[16], levels=1)
+    assert {(r.seed, r.exemplar, r.size, r.levels) for r in runs} == {
+        (5, "brick", 16, 1), (6, "brick", 16, 1)}
+    kwargs = runs[0].kwargs()
+    assert kwargs["rng"] == 5 and kwargs["size"] == 16 and kwargs["xi"] == -1.0
+    assert kwargs["window"] == 7 and kwargs["heuristic"] == "ML_H2b"
+
+
+def test_study_exemplars_load():
+    names = catalog.STUDY_EXEMPLARS + catalog.GREY_EXEMPLARS + catalog.COLOUR_EXEMPLARS \
+        + catalog.LAYERED_EXEMPLARS
+    channels = set()
+    for name in set(names):
+        image = catalog.load_exemplar(name)
+        assert image.dtype == np.float32 and 64 <= min(image.shape[:2]) <= 128
+        channels.add(image.shape[2])
+    assert channels == {1, 3}
+    assert catalog.load_exemplar("brick", crop=20).shape == (20, 20, 1)
+    with pytest.raises(ParameterError, match="unknown exemplar"):
+        catalog.load_exemplar("marble")
+
+
+def test_etr_terrains_only_at_run_time(monkeypatch, tmp_path):
+    monkeypatch.setattr(catalog, "ETR_DIR", tmp_path / "missing")
+    with pytest.raises(ParameterError, match="extremetuxracer-data.*not bundled"):
+        catalog.load_exemplar("etr:snow")
+    assert catalog.etr_available(tmp_path / "missing") == []
+    folder = tmp_path / "terrains"
+    folder.mkdir()
+    import imageio.v3 as iio
+
+    iio.imwrite(folder / "snow.png", np.full((64, 64, 3), 200, np.uint8))
+    monkeypatch.setattr(catalog, "ETR_DIR", folder)
+    assert catalog.etr_available() == ["etr:snow"]
+    assert catalog.load_exemplar("etr:snow").shape == (64, 64, 3)
+    with pytest.raises(ParameterError, match="no terrain photograph 'ice'"):
+        catalog.load_exemplar("etr:ice")
+
+
+def test_plan_workers_never_oversubscribes():
+    assert runner.plan_workers(None, None, 2) == (2, 1)
+    assert runner.plan_workers(1, None, 2) == (1, 2)
+    with pytest.raises(ParameterError, match="exceed the 2 cores"):
+        runner.plan_workers(3, None, 2)
+    with pytest.raises(ParameterError, match="exceed"):
+        runner.plan_workers(2, 2, 2)
+
+
+# --------------------------------------------------------------------------- running
+
+
+@pytest.mark.parametrize("name", list(STUDIES))
+def test_every_study_runs_in_quick_mode(quick_results, name):
+    out, outcomes = quick_results
+    outcome = outcomes[name]
+    study_dir = out / name
+    failed = [(r["run_id"], r["error"]) for r in outcome.rows if r["status"] == "failed"]
+    assert not failed
+    assert outcome.counts["done"] == len(outcome.rows) == len(runner.read_results(
+        study_dir / "results.csv"))
+    for row in outcome.rows:
+        run_dir = study_dir / row["run_id"]
+        for file in ("volume.npy", "volume.tif", "preview.png", "run.json", "metrics.json"):
+            assert (run_dir / file).is_file()
+        assert np.isfinite(float(row["mean_histogram_kl"]))
+        assert np.isfinite(float(row["mean_autocorrelation_l2"]))
+        record = json.loads((run_dir / "run.json").read_text())
+        assert record["seed"] == row["seed"] and record["spec"]["run_id"] == row["run_id"]
+    for figure in ("metrics.png", "slices.png", *{"temperature": ["temperature.png"],
+                                                  "two_point": ["two_point.png"]}.get(
+                                                      next(iter(STUDIES[name].figures), ""), [])):
+        assert (study_dir / figure).is_file()
+    info = json.loads((study_dir / "study.json").read_text())
+    assert info["mode"] == "quick" and info["scheduler"] == "serial"
+
+
+def test_resume_skips_finished_runs(tmp_path):
+    study = _study("resume", GOOD, CONTROL)
+    first = run_study(study, out=tmp_path, scheduler="serial", progress=False, echo=None)
+    assert first.counts == {"done": 2, "skipped": 0, "failed": 0}
+    stamp = (tmp_path / "resume" / first.rows[0]["run_id"] / "volume.npy").stat().st_mtime_ns
+    (tmp_path / "resume" / first.rows[1]["run_id"] / "metrics.json").unlink()  # unfinished
+    second = run_study(study, out=tmp_path, scheduler="serial", progress=False, echo=None)
+    assert [r["status"] for r in second.rows] == ["skipped", "done"]
+    assert (tmp_path / "resume" / first.rows[0]["run_id"] / "volume.npy").stat().st_mtime_ns == stamp
+    for a, b in zip(first.rows, second.rows):
+        assert a["mean_histogram_kl"] == b["mean_histogram_kl"]
+
+
+def test_failed_run_is_recorded_and_others_go_on(tmp_path):
+    study = _study("failing", BROKEN, GOOD)
+    outcome = run_study(study, out=tmp_path, scheduler="serial", progress=False, echo=None)
+    broken, good = outcome.rows
+    assert broken["status"] == "failed" and good["status"] == "done"
+    assert "ParameterError" in broken["error"] and "window" in broken["error"]
+    error = json.loads((tmp_path / "failing" / broken["run_id"] / "error.json").read_text())
+    assert "Traceback" in error["traceback"] and error["spec"]["method"] == "broken"
+    rows = runner.read_results(tmp_path / "failing" / "results.csv")
+    assert [r["status"] for r in rows] == ["failed", "done"] and rows[0]["error"]
+    again = run_study(study, out=tmp_path, scheduler="serial", progress=False, echo=None)
+    assert [r["status"] for r in again.rows] == ["failed", "skipped"]  # failures are retried
+
+
+def test_dask_gives_the_serial_results(tmp_path, cluster):
+    study = _study("same", GOOD, CONTROL, BROKEN)
+    study = study.with_scale("quick", seeds=(0, 1))
+    serial = run_study(study, out=tmp_path / "serial", scheduler="serial", progress=False,
+                       echo=None)
+    messages = []
+    dask = run_study(study, out=tmp_path / "dask", scheduler=cluster, threads=1,
+                     progress=False, echo=messages.append)
+    assert any("dashboard" in m for m in messages)
+    assert [r["status"] for r in dask.rows] == [r["status"] for r in serial.rows] == [
+        "done", "done", "done", "done", "failed", "failed"]
+    for a, b in zip(serial.rows, dask.rows):
+        assert a["run_id"] == b["run_id"]
+        if a["status"] == "done":
+            va = np.load(tmp_path / "serial" / "same" / a["run_id"] / "volume.npy")
+            vb = np.load(tmp_path / "dask" / "same" / b["run_id"] / "volume.npy")
+            np.testing.assert_array_equal(va, vb)
+            assert a["mean_autocorrelation_l2"] == b["mean_autocorrelation_l2"]
+            assert json.loads((tmp_path / "dask" / "same" / b["run_id"] / "run.json")
+                              .read_text())["threads"] == 1
+        else:
+            assert a["error"] == b["error"]
+
+
+# --------------------------------------------------------------------------- report
+
+
+class _Collector(html.parser.HTMLParser):
+    def __init__(self):
+        super().__init__()
+        self.ids, self.images, self.links = {}, {}, []
+
+    def handle_starttag(self, tag, attrs):
+        attrs = dict(attrs)
+        if "id" in attrs:
+            self.ids[attrs["id"]] = tag
+        if tag == "img":
+            self.images[attrs.get("id")] = attrs["src"]
+        for key in ("href", "src"):
+            if key in attrs and not attrs[key].startswith(("#", "data:")):
+                self.links.append(attrs[key])
+
+
+def test_report_has_every_run_row_and_figure(quick_results, tmp_path):
+    out, outcomes = quick_results
+    target = tmp_path / "all.html"
+    assert cli.main(["report", str(out), "--out", str(target)]) == 0
+    parser = _Collector()
+    parser.feed(target.read_text(encoding="utf-8"))
+    assert not parser.links  # self-contained: opens offline
+    for name, outcome in outcomes.items():
+        assert parser.ids[f"study-{name}"] == "section"
+        for row in outcome.rows:
+            assert parser.ids[f"row-{name}-{row['run_id']}"] == "tr"
+            assert parser.images[f"fig-{name}-{row['run_id']}"].startswith("data:image/png;base64,")
+        assert f"study-fig-{name}-metrics" in parser.images
+    one = report.write_report(out / "cooling")
+    assert one == out / "cooling" / "report.html"
+    text = one.read_text(encoding="utf-8")
+    assert "study-fig-cooling-temperature" in text and "xi-1-full" in text
+
+
+def test_report_shows_failures(tmp_path):
+    outcome = run_study(_study("failing", BROKEN, GOOD), out=tmp_path, scheduler="serial",
+                        progress=False, echo=None)
+    parser = _Collector()
+    text = report.build_report(tmp_path)
+    parser.feed(text)
+    broken = outcome.rows[0]["run_id"]
+    assert parser.ids[f"row-failing-{broken}"] == "tr"
+    assert parser.ids[f"fig-failing-{broken}"] == "div"  # no picture, the message instead
+    assert "Failures (1)" in text and "ParameterError" in text
+
+
+# --------------------------------------------------------------------------- command line
+
+
+def test_cli_study_and_errors(tmp_path, capsys, blobs):
+    out = tmp_path / "cli"
+    assert cli.main(["study", "views", "--quick", "--out", str(out), "--scheduler", "serial",
+                     "--quiet"]) == 0
+    assert (out / "views" / "results.csv").is_file()
+    assert cli.main(["study", "nope", "--quick"]) == 2
+    assert "study must be one of" in capsys.readouterr().err
+    assert cli.main(["study", "groundtruth", "--quick", "--out", str(out),
+                     "--scheduler", "serial"]) == 2
+    assert "--volume" in capsys.readouterr().err
+    assert cli.main(["study", "views", "--quick", "--workers", "999", "--out", str(out),
+                     "--exemplars", "brick"]) == 2
+    assert "exceed" in capsys.readouterr().err
+    assert cli.main(["report", str(tmp_path / "empty")]) == 2
+    assert cli.main(["study", "--help"]) == 0
+    assert "(default: local)" in capsys.readouterr().out
+
+
+def test_study_script_entry_point(tmp_path):
+    from npmrf3d.studies.cli import study_main
+
+    assert study_main("views", ["--quick", "--out", str(tmp_path), "--scheduler", "serial",
+                                "--quiet"]) == 0
+    assert study_main("views", ["--quick", "--out", str(tmp_path), "--scheduler", "serial",
+                                "--quiet", "--exemplars", "nope.png"]) == 0  # failed run, recorded
+    rows = runner.read_results(tmp_path / "views" / "results.csv")
+    assert {r["status"] for r in rows} == {"failed"} and "does not exist" in rows[0]["error"]
+
+
+# --------------------------------------------------------------------------- ground truth
+
+
+def test_two_point_and_fractions_against_brute_force():
+    rng = np.random.default_rng(0)
+    volume = (rng.random((12, 10, 9)) < 0.3).astype(np.float32)
+    phases = groundtruth.phases_of(volume[0][..., None])
+    assert phases.tolist() == [0.0, 1.0]
+    for axis in range(3):
+        curve = groundtruth.two_point(volume, axis, 4, phases)[0]
+        n = volume.shape[axis]
+        for r in range(5):
+            pairs = [float(np.take(volume, i, axis) .ravel() @ np.take(volume, i + r, axis).ravel())
+                     for i in range(n - r)]
+            expected = sum(pairs) / ((n - r) * volume.size / n)
+            assert curve[r] == pytest.approx(expected)
+        assert curve[0] == pytest.approx(volume.mean())
+    fr = groundtruth.fractions(volume, phases, (0.0, 1.0))
+    assert fr.tolist() == pytest.approx([1 - volume.mean(), volume.mean()])
+    grey = rng.random((16, 16, 16)).astype(np.float32)
+    rho = groundtruth.two_point(grey, 1, 3, None)[0]
+    assert rho[0] == pytest.approx(1.0) and np.all(np.abs(rho[1:]) < 0.1)
+
+
+def test_ground_truth_compare_ranks_structure(blobs):
+    real = groundtruth.load_reference(blobs)
+    exemplar = groundtruth.exemplar_slice(real, 0)
+    np.testing.assert_array_equal(exemplar, real[16])
+    same = groundtruth.compare(real, real, exemplar)
+    assert same["two_point_l2_mean"] == 0 and same["fraction_l1"] == 0
+    control = runner.structureless(exemplar, 32, 0)
+    noise = groundtruth.compare(control, real, exemplar)
+    assert noise["two_point_l2_mean"] > 0.1 and noise["fraction_l1"] < 0.1
+    assert set(noise["slice_metrics"]["per_view"]) == {"front", "right", "top"}
+    assert groundtruth.fit_size(real.shape, 64, 2) == 32
+    with pytest.raises(ParameterError, match="slice index"):
+        groundtruth.exemplar_slice(real, 1, 40)
