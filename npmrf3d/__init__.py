@@ -3,7 +3,12 @@
 Public API
 ----------
 synthesize
-    Multi-scale NP-MRF synthesis (ICM with per-voxel temperatures, four heuristics).
+    Multi-scale NP-MRF synthesis (ICM with per-voxel temperatures or simulated annealing,
+    four heuristics, grey, colour or any channel count).
+kopf_synthesize
+    The NP_K baseline (Kopf et al. 2007), same result object.
+data, metrics
+    Bundled exemplars (``data.path(name)``) and the comparison metrics (``metrics.evaluate``).
 load_exemplar
     Read an exemplar image or array as float32 (H, W, C).
 SynthesisConfig, SynthesisResult, DecisionRule, VARIANTS
@@ -14,6 +19,8 @@ ParameterError
 
 from importlib.metadata import PackageNotFoundError, version
 
+from . import data, metrics
+from .baselines import kopf_synthesize
 from .config import VARIANTS, DecisionRule, SynthesisConfig, SynthesisResult
 from .errors import ParameterError
 from .exemplar import load_exemplar
@@ -33,7 +40,10 @@ __all__ = [
     "SynthesisConfig",
     "SynthesisResult",
     "__version__",
+    "data",
+    "kopf_synthesize",
     "load_exemplar",
+    "metrics",
     "make_config",
     "synthesize",
 ]
