@@ -17,6 +17,11 @@ Usage::
 
     python benchmarks/bench_quality.py                       # default and literal variants
     python benchmarks/bench_quality.py --variant default --set adaptive=0.1 --tag a01
+    python benchmarks/bench_quality.py --suite anneal   # annealing samplers and proposal counts,
+                                                        # colour and grey exemplars
+
+The ``anneal`` suite runs on :data:`ANNEAL_EXEMPLARS` with a 64-colour palette (colour
+exemplars have thousands of distinct colours; the heat-bath sampler evaluates every label).
 """
 
 from __future__ import annotations
@@ -33,6 +38,16 @@ from npmrf3d import data, metrics
 from npmrf3d.plotting import preview_figure, save_figure
 
 EXEMPLARS = ("gravel64", "brick", "grass")
+ANNEAL_EXEMPLARS = ("ihc64", "hubble", "gravel64")
+#: The ``anneal`` suite: (label, variant, overrides of synthesize).
+ANNEAL_SUITE = tuple(
+    (f"{sampler}-P{p}", "default",
+     {"relaxation": "anneal", "sampler": sampler, "proposals": p, "palette": 64})
+    for sampler, counts in (("heat-bath", (4, 8, 16)), ("metropolis", (8, 32)))
+    for p in counts
+) + (("metropolis-literal-P8", "literal",
+      {"relaxation": "anneal", "sampler": "metropolis", "proposals": 8, "palette": 64,
+       "histogram_weight": 8.0}),)
 VIEWS = ("front", "right", "top")
 
 
@@ -72,6 +87,9 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0],
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     parser.add_argument("--variant", action="append", help="variants to run (repeatable)")
+    parser.add_argument("--suite", choices=("variants", "anneal"), default="variants",
+                        help="variants: the --variant presets with --set overrides; anneal: "
+                             "the annealing samplers and proposal counts of ANNEAL_SUITE")
     parser.add_argument("--set", action="append", default=[], help="override key=value of the rule")
     parser.add_argument("--size", type=int, default=32)
     parser.add_argument("--levels", type=int, default=2)
@@ -81,9 +99,13 @@ def main(argv=None) -> int:
     parser.add_argument("--tag", default="", help="suffix for the picture names")
     parser.add_argument("--out", default="figures/quality")
     args = parser.parse_args(argv)
-    variants = args.variant or ["default", "literal"]
-    names = args.exemplar or list(EXEMPLARS)
     overrides = parse_overrides(args.set)
+    if args.suite == "anneal":
+        runs = [(label, variant, {**extra, **overrides}) for label, variant, extra in ANNEAL_SUITE]
+        names = args.exemplar or list(ANNEAL_EXEMPLARS)
+    else:
+        runs = [(v + args.tag, v, overrides) for v in (args.variant or ["default", "literal"])]
+        names = args.exemplar or list(EXEMPLARS)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     max_lag = min(8, args.size // 2 - 1)
@@ -94,19 +116,18 @@ def main(argv=None) -> int:
     for name in names:
         ex = exemplar_crop(name)
         ctrl, floor = control_and_floor(ex, args.size, max_lag, np.random.default_rng(args.seed))
-        for variant in variants:
+        for label, variant, run_overrides in runs:
             t0 = time.perf_counter()
             res = npmrf3d.synthesize(ex, size=args.size, window=args.window, levels=args.levels,
-                                     variant=variant, rng=args.seed, **overrides)
+                                     variant=variant, rng=args.seed, **run_overrides)
             sec = time.perf_counter() - t0
             top = metrics.largest_value_share(res.volume)
             kl = metrics.histogram_kl(ex, res.volume)
-            label = variant + args.tag
             for view in VIEWS:
                 ac = metrics.autocorrelation_error(ex, res.volume, view, max_lag) / ctrl
                 records.append({"exemplar": name, "variant": label, "view": view, "ac": ac,
                                 "floor": floor / ctrl, "kl": kl, "top": top, "seconds": sec,
-                                "overrides": overrides})
+                                "overrides": run_overrides})
                 print(f"{name:10s} {label:14s} {view:6s} {ac:6.3f} {floor / ctrl:6.3f} {kl:6.3f} "
                       f"{top:6.3f} {sec:6.1f}", flush=True)
             fig = preview_figure(res.volume, {"front": ex}, title=f"{name} {label}")
@@ -117,7 +138,7 @@ def main(argv=None) -> int:
         summary[variant] = {k: float(np.mean([r[k] for r in rows])) for k in ("ac", "floor", "kl", "top")}
         s = summary[variant]
         print(f"mean {variant:14s} ac {s['ac']:.3f} (floor {s['floor']:.3f}) kl {s['kl']:.3f} top {s['top']:.3f}")
-    path = out / f"quality{args.tag}.json"
+    path = out / f"quality{'_anneal' if args.suite == 'anneal' else ''}{args.tag}.json"
     path.write_text(json.dumps({"records": records, "summary": summary}, indent=2))
     return 0
 

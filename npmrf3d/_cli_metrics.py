@@ -19,7 +19,7 @@ import numpy as np
 
 from . import _validation as check
 from . import io
-from .cli import BUNDLED_PREFIX, PROG, _exemplar_source
+from .cli import BUNDLED_PREFIX, PROG, _check_out, _exemplar_source
 from .errors import ParameterError
 from .neighborhood import VIEWS
 
@@ -81,30 +81,6 @@ def register(commands: argparse._SubParsersAction, formatter_class: type) -> Non
 
 
 # --------------------------------------------------------------------------- checks and inputs
-
-
-def _check_out(out: pathlib.Path, overwrite: bool) -> None:
-    if out.exists():
-        if not out.is_dir():
-            raise ParameterError(f"output folder '{out}' exists and is not a folder")
-        previous = [name for name in OUT_FILES if (out / name).exists()]
-        if previous and not overwrite:
-            raise ParameterError(
-                f"output folder '{out}' already holds {', '.join(previous)}; "
-                "pass --overwrite or choose another --out"
-            )
-        if not os.access(out, os.W_OK | os.X_OK):
-            raise ParameterError(f"output folder '{out}' is not writable")
-        return
-    ancestor = out.absolute().parent
-    while not ancestor.exists():
-        ancestor = ancestor.parent
-    if not ancestor.is_dir():
-        raise ParameterError(
-            f"output folder '{out}' cannot be created: '{ancestor}' is not a folder")
-    if not os.access(ancestor, os.W_OK | os.X_OK):
-        raise ParameterError(
-            f"output folder '{out}' cannot be created: '{ancestor}' is not writable")
 
 
 def _stored_dtype(path: pathlib.Path) -> np.dtype | None:
@@ -249,7 +225,7 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
     if args.out is not None and not args.out.strip():
         raise ParameterError("--out must name a folder; got an empty string")
     out = pathlib.Path(args.out) if args.out is not None else pathlib.Path(args.volume).parent
-    _check_out(out, args.overwrite)
+    _check_out(out, args.overwrite, files=OUT_FILES, what="metrics")
     volume, stored = _read_volume(args.volume)
     exemplars, sources = _read_exemplars(args, views)
     result = metrics.evaluate(volume, exemplars, views=views)

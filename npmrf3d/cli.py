@@ -293,15 +293,20 @@ def _exemplar_source(text: str | None) -> tuple[pathlib.Path | None, str | None]
     return pathlib.Path(text), text
 
 
-def _check_out(out: pathlib.Path, overwrite: bool) -> None:
-    """The output folder must be usable; checked before synthesis (write_run checks again)."""
+def _check_out(out: pathlib.Path, overwrite: bool, files: tuple[str, ...] = io.RUN_FILES,
+               what: str = "a run") -> None:
+    """The output folder must be usable (checked before the work; the writers check again).
+
+    It may exist if it holds none of ``files`` (or ``overwrite`` is set) and is writable, or
+    be creatable under its nearest existing ancestor. ``what`` names ``files`` in the message.
+    """
     if out.exists():
         if not out.is_dir():
             raise ParameterError(f"output folder '{out}' exists and is not a folder")
-        previous = [name for name in io.RUN_FILES if (out / name).exists()]
+        previous = [name for name in files if (out / name).exists()]
         if previous and not overwrite:
             raise ParameterError(
-                f"output folder '{out}' already holds a run ({', '.join(previous)}); "
+                f"output folder '{out}' already holds {what} ({', '.join(previous)}); "
                 "pass --overwrite or choose another --out"
             )
         if not os.access(out, os.W_OK | os.X_OK):
@@ -326,11 +331,19 @@ def _check_checkpoint(path: pathlib.Path | None) -> None:
 
 
 class _Progress:
-    """One tqdm bar per level on stderr: sweeps done, global temperature as postfix."""
+    """One tqdm bar per level on stderr: steps (``unit``) done, a level quantity as postfix.
 
-    def __init__(self, size: tuple[int, int, int], enabled: bool):
+    Called as ``progress(level, step, steps, value)`` with ``step = 0`` at the start of each
+    level: sweeps and the global temperature ``T`` for synth, iterations and the energy ``E``
+    for NP_K.
+    """
+
+    def __init__(self, size: tuple[int, int, int], enabled: bool, unit: str = "sweep",
+                 symbol: str = "T"):
         self.size = size
         self.enabled = enabled
+        self.unit = unit
+        self.symbol = symbol
         self.bar = None
 
     def __call__(self, level: int, sweep: int, max_sweeps: int, temperature: float) -> None:
@@ -344,9 +357,9 @@ class _Progress:
 
             shape = level_shape(self.size, level)
             side = f"{shape[0]}^3" if len(set(shape)) == 1 else "x".join(map(str, shape))
-            self.bar = tqdm(total=max_sweeps, desc=f"level {level} ({side})", unit="sweep",
+            self.bar = tqdm(total=max_sweeps, desc=f"level {level} ({side})", unit=self.unit,
                             file=sys.stderr, leave=True, dynamic_ncols=True)
-        self.bar.set_postfix(T=f"{temperature:.4g}", refresh=False)
+        self.bar.set_postfix({self.symbol: f"{temperature:.4g}"}, refresh=False)
         if sweep > self.bar.n:
             self.bar.update(sweep - self.bar.n)
         else:

@@ -4,15 +4,7 @@ Usage: python studies/cooling.py [--quick] [--out DIR] [--scheduler ADDRESS|loca
 (the same as 'npmrf3d study cooling ...'; --help lists every option). See studies/README.md.
 """
 
-import pathlib
-import sys
-
-try:
-    import npmrf3d  # noqa: F401
-except ImportError:  # running from a source checkout that is not installed
-    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
-
-from npmrf3d.studies.cli import study_main
+from _study import main
 
 if __name__ == "__main__":
-    sys.exit(study_main("cooling"))
+    main("cooling")

@@ -98,6 +98,22 @@ def neighbour_distances(values, trust, patches_t, n_patches, dist, rows):
 
 
 @jit
+def smoothed_log_weight(labels, kl, nonzero, log_weights, n_nz, inv_two_hc2):
+    """``log sum_j W_j exp(-||lam_k - lam_j||^2 / (2 h_c^2))`` over the weighted labels j, in
+    the log domain (log-sum-exp: exact where the linear sum would underflow)."""
+    best = -np.inf
+    for a in range(n_nz):
+        v = log_weights[a] - label_sq_distance(labels, nonzero[a], kl) * inv_two_hc2
+        if v > best:
+            best = v
+    acc = 0.0
+    for a in range(n_nz):
+        v = log_weights[a] - label_sq_distance(labels, nonzero[a], kl) * inv_two_hc2
+        acc += math.exp(v - best)
+    return best + math.log(acc)
+
+
+@jit
 def label_weights(dist, n_patches, centre_labels, inv_two_h2, adapt_eps, min_two_h2, prune,
                   log_norm_const, weights, nonzero, log_weights):
     """Patch weights summed per centre label, and the log normaliser ``log sum_j W_j c_j``.
@@ -155,17 +171,8 @@ def log_lcpdf_at_labels(
     n_nz, log_z = label_weights(dist, n_patches, centre_labels, inv_two_h2, adapt_eps,
                                 min_two_h2, prune, log_norm_const, weights, nonzero, log_weights)
     for q in range(query.shape[0]):
-        kl = query[q]
-        best = -np.inf
-        for a in range(n_nz):
-            v = log_weights[a] - label_sq_distance(labels, nonzero[a], kl) * inv_two_hc2
-            if v > best:
-                best = v
-        acc = 0.0
-        for a in range(n_nz):
-            v = log_weights[a] - label_sq_distance(labels, nonzero[a], kl) * inv_two_hc2
-            acc += math.exp(v - best)
-        value = best + math.log(acc) - log_z
+        value = smoothed_log_weight(labels, query[q], nonzero, log_weights, n_nz,
+                                    inv_two_hc2) - log_z
         if outlier > 0.0:
             value = math.log((1.0 - outlier) * math.exp(value) + outlier / n_labels)
         out[q] = value
@@ -218,16 +225,8 @@ def log_lcpdf_from_distances(
                 out[kl] = math.log(out[kl]) - log_z
                 continue
             # log domain (no table, or the sum underflows): log-sum-exp over weighted labels
-            best = -np.inf
-            for a in range(n_nz):
-                v = log_weights[a] - label_sq_distance(labels, nonzero[a], kl) * inv_two_hc2
-                if v > best:
-                    best = v
-            acc = 0.0
-            for a in range(n_nz):
-                v = log_weights[a] - label_sq_distance(labels, nonzero[a], kl) * inv_two_hc2
-                acc += math.exp(v - best)
-            out[kl] = best + math.log(acc) - log_z
+            out[kl] = smoothed_log_weight(labels, kl, nonzero, log_weights, n_nz,
+                                          inv_two_hc2) - log_z
         if outlier > 0.0:  # no kernel table: mix the exact values
             for kl in range(n_labels):
                 out[kl] = math.log((1.0 - outlier) * math.exp(out[kl]) + outlier / n_labels)

@@ -159,37 +159,6 @@ def _constraint_weight(text: str | None):
     return weights[..., 0]
 
 
-class _Progress:
-    """One tqdm bar per level on stderr: iterations done, mean energy as postfix."""
-
-    def __init__(self, size, enabled: bool):
-        self.size = size
-        self.enabled = enabled
-        self.bar = None
-
-    def __call__(self, level: int, iteration: int, iterations: int, energy: float) -> None:
-        if not self.enabled:
-            return
-        if iteration == 0 or self.bar is None:
-            self.close()
-            from tqdm import tqdm
-
-            from ..pyramid import level_shape
-
-            shape = level_shape(self.size, level)
-            side = f"{shape[0]}^3" if len(set(shape)) == 1 else "x".join(map(str, shape))
-            self.bar = tqdm(total=iterations, desc=f"level {level} ({side})", unit="iter",
-                            file=sys.stderr, leave=True, dynamic_ncols=True)
-            return
-        self.bar.set_postfix(E=f"{energy:.4g}", refresh=False)
-        self.bar.update(iteration - self.bar.n)
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
-            self.bar = None
-
-
 def _option_message(message: str) -> str:
     for name in _OPTION_NAMES:
         if message.startswith(f"{name} must "):
@@ -207,7 +176,7 @@ def _kopf(args: argparse.Namespace, argv: list[str]) -> int:
 def _run(args: argparse.Namespace, argv: list[str]) -> int:
     import numpy as np
 
-    from ..cli import PROG, _check_out, _exemplar_source, _parse_size
+    from ..cli import PROG, _check_out, _exemplar_source, _parse_size, _Progress
     from ..synthesis import resolve_exemplars
     from .kopf import _constraint_arrays, make_kopf_config, run_kopf
 
@@ -237,7 +206,7 @@ def _run(args: argparse.Namespace, argv: list[str]) -> int:
     channels = next(iter(per_view.values())).shape[2]
     target, tau = _constraint_arrays(constraint, weight, config.size, channels)
 
-    progress = _Progress(config.size, enabled=not args.quiet)
+    progress = _Progress(config.size, enabled=not args.quiet, unit="iter", symbol="E")
     try:
         result = run_kopf(config, per_view, np.random.default_rng(config.seed), constraint=target,
                           constraint_weight=tau, progress=progress, t_start=t_start)
