@@ -321,6 +321,52 @@ def _check_out(out: pathlib.Path, overwrite: bool, files: tuple[str, ...] = io.R
         raise ParameterError(f"output folder '{out}' cannot be created: '{ancestor}' is not writable")
 
 
+def _output_folder(args: argparse.Namespace) -> pathlib.Path:
+    """The checked ``--out`` folder of a command that writes a run folder."""
+    if not args.out.strip():
+        raise ParameterError("--out must name a folder; got an empty string")
+    out = pathlib.Path(args.out)
+    _check_out(out, args.overwrite)
+    return out
+
+
+def _view_sources(args: argparse.Namespace):
+    """(EXEMPLAR file, {view: --exemplar-VIEW file}, views -> {view: name for run.json})."""
+    exemplar, exemplar_name = _exemplar_source(args.exemplar)
+    per_view_sources, names = {}, {}
+    for view in VIEWS:
+        source, name = _exemplar_source(getattr(args, f"exemplar_{view}"))
+        if source is not None:
+            per_view_sources[view], names[view] = source, name
+    return exemplar, per_view_sources, lambda views: {v: names.get(v, exemplar_name) for v in views}
+
+
+def _write_result(out: pathlib.Path, args: argparse.Namespace, argv: list[str], command: str,
+                  result, per_view: dict, sources: dict, title: str, **extra) -> None:
+    """Write the run folder (volume, TIFF, preview, run.json with ``extra``) and say so."""
+    record = {
+        "command": command,
+        "argv": [PROG, *argv],
+        "config": result.config.to_dict(),
+        "seed": result.config.seed,
+        "exemplars": sources,
+        **extra,
+        "versions": io.package_versions(),
+        "threads": result.stats["threads"],
+        "timings": result.timings,
+        "history": result.history,
+        "stats": result.stats,
+        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+    }
+    io.write_run(out, volume=result.volume, exemplars=per_view, record=record,
+                 overwrite=args.overwrite, title=title)
+    if not args.quiet:
+        shape = "x".join(str(n) for n in result.volume.shape)
+        labels = f"{len(result.labels)} labels, " if len(result.labels) else ""
+        print(f"wrote {out}{os.sep}: {', '.join(io.RUN_FILES)}")
+        print(f"volume {shape} (N1xN2xN3xC), {labels}{result.timings['total']:.1f} s")
+
+
 def _check_checkpoint(path: pathlib.Path | None) -> None:
     if path is None:
         return
@@ -388,21 +434,13 @@ def _synth(args: argparse.Namespace, argv: list[str]) -> int:
         grey_levels=args.grey_levels,
         palette=args.palette, toroidal_exemplar=args.toroidal_exemplar, seed=args.seed,
     )
-    if not args.out.strip():
-        raise ParameterError("--out must name a folder; got an empty string")
-    out = pathlib.Path(args.out)
-    _check_out(out, args.overwrite)
+    out = _output_folder(args)
     checkpoint = pathlib.Path(args.checkpoint) if args.checkpoint is not None else None
     _check_checkpoint(checkpoint)
 
-    exemplar, exemplar_name = _exemplar_source(args.exemplar)
-    per_view_sources, names = {}, {}
-    for view in VIEWS:
-        source, name = _exemplar_source(getattr(args, f"exemplar_{view}"))
-        if source is not None:
-            per_view_sources[view], names[view] = source, name
+    exemplar, per_view_sources, source_names = _view_sources(args)
     per_view = resolve_exemplars(exemplar, per_view_sources, config.views, config)
-    sources = {view: names.get(view, exemplar_name) for view in config.views}
+    sources = source_names(config.views)
 
     import numpy as np
 
@@ -413,29 +451,10 @@ def _synth(args: argparse.Namespace, argv: list[str]) -> int:
     finally:
         progress.close()
 
-    record = {
-        "command": "synth",
-        "argv": [PROG, *argv],
-        "config": result.config.to_dict(),
-        "seed": config.seed,
-        "exemplars": sources,
-        "versions": io.package_versions(),
-        "threads": result.stats["threads"],
-        "timings": result.timings,
-        "history": result.history,
-        "stats": result.stats,
-        "labels": int(len(result.labels)),
-        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-    }
     title = (f"npmrf3d {config.heuristic}, variant {config.variant}, window {config.window}, "
              f"{config.levels} levels, seed {config.seed}")
-    io.write_run(out, volume=result.volume, exemplars=per_view, record=record,
-                 overwrite=args.overwrite, title=title)
-    if not args.quiet:
-        shape = "x".join(str(n) for n in result.volume.shape)
-        print(f"wrote {out}{os.sep}: {', '.join(io.RUN_FILES)}")
-        print(f"volume {shape} (N1xN2xN3xC), {len(result.labels)} labels, "
-              f"{result.timings['total']:.1f} s")
+    _write_result(out, args, argv, "synth", result, per_view, sources, title,
+                  labels=int(len(result.labels)))
     return 0
 
 

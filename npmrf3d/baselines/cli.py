@@ -10,11 +10,7 @@ before any synthesis work and without leaving files behind.
 from __future__ import annotations
 
 import argparse
-import os
-import pathlib
-import sys
 import time
-from datetime import datetime, timezone
 
 from .. import data, io
 from ..errors import ParameterError
@@ -176,7 +172,7 @@ def _kopf(args: argparse.Namespace, argv: list[str]) -> int:
 def _run(args: argparse.Namespace, argv: list[str]) -> int:
     import numpy as np
 
-    from ..cli import PROG, _check_out, _exemplar_source, _parse_size, _Progress
+    from ..cli import _output_folder, _parse_size, _Progress, _view_sources, _write_result
     from ..synthesis import resolve_exemplars
     from .kopf import _constraint_arrays, make_kopf_config, run_kopf
 
@@ -190,19 +186,10 @@ def _run(args: argparse.Namespace, argv: list[str]) -> int:
         histogram_weight=args.histogram_weight, mean_shift=_parse_mean_shift(args.mean_shift),
         upsample=args.upsample, constrained=constraint is not None, seed=args.seed,
     )
-    if not args.out.strip():
-        raise ParameterError("--out must name a folder; got an empty string")
-    out = pathlib.Path(args.out)
-    _check_out(out, args.overwrite)
-
-    exemplar, exemplar_name = _exemplar_source(args.exemplar)
-    per_view_sources, names = {}, {}
-    for view in VIEWS:
-        source, name = _exemplar_source(getattr(args, f"exemplar_{view}"))
-        if source is not None:
-            per_view_sources[view], names[view] = source, name
+    out = _output_folder(args)
+    exemplar, per_view_sources, source_names = _view_sources(args)
     per_view = resolve_exemplars(exemplar, per_view_sources, config.views, _config_fit(config))
-    sources = {view: names.get(view, exemplar_name) for view in config.views}
+    sources = source_names(config.views)
     channels = next(iter(per_view.values())).shape[2]
     target, tau = _constraint_arrays(constraint, weight, config.size, channels)
 
@@ -213,29 +200,10 @@ def _run(args: argparse.Namespace, argv: list[str]) -> int:
     finally:
         progress.close()
 
-    record = {
-        "command": "baseline kopf",
-        "argv": [PROG, *argv],
-        "config": result.config.to_dict(),
-        "seed": config.seed,
-        "exemplars": sources,
-        "constraint": args.constraint,
-        "constraint_weight": args.constraint_weight,
-        "versions": io.package_versions(),
-        "threads": result.stats["threads"],
-        "timings": result.timings,
-        "history": result.history,
-        "stats": result.stats,
-        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-    }
     title = (f"NP_K (Kopf et al. 2007), window {config.window}, {config.levels} levels, "
              f"seed {config.seed}")
-    io.write_run(out, volume=result.volume, exemplars=per_view, record=record,
-                 overwrite=args.overwrite, title=title)
-    if not args.quiet:
-        shape = "x".join(str(n) for n in result.volume.shape)
-        print(f"wrote {out}{os.sep}: {', '.join(io.RUN_FILES)}")
-        print(f"volume {shape} (N1xN2xN3xC), {result.timings['total']:.1f} s")
+    _write_result(out, args, argv, "baseline kopf", result, per_view, sources, title,
+                  constraint=args.constraint, constraint_weight=args.constraint_weight)
     return 0
 
 
