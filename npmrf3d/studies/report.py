@@ -130,7 +130,7 @@ def _middle_slice(volume: np.ndarray, view: str) -> np.ndarray:
 def _slices_figure(study, study_dir, specs, rows):
     from matplotlib.figure import Figure
 
-    from npmrf3d.plotting import save_figure, to_display
+    from npmrf3d.plotting import save_figure
 
     status = {r["run_id"]: r["status"] for r in rows}
     exemplars = _unique(s.exemplar for s in specs)[:_MAX_SLICE_ROWS]
@@ -142,7 +142,12 @@ def _slices_figure(study, study_dir, specs, rows):
                  layout="constrained")
     axes = fig.subplots(len(exemplars), len(methods) + 1, squeeze=False)
     for i, e in enumerate(exemplars):
-        exemplar_image = None
+        row_specs = [first[(e, m)] for m in methods if (e, m) in first]
+        exemplar_image = _exemplar_image(row_specs[0]) if row_specs else None
+        # one value range per row (the exemplar's): a dark volume must look dark, not be
+        # stretched to full contrast panel by panel
+        lo, hi = ((float(np.min(exemplar_image)), float(np.max(exemplar_image)))
+                  if exemplar_image is not None else (None, None))
         for j, m in enumerate(methods):
             ax = axes[i, j + 1]
             ax.set_xticks([])
@@ -155,12 +160,7 @@ def _slices_figure(study, study_dir, specs, rows):
                 ax.text(0.5, 0.5, "failed" if spec is not None else "-", ha="center",
                         va="center", transform=ax.transAxes, color="red")
                 continue
-            volume = np.load(path)
-            image = _middle_slice(volume, spec.views[0])
-            data = to_display(image)
-            ax.imshow(data, cmap="gray" if data.ndim == 2 else None, interpolation="nearest")
-            if exemplar_image is None:
-                exemplar_image = _exemplar_image(spec)
+            _show_in_range(ax, _middle_slice(np.load(path), spec.views[0]), lo, hi)
         ax = axes[i, 0]
         ax.set_xticks([])
         ax.set_yticks([])
@@ -168,9 +168,19 @@ def _slices_figure(study, study_dir, specs, rows):
         if i == 0:
             ax.set_title("exemplar", fontsize="small")
         if exemplar_image is not None:
-            data = to_display(exemplar_image)
-            ax.imshow(data, cmap="gray" if data.ndim == 2 else None, interpolation="nearest")
+            _show_in_range(ax, exemplar_image, lo, hi)
     return [save_figure(fig, study_dir / "slices.png")]
+
+
+def _show_in_range(ax, image, lo, hi):
+    """imshow ``image`` (H, W, C) with the value range ``[lo, hi]`` (grey or RGB)."""
+    from npmrf3d.plotting import to_display
+
+    data = to_display(image, vmin=lo, vmax=hi)
+    if data.ndim == 2:
+        ax.imshow(data, cmap="gray", vmin=lo, vmax=hi, interpolation="nearest")
+    else:
+        ax.imshow(data, interpolation="nearest")
 
 
 def _exemplar_image(spec):
