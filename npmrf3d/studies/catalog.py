@@ -157,11 +157,12 @@ COOLING = Study(
     title="ICM cooling: xi = -1 versus -3, full versus 95 % stop",
     question="How fast should voxels cool, and does stopping at 95 % of the global temperature "
              "lose anything against cooling down to 0?",
-    notes="ML_H2b, default decision rule, 7x7, 8/8, resynth. The temperature figure shows the "
+    notes="ML_H2b, default decision rule, 7x7, 8/8, resynth, 64-colour palette. The "
+          "temperature figure shows the "
           "global temperature (sum of voxel temperatures) after each sweep, levels one after "
           "the other; its numbers are in temperature.csv.",
     common=(("relaxation", "icm"), ("heuristic", "ML_H2b"), ("window", 7), ("upsample", "8/8"),
-            ("inherit", "resynth"), ("max_sweeps", 60)),
+            ("inherit", "resynth"), ("max_sweeps", 60), ("palette", 64)),
     methods=(
         _m("xi-1-full", xi=-1.0, stop=1.0),
         _m("xi-1-stop95", xi=-1.0, stop=0.95),
@@ -265,8 +266,10 @@ VIEWS = Study(
              "layering direction (front and top) avoid the conflict a third view creates?",
     notes="The exemplars' layers run along the image rows, i.e. along axis i in the front "
           "(i, j) and top (i, k) views; the right view (j, k) would ask for layers along j too. "
-          "ML_H2b, ICM, default rule, 7x7. Metrics are computed on the constrained views only.",
-    common=(("relaxation", "icm"), ("heuristic", "ML_H2b"), ("window", 7), ("max_sweeps", 30)),
+          "ML_H2b, ICM, default rule, 7x7, 64-colour palette (the colour photographs have "
+          "thousands of distinct colours). Metrics are computed on the constrained views only.",
+    common=(("relaxation", "icm"), ("heuristic", "ML_H2b"), ("window", 7), ("max_sweeps", 30),
+            ("palette", 64)),
     methods=(
         _m("3views", views="front,right,top"),
         _m("2views", views="front,top"),
