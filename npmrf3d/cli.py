@@ -367,6 +367,22 @@ def _write_result(out: pathlib.Path, args: argparse.Namespace, argv: list[str], 
         print(f"volume {shape} (N1xN2xN3xC), {labels}{result.timings['total']:.1f} s")
 
 
+#: Above this many distinct exemplar values, synth suggests --palette (the label stage scales
+#: with the number of labels; a colour photograph easily has thousands).
+MANY_VALUES = 1024
+
+
+def _note_many_values(per_view: dict) -> None:
+    import numpy as np
+
+    arrays = {id(a): a for a in per_view.values()}.values()
+    values = np.unique(np.concatenate([a.reshape(-1, a.shape[2]) for a in arrays]), axis=0)
+    if len(values) > MANY_VALUES:
+        print(f"{PROG}: note: the exemplar has {len(values)} distinct values, each a label; run "
+              f"time grows with the label count: --palette 64 (colour) or --grey-levels 64 "
+              f"is usually as good and much faster", file=sys.stderr)
+
+
 def _check_checkpoint(path: pathlib.Path | None) -> None:
     if path is None:
         return
@@ -441,6 +457,8 @@ def _synth(args: argparse.Namespace, argv: list[str]) -> int:
     exemplar, per_view_sources, source_names = _view_sources(args)
     per_view = resolve_exemplars(exemplar, per_view_sources, config.views, config)
     sources = source_names(config.views)
+    if not args.quiet and config.palette is None and config.grey_levels is None:
+        _note_many_values(per_view)
 
     import numpy as np
 

@@ -110,6 +110,17 @@ def test_anneal_run_writes_a_colour_run(capsys, tmp_path):
     assert np.load(out / "volume.npy").shape == (8, 8, 8, 3)
 
 
+def test_synth_suggests_a_palette_for_many_colours(capsys, tmp_path, monkeypatch):
+    monkeypatch.setattr(cli, "MANY_VALUES", 50)
+    code, _, err = run_cli(capsys, "synth", "bundled:ihc64", "--size", "8", "--levels", "1",
+                           "--window", "3", "--max-sweeps", "1", "--grey-levels", "4",
+                           "--out", str(tmp_path / "a"))
+    assert code == 0 and "--palette 64" not in err  # asked for few labels: no note
+    code, _, err = run_cli(capsys, "synth", "bundled:gravel64", "--size", "8", "--levels", "1",
+                           "--window", "3", "--max-sweeps", "1", "--out", str(tmp_path / "b"))
+    assert code == 0 and "178 distinct values" in err and "--palette 64" in err
+
+
 def test_info_prints_version_and_registries(capsys):
     import npmrf3d
 
