@@ -19,7 +19,7 @@ import numpy as np
 
 from . import _validation as check
 from . import io
-from .cli import BUNDLED_PREFIX, PROG, _check_out, _exemplar_source
+from .cli import BUNDLED_PREFIX, PROG, _check_out, _exemplar_source, say
 from .errors import ParameterError
 from .neighborhood import VIEWS
 
@@ -256,6 +256,6 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
     except OSError as exc:
         raise ParameterError(
             f"cannot write into output folder '{out}': {exc.strerror or exc}") from exc
-    print(_table(result))
-    print(f"wrote {out}{os.sep}: {', '.join(OUT_FILES)}")
+    say(_table(result))
+    say(f"wrote {out}{os.sep}: {', '.join(OUT_FILES)}")
     return 0

@@ -515,6 +515,15 @@ def _info() -> int:
 _OPTION_NAMES = ("max_sweeps", "centre_bandwidth", "histogram_weight", "grey_levels", "t_end")
 
 
+def say(text: str, *, error: bool = False) -> None:
+    """Write one line of command-line output (stdout, or stderr for diagnostics).
+
+    The one place where the command line talks to the user; the library itself reports through
+    return values, progress callbacks and exceptions.
+    """
+    print(text, file=sys.stderr if error else sys.stdout)
+
+
 def _error(message: str) -> int:
     line = " ".join(part.strip() for part in str(message).splitlines() if part.strip())
     for name in _OPTION_NAMES:

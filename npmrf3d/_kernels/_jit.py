@@ -21,6 +21,14 @@ jit_contract = numba.njit(**{**JIT_OPTIONS, "fastmath": {"contract"}})
 prange = numba.prange
 
 
+def use_threads(threads: int | None) -> int:
+    """Let numba's parallel loops use ``threads`` threads (capped at the pool size; None: keep
+    the current setting); return the number in use."""
+    if threads is not None:
+        numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
+    return thread_count()
+
+
 def thread_count() -> int:
     """Number of threads numba's parallel loops use in this process."""
     return int(numba.get_num_threads())

@@ -10,6 +10,7 @@ import argparse
 import pathlib
 import sys
 
+from npmrf3d.cli import say
 from npmrf3d.errors import ParameterError
 
 __all__ = ["register", "study_main"]
@@ -68,7 +69,7 @@ def _run(args: argparse.Namespace, name: str | None = None) -> int:
     study = get_study(name or args.name)
     if not str(args.out).strip():
         raise ParameterError("--out must name a folder; got an empty string")
-    echo = None if args.quiet else print
+    echo = None if args.quiet else say
     outcome = run_study(
         study, mode="quick" if args.quick else "full", out=args.out,
         scheduler=None if args.scheduler == "local" else args.scheduler, workers=args.workers,
@@ -76,7 +77,7 @@ def _run(args: argparse.Namespace, name: str | None = None) -> int:
         levels=args.levels, volume=args.volume, slice_axis=args.slice_axis,
         slice_index=args.slice_index, progress=not args.quiet, echo=echo)
     if echo is not None:
-        print(f"report: npmrf3d report {outcome.study_dir}")
+        say(f"report: npmrf3d report {outcome.study_dir}")
     return 0
 
 
@@ -88,7 +89,7 @@ def _report_handler(args, argv) -> int:
     from .report import write_report
 
     path = write_report(args.results_dir, args.out)
-    print(f"wrote {path}")
+    say(f"wrote {path}")
     return 0
 
 
@@ -154,5 +155,5 @@ def study_main(name: str, argv: list[str] | None = None) -> int:
     except ParameterError as exc:
         return _error(str(exc))
     except KeyboardInterrupt:
-        print(f"{PROG}: interrupted", file=sys.stderr)
+        say(f"{PROG}: interrupted", error=True)
         return 130

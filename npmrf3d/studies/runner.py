@@ -44,6 +44,7 @@ from typing import Any
 
 import numpy as np
 
+from npmrf3d._kernels import _jit
 from npmrf3d.errors import ParameterError
 
 from .grid import RunSpec, Study
@@ -117,14 +118,6 @@ def is_finished(run_dir: pathlib.Path) -> bool:
     return all((pathlib.Path(run_dir) / name).is_file() for name in FINISHED_FILES)
 
 
-def _use_threads(threads: int | None) -> int:
-    import numba
-
-    if threads is not None:
-        numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
-    return int(numba.get_num_threads())
-
-
 def _config_dict(result) -> Any:
     config = getattr(result, "config", None)
     if config is None:
@@ -189,7 +182,7 @@ def execute_run(spec: RunSpec, study_dir: str, threads: int | None = None) -> di
     run_dir = pathlib.Path(study_dir) / spec.run_id
     t_start = time.perf_counter()
     try:
-        used_threads = _use_threads(threads)
+        used_threads = _jit.use_threads(threads)
         (run_dir / "error.json").unlink(missing_ok=True)
         real = None
         if spec.reference is not None:
@@ -473,7 +466,7 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
               workers: int | None = None, threads: int | None = None, seeds=None, exemplars=None,
               sizes=None, levels: int | None = None, volume=None, slice_axis: int = 0,
               slice_index: int | None = None, progress: bool = True,
-              echo: Callable[[str], None] | None = print) -> StudyOutcome:
+              echo: Callable[[str], None] | None = None) -> StudyOutcome:
     """Run (or resume) a study and write its runs, ``results.csv``, figures and ``study.json``.
 
     Parameters
