@@ -46,6 +46,7 @@ import numpy as np
 
 from npmrf3d._kernels import _jit
 from npmrf3d.errors import ParameterError
+from npmrf3d.metrics import METRICS
 
 from .grid import RunSpec, Study
 
@@ -62,12 +63,11 @@ __all__ = [
 
 #: The files that mark a finished run.
 FINISHED_FILES = ("run.json", "metrics.json")
-#: The metrics of the studies (the paper's three first).
-HEADLINE_METRICS = ("histogram_kl", "autocorrelation_l2", "orientation_kl", "sliced_wasserstein")
+#: The metrics of the studies (the paper's three first), as :data:`npmrf3d.metrics.METRICS`.
+HEADLINE_METRICS = METRICS
 #: Leading columns of results.csv; metric columns follow, ``error`` comes last.
 BASE_COLUMNS = ("study", "run_id", "exemplar", "method", "algorithm", "seed", "size", "levels",
                 "status", "seconds", "wall_seconds", "threads", "largest_value_share")
-_FALLBACK_MAX_LAG = 32
 
 
 # --------------------------------------------------------------------------- metrics
@@ -75,26 +75,11 @@ _FALLBACK_MAX_LAG = 32
 
 def evaluate_metrics(volume: np.ndarray, exemplars: dict[str, np.ndarray],
                      views: Sequence[str] | None = None) -> dict:
-    """:func:`npmrf3d.metrics.evaluate` when it exists, else a small adapter over the older
-    ``histogram_kl`` / ``autocorrelation_error`` (same output layout, fewer metrics)."""
+    """:func:`npmrf3d.metrics.evaluate` of ``volume`` against the exemplars of ``views``."""
     from npmrf3d import metrics
 
     views = tuple(exemplars) if views is None else tuple(views)
-    exemplars = {v: exemplars[v] for v in views}
-    if hasattr(metrics, "evaluate"):
-        return metrics.evaluate(volume, exemplars, views=list(views))
-    per_view = {}
-    for view, exemplar in exemplars.items():  # pragma: no cover - until metrics.evaluate lands
-        slices = metrics.view_slices(volume, view)
-        lag = max(1, min(_FALLBACK_MAX_LAG, *(s // 2 for s in exemplar.shape[:2]),
-                         *(s // 2 for s in slices.shape[1:3])))
-        per_view[view] = {
-            "histogram_kl": metrics.histogram_kl(exemplar, slices),
-            "autocorrelation_l2": metrics.autocorrelation_error(exemplar, volume, view, lag),
-        }
-    names = list(next(iter(per_view.values())))
-    mean = {n: float(np.mean([pv[n] for pv in per_view.values()])) for n in names}
-    return {"per_view": per_view, "mean": mean, "settings": {"implementation": "fallback"}}
+    return metrics.evaluate(volume, {v: exemplars[v] for v in views}, views=list(views))
 
 
 def structureless(exemplar: np.ndarray, size: int, rng) -> np.ndarray:
