@@ -11,7 +11,30 @@ speed-up in docs/quality.md).
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import numba
+
+
+def _default_cache_dir() -> str:
+    """Per-user folder for numba's compiled-code cache: ``$NUMBA_CACHE_DIR`` if set, else
+    ``$XDG_CACHE_HOME/npmrf3d/numba`` (``~/.cache/npmrf3d/numba``).
+
+    Never the installed package: numba's default writes ``__pycache__`` folders beside the
+    sources, and a later editable install leaves ``site-packages/npmrf3d/_kernels/__pycache__``
+    behind as a namespace package that shadows the real one (issue 13, item 0).
+    """
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return str(Path(base) / "npmrf3d" / "numba")
+
+
+# Read by numba when each decorated function is created (its cache locator), so setting it here,
+# before any kernel module decorates a function, is enough even if numba was imported earlier;
+# the environment variable carries the choice to worker processes (dask) too.
+if not os.environ.get("NUMBA_CACHE_DIR"):
+    os.environ["NUMBA_CACHE_DIR"] = _default_cache_dir()
+    numba.config.CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]
 
 JIT_OPTIONS = {"cache": True, "fastmath": False, "nogil": True}
 
