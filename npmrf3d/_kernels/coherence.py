@@ -1,0 +1,342 @@
+"""Compiled loops of the k-coherence machinery (Chen & Wang 2010; issue 11).
+
+Private: called by :mod:`npmrf3d.coherence` and :mod:`npmrf3d.baselines.chen_wang` with
+validated arrays only; nothing here raises a user-facing error. Three kernels:
+
+* :func:`candidates` (sequential, one site): the k-coherence candidate set of one site of one
+  view, in a fixed enumeration order (duplicates kept; they do not change an argmin that keeps
+  the first minimum).
+* :func:`search_view` (parallel over the slices of a batch): for every site of one view, the
+  PCA projection of its volume neighbourhood, the candidate with the smallest distance
+  multiplied by the index-histogram factor, and its IRLS weight. The index histogram is frozen
+  within a batch and updated (sequentially) between batches.
+* :func:`solve` (parallel over the voxels of a batch): the discrete solver. Every voxel takes,
+  among the texels voted by all overlapping neighbourhoods of all views, the one nearest to their
+  weighted mean (IRLS weights divided by the position-histogram factor), colour and source. The
+  position histograms are frozen within a batch and updated (sequentially) between batches.
+
+Geometry (shared with :mod:`npmrf3d.coherence`): a window of side ``w`` "at" a site ``u`` covers
+plane positions ``u - a .. u - a + w - 1`` along both plane axes (toroidal volume), with
+``a = (w - 1) // 2`` (:func:`npmrf3d.coherence.anchor`); an exemplar neighbourhood at pixel ``p``
+covers ``p - a .. p - a + w - 1`` and exists for the *valid centres*, the pixels whose window lies
+inside the exemplar. Sources and centres are flat pixel indices ``row * W + col``.
+
+Results depend only on the inputs: parallel loops write only their own site or voxel, and every
+order-dependent step (histogram updates) runs in one thread in a fixed order.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from npmrf3d._kernels._jit import jit, jit_parallel, prange
+
+
+@jit
+def candidates(src_v, ra, ca, pos0, pos1, pos2, ewidth, lo_r, hi_r, lo_c, hi_c, kcoh, out):
+    """Fill ``out`` with the candidate centres of the site ``(pos0, pos1, pos2)``; return count.
+
+    For every in-plane neighbour ``u + delta`` (``delta`` in ``{-1, 0, 1}^2``, row-major, the
+    site itself included) with source ``s``: its coherent shift ``s - delta`` clamped to the
+    valid centres ``[lo_r, hi_r] x [lo_c, hi_c]``, then that centre's k-coherence set
+    ``kcoh[shift]``. ``out`` needs ``9 * (1 + k)`` entries.
+    """
+    n0, n1, n2 = src_v.shape
+    count = 0
+    k = kcoh.shape[1]
+    for dr in range(-1, 2):
+        for dc in range(-1, 2):
+            q0 = pos0
+            q1 = pos1
+            q2 = pos2
+            if ra == 0:
+                q0 = (pos0 + dr) % n0
+            elif ra == 1:
+                q1 = (pos1 + dr) % n1
+            else:
+                q2 = (pos2 + dr) % n2
+            if ca == 0:
+                q0 = (pos0 + dc) % n0
+            elif ca == 1:
+                q1 = (pos1 + dc) % n1
+            else:
+                q2 = (pos2 + dc) % n2
+            s = src_v[q0, q1, q2]
+            sr = s // ewidth - dr
+            sc = s % ewidth - dc
+            sr = min(max(sr, lo_r), hi_r)
+            sc = min(max(sc, lo_c), hi_c)
+            centre = sr * ewidth + sc
+            out[count] = centre
+            count += 1
+            for t in range(k):
+                out[count] = kcoh[centre, t]
+                count += 1
+    return count
+
+
+@jit_parallel
+def search_view(volume, src_v, ra, ca, window, anchor, grid, ewidth, lo_r, hi_r, lo_c, hi_c,
+                mean, basis, proj, kcoh, batches, index_hist, phi, index_weight, r, floor,
+                assign_v, fresh_v, omega_v, energy):
+    """Search phase of one view (paper section 4.3 with eq. 5-6).
+
+    Parameters
+    ----------
+    volume : (N0, N1, N2, C) float32
+    src_v : (N0, N1, N2) int32, this view's source pixel of every voxel
+    ra, ca : volume axes of the exemplar row and column
+    window, anchor, grid : window side, its anchor ``a`` and the site spacing in the plane
+    ewidth : exemplar width; ``lo_r..hi_r`` x ``lo_c..hi_c`` the valid centres
+    mean : (d,) float64, basis : (d, D) float32, proj : (H * W, D) float32 (rows of valid centres)
+    kcoh : (H * W, k) int32, k-coherence sets of the valid centres
+    batches : int, the slices along the normal axis ``n`` form batches ``n % batches``
+    index_hist : (H * W,) float64, updated in place: sites currently assigned to each centre
+    phi, index_weight : the index histogram's even share and strength; the distance is
+        multiplied by ``1 + index_weight * max(0, index_hist[e] / phi - 1)``
+    r, floor : IRLS exponent and distance floor, ``omega = max(dist, floor) ** (r - 2)``
+    assign_v : (N0, N1, N2) int32, in/out: the centre matched at every site (-1 elsewhere;
+        on entry the previous assignment, whose counts ``index_hist`` holds)
+    fresh_v : (N0, N1, N2) int32, scratch for the new assignments of a batch
+    omega_v : (N0, N1, N2) float32, out: IRLS weight at every site
+    energy : (N_normal,) float64, out: ``sum dist ** r`` over the sites of each slice
+    """
+    na = 3 - ra - ca
+    shape = volume.shape
+    nn = shape[na]
+    nr = shape[ra]
+    nc = shape[ca]
+    channels = shape[3]
+    d = window * window * channels
+    dims = basis.shape[1]
+    cap = 9 * (1 + kcoh.shape[1])
+    gr = nr // grid
+    gc = nc // grid
+    for b in range(batches):
+        nb = (nn - b + batches - 1) // batches
+        for t in prange(nb):
+            n = b + t * batches
+            vec = np.empty(d, dtype=np.float64)
+            y = np.empty(dims, dtype=np.float64)
+            cand = np.empty(cap, dtype=np.int64)
+            acc = 0.0
+            for ar in range(gr):
+                u_r = ar * grid
+                for ac in range(gc):
+                    u_c = ac * grid
+                    p0 = n if na == 0 else (u_r if ra == 0 else u_c)
+                    p1 = n if na == 1 else (u_r if ra == 1 else u_c)
+                    p2 = n if na == 2 else (u_r if ra == 2 else u_c)
+                    # the neighbourhood, (row, col, channel) order
+                    m = 0
+                    for wr in range(window):
+                        x_r = (u_r - anchor + wr) % nr
+                        for wc in range(window):
+                            x_c = (u_c - anchor + wc) % nc
+                            q0 = n if na == 0 else (x_r if ra == 0 else x_c)
+                            q1 = n if na == 1 else (x_r if ra == 1 else x_c)
+                            q2 = n if na == 2 else (x_r if ra == 2 else x_c)
+                            for ch in range(channels):
+                                vec[m] = volume[q0, q1, q2, ch] - mean[m]
+                                m += 1
+                    for j in range(dims):
+                        y[j] = 0.0
+                    for m in range(d):
+                        xm = vec[m]
+                        for j in range(dims):
+                            y[j] += xm * basis[m, j]
+                    count = candidates(src_v, ra, ca, p0, p1, p2, ewidth, lo_r, hi_r, lo_c, hi_c,
+                                       kcoh, cand)
+                    best = -1
+                    best_cost = np.inf
+                    best_d2 = 0.0
+                    for t2 in range(count):
+                        e = cand[t2]
+                        d2 = 0.0
+                        for j in range(dims):
+                            diff = y[j] - proj[e, j]
+                            d2 += diff * diff
+                        excess = index_hist[e] / phi - 1.0
+                        cost = d2 * (1.0 + index_weight * excess) if excess > 0.0 else d2
+                        if cost < best_cost:
+                            best_cost = cost
+                            best = e
+                            best_d2 = d2
+                    dist = np.sqrt(best_d2)
+                    acc += dist ** r
+                    omega_v[p0, p1, p2] = max(dist, floor) ** (r - 2.0)
+                    fresh_v[p0, p1, p2] = best
+            energy[n] = acc
+        # sequential, fixed order: move the batch's sites from their old centres to the new ones
+        for t in range(nb):
+            n = b + t * batches
+            for ar in range(gr):
+                for ac in range(gc):
+                    u_r = ar * grid
+                    u_c = ac * grid
+                    p0 = n if na == 0 else (u_r if ra == 0 else u_c)
+                    p1 = n if na == 1 else (u_r if ra == 1 else u_c)
+                    p2 = n if na == 2 else (u_r if ra == 2 else u_c)
+                    old = assign_v[p0, p1, p2]
+                    if old >= 0:
+                        index_hist[old] -= 1.0
+                    new = fresh_v[p0, p1, p2]
+                    index_hist[new] += 1.0
+                    assign_v[p0, p1, p2] = new
+    return 0
+
+
+@jit
+def _votes(p0, p1, p2, assign, omega, view_axes, ex_off, ewidth, window, anchor, grid, pos_hist,
+           hist_off, theta, position_weight, out_g, out_v, out_w):
+    """Texels voted for voxel ``(p0, p1, p2)`` by every overlapping neighbourhood of every view.
+
+    A neighbourhood at site ``u`` matched with centre ``e`` votes for the texel ``e + (x - u)``
+    (plane offsets) with weight ``omega[u] / (1 + position_weight * max(0, H(texel) / theta - 1))``
+    (paper eq. 4 with a strength). Votes are enumerated view by view, then by row offset
+    ``x_r - u_r`` from ``-anchor`` to ``window - 1 - anchor``, then by column offset; texels are
+    written as packed rows ``ex_off[v] + local``. Returns the number of votes.
+    """
+    shape = assign.shape
+    count = 0
+    for v in range(assign.shape[0]):
+        ra = view_axes[v, 0]
+        ca = view_axes[v, 1]
+        nr = shape[1 + ra]
+        nc = shape[1 + ca]
+        xr = p0 if ra == 0 else (p1 if ra == 1 else p2)
+        xc = p0 if ca == 0 else (p1 if ca == 1 else p2)
+        w = ewidth[v]
+        for orow in range(-anchor, window - anchor):
+            u_r = (xr - orow) % nr
+            if u_r % grid:
+                continue
+            for ocol in range(-anchor, window - anchor):
+                u_c = (xc - ocol) % nc
+                if u_c % grid:
+                    continue
+                q0 = p0
+                q1 = p1
+                q2 = p2
+                if ra == 0:
+                    q0 = u_r
+                elif ra == 1:
+                    q1 = u_r
+                else:
+                    q2 = u_r
+                if ca == 0:
+                    q0 = u_c
+                elif ca == 1:
+                    q1 = u_c
+                else:
+                    q2 = u_c
+                e = assign[v, q0, q1, q2]
+                if e < 0:
+                    continue
+                local = (e // w + orow) * w + (e % w + ocol)
+                excess = pos_hist[hist_off[v] + local] / theta[v] - 1.0
+                weight = omega[v, q0, q1, q2]
+                if excess > 0.0:
+                    weight = weight / (1.0 + position_weight * excess)
+                out_g[count] = ex_off[v] + local
+                out_v[count] = v
+                out_w[count] = weight
+                count += 1
+    return count
+
+
+@jit_parallel
+def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window, anchor, grid,
+          order, batch_bounds, pos_hist, hist_off, theta, position_weight, chunk):
+    """Discrete solver (paper section 4.2 with eq. 4), one pass over all voxels.
+
+    Voxels are visited in ``order`` (flat indices), cut into batches at ``batch_bounds``. Within a
+    batch every voxel (in parallel) gathers its votes (:func:`_votes`), computes their weighted
+    mean colour and copies the voted texel nearest to it (first one on ties): ``volume`` gets its
+    colour, and each view's source becomes that view's voted texel nearest to the copied colour
+    (the copied texel itself for its own view). After the batch, in one thread, the position
+    histograms ``pos_hist`` (packed per view at ``hist_off``, counts of voxels per source pixel)
+    move from the old sources to the new ones. Returns the number of voxels whose colour changed.
+    """
+    n_views = assign.shape[0]
+    n0, n1, n2, channels = volume.shape
+    cap = n_views * window * window
+    changed = 0
+    for b in range(batch_bounds.shape[0] - 1):
+        start = batch_bounds[b]
+        m = batch_bounds[b + 1] - start
+        new_src = np.empty((m, n_views), dtype=np.int32)
+        flags = np.zeros(m, dtype=np.int64)
+        n_chunks = (m + chunk - 1) // chunk
+        for c in prange(n_chunks):
+            vg = np.empty(cap, dtype=np.int64)
+            vv = np.empty(cap, dtype=np.int64)
+            vw = np.empty(cap, dtype=np.float64)
+            mean = np.empty(channels, dtype=np.float64)
+            for t in range(c * chunk, min(m, (c + 1) * chunk)):
+                flat = order[start + t]
+                p0 = flat // (n1 * n2)
+                p1 = (flat // n2) % n1
+                p2 = flat % n2
+                count = _votes(p0, p1, p2, assign, omega, view_axes, ex_off, ewidth, window,
+                               anchor, grid, pos_hist, hist_off, theta, position_weight, vg, vv, vw)
+                for v in range(n_views):
+                    new_src[t, v] = src[v, p0, p1, p2]
+                if count == 0:
+                    continue
+                total = 0.0
+                for ch in range(channels):
+                    mean[ch] = 0.0
+                for q in range(count):
+                    total += vw[q]
+                    for ch in range(channels):
+                        mean[ch] += vw[q] * ex_flat[vg[q], ch]
+                for ch in range(channels):
+                    mean[ch] /= total
+                best = 0
+                best_d = np.inf
+                for q in range(count):
+                    dd = 0.0
+                    for ch in range(channels):
+                        diff = ex_flat[vg[q], ch] - mean[ch]
+                        dd += diff * diff
+                    if dd < best_d:
+                        best_d = dd
+                        best = q
+                g = vg[best]
+                for ch in range(channels):
+                    if volume[p0, p1, p2, ch] != ex_flat[g, ch]:
+                        flags[t] = 1
+                    volume[p0, p1, p2, ch] = ex_flat[g, ch]
+                for v in range(n_views):
+                    if v == vv[best]:
+                        new_src[t, v] = g - ex_off[v]
+                        continue
+                    near = -1
+                    near_d = np.inf
+                    for q in range(count):
+                        if vv[q] != v:
+                            continue
+                        dd = 0.0
+                        for ch in range(channels):
+                            diff = ex_flat[vg[q], ch] - ex_flat[g, ch]
+                            dd += diff * diff
+                        if dd < near_d:
+                            near_d = dd
+                            near = q
+                    if near >= 0:
+                        new_src[t, v] = vg[near] - ex_off[v]
+        # sequential, fixed order: histograms follow the new sources
+        for t in range(m):
+            flat = order[start + t]
+            p0 = flat // (n1 * n2)
+            p1 = (flat // n2) % n1
+            p2 = flat % n2
+            changed += flags[t]
+            for v in range(n_views):
+                old = src[v, p0, p1, p2]
+                new = new_src[t, v]
+                pos_hist[hist_off[v] + old] -= 1.0
+                pos_hist[hist_off[v] + new] += 1.0
+                src[v, p0, p1, p2] = new
+    return changed

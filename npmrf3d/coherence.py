@@ -1,0 +1,320 @@
+"""k-coherence machinery: per-level exemplar models, source maps and histograms (issue 11).
+
+The model layer of Chen & Wang 2010 ("High quality solid texture synthesis using position and
+index histogram matching"), kept apart from the method so that other samplers can reuse it:
+
+* :func:`build_level_model` -- one exemplar at one level: its neighbourhoods (one per *valid
+  centre*, the pixels whose window lies inside the exemplar), their PCA projection to about 20
+  dimensions, and each valid centre's **k-coherence set** (its ``k`` most similar valid centres
+  in the PCA space, ``scipy.spatial.cKDTree``).
+* **source maps** -- for every voxel and view the exemplar pixel it was copied from (flat index
+  ``row * W + col``): :func:`random_sources`, :func:`upsample_sources` (``2 * parent + offset``).
+* **candidate sets** -- :func:`candidate_set`, the union over a site's 3 x 3 in-plane neighbours
+  of their coherent shifts and the shifts' k-coherence sets.
+* **position / index histograms** -- :func:`position_histogram`, :func:`histogram_factor`
+  (``1 + strength * max(0, H / even - 1)``, the paper's eq. 4 and 6 in units of the even share).
+
+Window geometry: a window of side ``w`` (odd or even) at site/pixel ``u`` covers
+``u - a .. u - a + w - 1`` along both plane axes, ``a = (w - 1) // 2`` (:func:`anchor`); the
+volume is toroidal, the exemplar is not. Views and axes as in :mod:`npmrf3d.neighborhood`.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+from scipy.spatial import cKDTree
+
+from ._kernels import coherence as _k
+from .neighborhood import VIEW_AXES
+
+__all__ = [
+    "LevelModel",
+    "anchor",
+    "build_level_model",
+    "candidate_set",
+    "downsample_exemplar",
+    "histogram_factor",
+    "k_coherence_sets",
+    "pca_project",
+    "position_histogram",
+    "random_sources",
+    "upsample_sources",
+    "valid_centres",
+]
+
+
+class LevelModel(NamedTuple):
+    """One exemplar at one pyramid level, ready for the kernels.
+
+    Attributes
+    ----------
+    exemplar : (H, W, C) float32 ndarray
+    window, anchor : int
+        Window side and anchor ``a`` (window of pixel ``p`` covers ``p - a .. p - a + w - 1``).
+    bounds : (lo_r, hi_r, lo_c, hi_c)
+        The valid centres are rows ``lo_r..hi_r`` and columns ``lo_c..hi_c`` (inclusive).
+    mean : (d,) float64 ndarray
+        Mean neighbourhood, ``d = window**2 * C`` in (row, column, channel) order.
+    basis : (d, D) float32 ndarray
+        Orthonormal principal directions (``D <= dims``).
+    proj : (H * W, D) float32 ndarray
+        Projection of the neighbourhood of every valid centre (rows of other pixels are 0).
+    kcoh : (H * W, k) int32 ndarray
+        k-coherence set of every valid centre, most similar first (rows of other pixels -1).
+    """
+
+    exemplar: np.ndarray
+    window: int
+    anchor: int
+    bounds: tuple[int, int, int, int]
+    mean: np.ndarray
+    basis: np.ndarray
+    proj: np.ndarray
+    kcoh: np.ndarray
+
+    @property
+    def pixels(self) -> int:
+        return self.exemplar.shape[0] * self.exemplar.shape[1]
+
+    @property
+    def centres(self) -> int:
+        lo_r, hi_r, lo_c, hi_c = self.bounds
+        return (hi_r - lo_r + 1) * (hi_c - lo_c + 1)
+
+
+def anchor(window: int) -> int:
+    """Offset of a window's reference pixel from its top-left corner: ``(window - 1) // 2``.
+
+    >>> anchor(8), anchor(7)
+    (3, 3)
+    """
+    return (int(window) - 1) // 2
+
+
+def downsample_exemplar(exemplar: np.ndarray, level: int) -> np.ndarray:
+    """Box average over ``2^level x 2^level`` blocks, ``(H // 2^level, W // 2^level, C)`` float32.
+
+    Pixel ``(r, c)`` of level ``l`` averages pixels ``2r..2r+1, 2c..2c+1`` of level ``l - 1``,
+    which is what makes ``2 * parent + offset`` the right source up-sampling.
+
+    >>> downsample_exemplar(np.arange(16, dtype=np.float32).reshape(4, 4, 1), 1)[..., 0]
+    array([[ 2.5,  4.5],
+           [10.5, 12.5]], dtype=float32)
+    """
+    f = 2 ** level
+    if f == 1:
+        return np.ascontiguousarray(exemplar, dtype=np.float32)
+    h, w, c = exemplar.shape[0] // f, exemplar.shape[1] // f, exemplar.shape[2]
+    blocks = exemplar[: h * f, : w * f].astype(np.float64).reshape(h, f, w, f, c)
+    return np.ascontiguousarray(blocks.mean(axis=(1, 3)), dtype=np.float32)
+
+
+def valid_centres(shape: tuple[int, ...], window: int) -> tuple[int, int, int, int]:
+    """``(lo_r, hi_r, lo_c, hi_c)``: the pixels whose window lies inside an ``H x W`` exemplar.
+
+    >>> valid_centres((10, 12), 4)
+    (1, 7, 1, 9)
+    """
+    a = anchor(window)
+    return a, shape[0] - window + a, a, shape[1] - window + a
+
+
+def centre_patches(exemplar: np.ndarray, window: int) -> np.ndarray:
+    """Neighbourhoods of the valid centres, ``(n, window**2 * C)`` float32, row-major over centres,
+    each flattened in (row, column, channel) order."""
+    view = sliding_window_view(exemplar, (window, window), axis=(0, 1))  # (H', W', C, w, w)
+    view = view.transpose(0, 1, 3, 4, 2)
+    return np.ascontiguousarray(view, dtype=np.float32).reshape(-1, window * window * exemplar.shape[2])
+
+
+def pca_project(patches: np.ndarray, dims: int = 20) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Project the rows of ``patches`` on their ``dims`` leading principal directions.
+
+    Returns
+    -------
+    mean : (d,) float64 ndarray
+    basis : (d, D) float32 ndarray, ``D = min(dims, d)``, orthonormal columns (eigenvectors of the
+        scatter matrix, largest eigenvalue first; signs as returned by ``numpy.linalg.eigh``)
+    projected : (n, D) float32 ndarray, ``(patches - mean) @ basis``
+
+    Examples
+    --------
+    >>> x = np.random.default_rng(0).normal(size=(200, 5))
+    >>> [a.shape for a in pca_project(x, 3)]
+    [(5,), (5, 3), (200, 3)]
+    """
+    x = patches.astype(np.float64)
+    mean = x.mean(axis=0)
+    x = x - mean
+    _, vecs = np.linalg.eigh(x.T @ x)
+    take = min(int(dims), x.shape[1])
+    basis = np.ascontiguousarray(vecs[:, ::-1][:, :take], dtype=np.float32)
+    return mean, basis, np.ascontiguousarray(x @ basis.astype(np.float64), dtype=np.float32)
+
+
+def k_coherence_sets(points: np.ndarray, k: int = 5, *, exclude: float = 0.0,
+                     coords: np.ndarray | None = None) -> np.ndarray:
+    """Indices of the ``k`` nearest other points of every point (``scipy.spatial.cKDTree``).
+
+    Parameters
+    ----------
+    points : (n, D) ndarray
+    k : int
+        Set size; requires more than ``k`` eligible points.
+    exclude : float
+        If > 0, points whose ``coords`` lie within this Chebyshev distance of the query point
+        (its own shifted copies) are skipped, so the sets point to other places of the exemplar.
+    coords : (n, 2) ndarray, optional
+        Pixel coordinates of the points (needed with ``exclude``).
+
+    Returns
+    -------
+    (n, k) int64 ndarray, nearest first; a point is never in its own set. Ties are broken as
+    ``cKDTree.query`` breaks them (exact Euclidean distances).
+    """
+    tree = cKDTree(np.asarray(points, dtype=np.float64))
+    n = len(points)
+    want = min(n, k + 1 if exclude <= 0 else max(4 * k, k + 1 + int((2 * exclude + 1) ** 2)))
+    out = np.empty((n, k), dtype=np.int64)
+    todo = np.arange(n)
+    while todo.size:
+        _, idx = tree.query(points[todo], k=want)
+        idx = np.asarray(idx, dtype=np.int64).reshape(len(todo), want)
+        ok = idx != todo[:, None]
+        if exclude > 0:
+            cheb = np.abs(coords[idx] - coords[todo][:, None, :]).max(axis=2)
+            ok &= cheb > exclude
+        enough = ok.sum(axis=1) >= k
+        if want >= n:
+            enough[:] = True
+        for row in np.flatnonzero(enough):
+            sel = idx[row][ok[row]][:k]
+            if sel.size < k:  # fewer eligible points than k: repeat the last one
+                sel = np.concatenate([sel, np.repeat(sel[-1:] if sel.size else todo[row:row + 1], k - sel.size)])
+            out[todo[row]] = sel
+        todo = todo[~enough]
+        want = min(n, 2 * want)
+    return out
+
+
+def build_level_model(exemplar: np.ndarray, window: int, *, dims: int = 20, k: int = 5,
+                      exclude: float = 0.0) -> LevelModel:
+    """PCA-reduced neighbourhoods and k-coherence sets of one exemplar at one level.
+
+    Parameters
+    ----------
+    exemplar : (H, W, C) float32 ndarray, at least ``window`` pixels per side
+    window : int >= 2
+    dims : int
+        PCA dimensions kept (the paper: about 20; fewer if ``window**2 * C`` is smaller).
+    k : int
+        Size of the k-coherence sets (the paper: 5).
+    exclude : float
+        See :func:`k_coherence_sets` (0 = plain k nearest other centres).
+
+    Returns
+    -------
+    LevelModel
+    """
+    exemplar = np.ascontiguousarray(exemplar, dtype=np.float32)
+    h, w = exemplar.shape[:2]
+    bounds = valid_centres(exemplar.shape, window)
+    lo_r, hi_r, lo_c, hi_c = bounds
+    patches = centre_patches(exemplar, window)
+    mean, basis, projected = pca_project(patches, dims)
+    rows, cols = np.meshgrid(np.arange(lo_r, hi_r + 1), np.arange(lo_c, hi_c + 1), indexing="ij")
+    flat = (rows * w + cols).ravel()
+    k_eff = min(k, len(flat) - 1) if len(flat) > 1 else 0
+    proj = np.zeros((h * w, basis.shape[1]), dtype=np.float32)
+    proj[flat] = projected
+    kcoh = np.full((h * w, k), -1, dtype=np.int32)
+    if k_eff > 0:
+        sets = k_coherence_sets(projected, k_eff, exclude=exclude,
+                                coords=np.stack([rows.ravel(), cols.ravel()], axis=1))
+        sets = flat[sets]
+        if k_eff < k:
+            sets = np.concatenate([sets, np.repeat(sets[:, -1:], k - k_eff, axis=1)], axis=1)
+        kcoh[flat] = sets
+    else:
+        kcoh[flat] = flat[:, None]
+    return LevelModel(exemplar, int(window), anchor(window), bounds, mean, basis, proj, kcoh)
+
+
+# --------------------------------------------------------------------------- source maps
+
+
+def random_sources(shape: tuple[int, int, int], exemplar_shape: tuple[int, ...],
+                   rng: np.random.Generator) -> np.ndarray:
+    """Uniformly random source pixels, ``shape`` int32 flat indices into an ``H x W`` exemplar."""
+    return rng.integers(0, exemplar_shape[0] * exemplar_shape[1], size=shape).astype(np.int32)
+
+
+def upsample_sources(src: np.ndarray, view: str, coarse_width: int, fine_shape: tuple[int, ...]) -> np.ndarray:
+    """Source map of the next finer level: child ``2 * x + o`` gets source ``2 * parent + offset``.
+
+    Parameters
+    ----------
+    src : (N1, N2, N3) int32, flat sources into the coarse exemplar (width ``coarse_width``)
+    view : the view whose plane axes ``(ra, ca)`` carry the offset
+    fine_shape : (H, W, ...) of the finer exemplar
+
+    Returns
+    -------
+    (2 N1, 2 N2, 2 N3) int32: for child offset ``o`` (in ``{0, 1}^3``), source row
+    ``2 * parent_row + o[ra]`` and column ``2 * parent_col + o[ca]``, clipped into the finer
+    exemplar (only needed when its side is odd... never for box-averaged levels).
+    """
+    ra, ca = VIEW_AXES[view]
+    sr = (src // coarse_width).astype(np.int64)
+    sc = (src % coarse_width).astype(np.int64)
+    shape = tuple(2 * n for n in src.shape)
+    out = np.empty(shape, dtype=np.int32)
+    for o in np.ndindex(2, 2, 2):
+        r = np.minimum(2 * sr + o[ra], fine_shape[0] - 1)
+        c = np.minimum(2 * sc + o[ca], fine_shape[1] - 1)
+        out[o[0]::2, o[1]::2, o[2]::2] = r * fine_shape[1] + c
+    return out
+
+
+def candidate_set(src_v: np.ndarray, view: str, site: tuple[int, int, int], model: LevelModel) -> np.ndarray:
+    """The k-coherence candidate set of one site of one view (sorted, distinct).
+
+    Union over the in-plane neighbours ``u + delta`` (``delta`` in ``{-1, 0, 1}^2``, the site
+    included) of the coherent shift ``source(u + delta) - delta`` (clamped to the valid centres)
+    and its k-coherence set. The compiled search enumerates the same list (with repeats).
+
+    Returns
+    -------
+    (m,) int64 ndarray of flat exemplar indices
+    """
+    ra, ca = VIEW_AXES[view]
+    out = np.empty(9 * (1 + model.kcoh.shape[1]), dtype=np.int64)
+    lo_r, hi_r, lo_c, hi_c = model.bounds
+    count = _k.candidates(np.ascontiguousarray(src_v, dtype=np.int32), ra, ca, *map(int, site),
+                          model.exemplar.shape[1], lo_r, hi_r, lo_c, hi_c, model.kcoh, out)
+    return np.unique(out[:count])
+
+
+# --------------------------------------------------------------------------- histograms
+
+
+def position_histogram(src_v: np.ndarray, pixels: int) -> np.ndarray:
+    """How many voxels copy each exemplar pixel: ``(pixels,)`` float64 counts of ``src_v``."""
+    return np.bincount(np.asarray(src_v).ravel(), minlength=pixels).astype(np.float64)
+
+
+def histogram_factor(counts: np.ndarray, even: float, strength: float = 1.0) -> np.ndarray:
+    """The histogram re-weighting factor ``1 + strength * max(0, counts / even - 1)``.
+
+    ``even`` is the count every bin would have if all were used equally (the paper's theta for
+    positions, phi for indices). The paper divides IRLS weights by this factor (eq. 4, position
+    histogram) and multiplies search distances by it (eq. 6, index histogram); it writes the
+    excess in counts, ``1 + max(0, H - theta)``, which is ``strength = even`` here.
+
+    >>> histogram_factor(np.array([0.0, 2.0, 6.0]), 2.0).tolist()
+    [1.0, 1.0, 3.0]
+    """
+    return 1.0 + strength * np.maximum(0.0, np.asarray(counts, dtype=np.float64) / even - 1.0)
