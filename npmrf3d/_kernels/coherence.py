@@ -247,12 +247,14 @@ def _votes(p0, p1, p2, assign, omega, view_axes, ex_off, ewidth, window, anchor,
 
 @jit_parallel
 def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window, anchor, grid,
-          order, batch_bounds, pos_hist, hist_off, theta, position_weight, chunk):
+          order, batch_bounds, pos_hist, hist_off, theta, position_weight, medoid, balance, r, chunk):
     """Discrete solver (paper section 4.2 with eq. 4), one pass over all voxels.
 
     Voxels are visited in ``order`` (flat indices), cut into batches at ``batch_bounds``. Within a
     batch every voxel (in parallel) gathers its votes (:func:`_votes`), computes their weighted
-    mean colour and copies the voted texel nearest to it (first one on ties): ``volume`` gets its
+    mean colour and copies the voted texel nearest to it (first one on ties) -- or, with
+    ``medoid > 0``, among the ``medoid`` heaviest votes (repeated votes merged first), the texel
+    ``p`` minimising ``sum_q w_q ||e_p - e_q||^r`` over all votes: ``volume`` gets its
     colour, and each view's source becomes that view's voted texel nearest to the copied colour
     (the copied texel itself for its own view). After the batch, in one thread, the position
     histograms ``pos_hist`` (packed per view at ``hist_off``, counts of voxels per source pixel)
@@ -273,6 +275,7 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
             vv = np.empty(cap, dtype=np.int64)
             vw = np.empty(cap, dtype=np.float64)
             mean = np.empty(channels, dtype=np.float64)
+            vsum = np.empty(n_views, dtype=np.float64)
             for t in range(c * chunk, min(m, (c + 1) * chunk)):
                 flat = order[start + t]
                 p0 = flat // (n1 * n2)
@@ -284,25 +287,81 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
                     new_src[t, v] = src[v, p0, p1, p2]
                 if count == 0:
                     continue
-                total = 0.0
-                for ch in range(channels):
-                    mean[ch] = 0.0
-                for q in range(count):
-                    total += vw[q]
-                    for ch in range(channels):
-                        mean[ch] += vw[q] * ex_flat[vg[q], ch]
-                for ch in range(channels):
-                    mean[ch] /= total
+                if balance:
+                    # every view gets the same total say: its votes' weights sum to 1
+                    for v in range(n_views):
+                        vsum[v] = 0.0
+                    for q in range(count):
+                        vsum[vv[q]] += vw[q]
+                    for q in range(count):
+                        vw[q] /= vsum[vv[q]]
                 best = 0
-                best_d = np.inf
-                for q in range(count):
-                    dd = 0.0
+                if medoid:
+                    # merge repeated (texel, view) votes, then the weighted robust medoid
+                    distinct = 0
+                    for q in range(count):
+                        seen = -1
+                        for q2 in range(distinct):
+                            if vg[q2] == vg[q] and vv[q2] == vv[q]:
+                                seen = q2
+                                break
+                        if seen >= 0:
+                            vw[seen] += vw[q]
+                        else:
+                            vg[distinct] = vg[q]
+                            vv[distinct] = vv[q]
+                            vw[distinct] = vw[q]
+                            distinct += 1
+                    count = distinct
+                    # candidates: the `medoid` heaviest merged votes (selection, ties: first)
+                    n_try = min(medoid, count)
+                    for a in range(n_try):
+                        top = a
+                        for q in range(a + 1, count):
+                            if vw[q] > vw[top]:
+                                top = q
+                        if top != a:
+                            tg = vg[a]
+                            vg[a] = vg[top]
+                            vg[top] = tg
+                            tv = vv[a]
+                            vv[a] = vv[top]
+                            vv[top] = tv
+                            tw = vw[a]
+                            vw[a] = vw[top]
+                            vw[top] = tw
+                    best_e = np.inf
+                    for q in range(n_try):
+                        e_sum = 0.0
+                        for q2 in range(count):
+                            dd = 0.0
+                            for ch in range(channels):
+                                diff = ex_flat[vg[q], ch] - ex_flat[vg[q2], ch]
+                                dd += diff * diff
+                            if dd > 0.0:
+                                e_sum += vw[q2] * dd ** (0.5 * r)
+                        if e_sum < best_e:
+                            best_e = e_sum
+                            best = q
+                else:
+                    total = 0.0
                     for ch in range(channels):
-                        diff = ex_flat[vg[q], ch] - mean[ch]
-                        dd += diff * diff
-                    if dd < best_d:
-                        best_d = dd
-                        best = q
+                        mean[ch] = 0.0
+                    for q in range(count):
+                        total += vw[q]
+                        for ch in range(channels):
+                            mean[ch] += vw[q] * ex_flat[vg[q], ch]
+                    for ch in range(channels):
+                        mean[ch] /= total
+                    best_d = np.inf
+                    for q in range(count):
+                        dd = 0.0
+                        for ch in range(channels):
+                            diff = ex_flat[vg[q], ch] - mean[ch]
+                            dd += diff * diff
+                        if dd < best_d:
+                            best_d = dd
+                            best = q
                 g = vg[best]
                 for ch in range(channels):
                     if volume[p0, p1, p2, ch] != ex_flat[g, ch]:

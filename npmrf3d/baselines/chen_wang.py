@@ -68,7 +68,12 @@ __all__ = ["ChenWangConfig", "chen_wang_synthesize", "make_chen_wang_config", "r
 
 ProgressCallback = Callable[[int, int, int, float], None]
 
-_SOLVE_CHUNK = 512  # voxels per parallel work item of the solver (any value gives the same result)
+#: How a voxel picks among its voted texels: ``mean`` = nearest to their weighted mean (the
+#: paper's practice), ``medoid`` = the weighted robust medoid (``sum_q w_q ||e_p - e_q||^r``).
+SOLVERS = ("mean", "medoid")
+_SOLVE_CHUNK = 512
+#: The medoid solver tries the heaviest (merged) votes only; the energy sums over all votes.
+_MEDOID_CANDIDATES = 8  # voxels per parallel work item of the solver (any value gives the same result)
 
 
 @dataclass(frozen=True)
@@ -88,6 +93,8 @@ class ChenWangConfig:
     position_weight: float = 1.0
     coherence_exclude: float = 0.0
     batches: int = 8
+    solver: str = "mean"
+    balance_views: bool = False
     seed: int | None = None
 
     def to_dict(self) -> dict:
@@ -116,7 +123,8 @@ def make_chen_wang_config(
     iterations=DEFAULTS.iterations, k=DEFAULTS.k, pca_dims=DEFAULTS.pca_dims, r=DEFAULTS.r,
     grid=DEFAULTS.grid, index_weight=DEFAULTS.index_weight,
     position_weight=DEFAULTS.position_weight, coherence_exclude=DEFAULTS.coherence_exclude,
-    batches=DEFAULTS.batches, seed=None,
+    batches=DEFAULTS.batches, solver=DEFAULTS.solver, balance_views=DEFAULTS.balance_views,
+    seed=None,
 ) -> ChenWangConfig:
     """Validate plain keyword arguments into a frozen :class:`ChenWangConfig`.
 
@@ -150,13 +158,15 @@ def make_chen_wang_config(
     position_weight = check.real("position_weight", position_weight, low=0.0)
     coherence_exclude = check.real("coherence_exclude", coherence_exclude, low=0.0)
     batches = check.integer("batches", batches, low=1, high=1024)
+    solver = check.choice("solver", solver, SOLVERS)
     views = check.views(views, VIEWS)
     if seed is not None:
         seed = check.integer("seed", seed, low=0)
     return ChenWangConfig(size=dims, window=window, levels=levels, views=views,
                           iterations=iterations, k=k, pca_dims=pca_dims, r=r, grid=grid,
                           index_weight=index_weight, position_weight=position_weight,
-                          coherence_exclude=coherence_exclude, batches=batches, seed=seed)
+                          coherence_exclude=coherence_exclude, batches=batches, solver=solver,
+                          balance_views=bool(balance_views), seed=seed)
 
 
 def _check_exemplar_levels(config: ChenWangConfig, per_view: Mapping[str, np.ndarray]) -> None:
@@ -181,7 +191,7 @@ def chen_wang_synthesize(
     grid: int = DEFAULTS.grid, index_weight: float = DEFAULTS.index_weight,
     position_weight: float = DEFAULTS.position_weight,
     coherence_exclude: float = DEFAULTS.coherence_exclude, batches: int = DEFAULTS.batches,
-    rng=None, progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
+    solver: str = DEFAULTS.solver, balance_views: bool = DEFAULTS.balance_views, rng=None, progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
 ) -> SynthesisResult:
     """Synthesize a solid texture with Chen & Wang's method (2010; issue 11).
 
@@ -219,6 +229,14 @@ def chen_wang_synthesize(
     batches : int
         Histogram updates per pass (search: interleaved slice groups; solver: parts of a random
         voxel order). More batches track the histograms more closely, fewer run more in parallel.
+    solver : {"mean", "medoid"}
+        How a voxel picks among its voted texels: the one nearest to their weighted mean (the
+        paper's practice, section 4.2), or the weighted robust medoid: among the 8 heaviest
+        votes (repeated votes merged), the texel ``p`` minimising ``sum_q w_q ||e_p - e_q||^r``
+        over all votes (mode-seeking: keeps the exemplar's contrast).
+    balance_views : bool
+        Scale each view's votes of a voxel to the same total weight, so no view's (coherent,
+        heavily weighted) neighbourhoods outvote the others (the paper: off).
     rng : None, int or numpy Generator
         Seed; the result depends on it only (not on the number of threads).
     progress : callable, optional
@@ -254,7 +272,7 @@ def chen_wang_synthesize(
         size=size, window=window, levels=levels, views=views, iterations=iterations, k=k,
         pca_dims=pca_dims, r=r, grid=grid, index_weight=index_weight,
         position_weight=position_weight, coherence_exclude=coherence_exclude, batches=batches,
-        seed=seed)
+        solver=solver, balance_views=balance_views, seed=seed)
     generator = check.rng(rng)
     fit = types.SimpleNamespace(window=config.window[0], levels=config.levels, toroidal_exemplar=False)
     per_view = resolve_exemplars(exemplar, exemplars, config.views, fit)
@@ -314,8 +332,7 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
         else:
             src = np.stack([coh.upsample_sources(src[vi], v, prev_widths[vi], vmodels[vi].exemplar.shape)
                             for vi, v in enumerate(views)])
-        first = vmodels[0].exemplar.reshape(-1, channels)
-        volume = np.ascontiguousarray(first[src[0]], dtype=np.float32)
+        volume = initial_colours(src, [m.exemplar for m in vmodels])
         ex_flat, ex_off, hist_off = _pack(vmodels)
         ewidth = np.array(widths, dtype=np.int64)
         pos_hist = np.concatenate([coh.position_histogram(src[vi], m.pixels) for vi, m in enumerate(vmodels)])
@@ -358,7 +375,10 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
             order = rng.permutation(n_vox).astype(np.int64)
             changed.append(int(_k.solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth,
                                         window, vmodels[0].anchor, config.grid, order, bounds, pos_hist,
-                                        hist_off, theta, config.position_weight, _SOLVE_CHUNK)))
+                                        hist_off, theta, config.position_weight,
+                                        _MEDOID_CANDIDATES if config.solver == "medoid" else 0,
+                                        config.balance_views, config.r,
+                                        _SOLVE_CHUNK)))
             t_solve += time.perf_counter() - ts
             level_history.append(energy_sum / max(1, sites))
             if progress is not None:
@@ -380,6 +400,32 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
     timings["total"] = time.perf_counter() - t_start
     return SynthesisResult(volume=volume, history=history, config=config, timings=timings,
                            labels=labels, stats=stats)
+
+
+def initial_colours(src: np.ndarray, exemplars) -> np.ndarray:
+    """Colour of every voxel from its sources: among the views' source texels, the one nearest to
+    their mean (the views' first on ties).
+
+    One view's up-sampled sources repeat along that view's normal axis (``2 * parent + offset``
+    has no offset there), so copying one view's texels would duplicate slices in pairs; taking
+    the most central of the views' texels keeps the colours exemplar colours without that.
+
+    Parameters
+    ----------
+    src : (V, N1, N2, N3) int32 flat sources per view
+    exemplars : V arrays (H, W, C)
+
+    Returns
+    -------
+    (N1, N2, N3, C) float32
+    """
+    texels = np.stack([ex.reshape(-1, ex.shape[2])[s] for ex, s in zip(exemplars, src)])  # (V, ..., C)
+    if len(texels) == 1:
+        return np.ascontiguousarray(texels[0], dtype=np.float32)
+    centre = texels.astype(np.float64).mean(axis=0)
+    dist = ((texels - centre) ** 2).sum(axis=-1)
+    pick = np.argmin(dist, axis=0)
+    return np.ascontiguousarray(np.take_along_axis(texels, pick[None, ..., None], axis=0)[0], dtype=np.float32)
 
 
 def _pack(models):
