@@ -276,6 +276,8 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
             vw = np.empty(cap, dtype=np.float64)
             mean = np.empty(channels, dtype=np.float64)
             vsum = np.empty(n_views, dtype=np.float64)
+            taken = np.zeros(cap, dtype=np.bool_)
+            tops = np.empty(max(medoid, 1), dtype=np.int64)
             for t in range(c * chunk, min(m, (c + 1) * chunk)):
                 flat = order[start + t]
                 p0 = flat // (n1 * n2)
@@ -313,25 +315,20 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
                             vw[distinct] = vw[q]
                             distinct += 1
                     count = distinct
-                    # candidates: the `medoid` heaviest merged votes (selection, ties: first)
+                    # candidates: the `medoid` heaviest merged votes (ties: the earlier vote)
                     n_try = min(medoid, count)
+                    for q in range(count):
+                        taken[q] = False
                     for a in range(n_try):
-                        top = a
-                        for q in range(a + 1, count):
-                            if vw[q] > vw[top]:
+                        top = -1
+                        for q in range(count):
+                            if not taken[q] and (top < 0 or vw[q] > vw[top]):
                                 top = q
-                        if top != a:
-                            tg = vg[a]
-                            vg[a] = vg[top]
-                            vg[top] = tg
-                            tv = vv[a]
-                            vv[a] = vv[top]
-                            vv[top] = tv
-                            tw = vw[a]
-                            vw[a] = vw[top]
-                            vw[top] = tw
+                        taken[top] = True
+                        tops[a] = top
                     best_e = np.inf
-                    for q in range(n_try):
+                    for a in range(n_try):
+                        q = tops[a]
                         e_sum = 0.0
                         for q2 in range(count):
                             dd = 0.0

@@ -1,0 +1,404 @@
+"""Chen & Wang 2010 (npmrf3d.coherence, npmrf3d.baselines.chen_wang) against literal twins.
+
+Kernels against ``tests/naive_coherence.py``; k-coherence sets against brute force; the candidate
+set of a site against its definition; discrete copies only; the position histogram spreading a
+skewed usage; thread-count independence; a periodic exemplar; user errors; checkpoints.
+Everything is tiny (exemplars up to 32x32, volumes 8^3 to 16^3).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+import pytest
+
+from npmrf3d import coherence as coh
+from npmrf3d._kernels import coherence as _k
+from npmrf3d.baselines import ChenWangConfig, chen_wang_synthesize
+from npmrf3d.baselines import chen_wang as CW
+from npmrf3d.config import SynthesisResult
+from npmrf3d.errors import ParameterError
+from npmrf3d.neighborhood import VIEW_AXES
+
+from tests.naive_coherence import (
+    naive_candidates,
+    naive_exemplar_patch,
+    naive_k_coherence,
+    naive_search_view,
+    naive_solve,
+    naive_upsample_sources,
+    naive_volume_patch,
+)
+
+VIEWS3 = ("front", "right", "top")
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(1234)
+
+
+def random_exemplar(rng, h=20, w=18, c=1):
+    return rng.random((h, w, c)).astype(np.float32)
+
+
+# --------------------------------------------------------------------------- model layer
+
+
+@pytest.mark.parametrize("window", [3, 4])
+@pytest.mark.parametrize("channels", [1, 3])
+def test_level_model_projects_the_valid_centres(rng, window, channels):
+    ex = random_exemplar(rng, c=channels)
+    m = coh.build_level_model(ex, window, dims=6, k=3)
+    lo_r, hi_r, lo_c, hi_c = m.bounds
+    assert (lo_r, lo_c) == (coh.anchor(window),) * 2
+    assert hi_r == ex.shape[0] - window + coh.anchor(window)
+    assert m.basis.shape == (window * window * channels, 6)
+    np.testing.assert_allclose(m.basis.T.astype(np.float64) @ m.basis, np.eye(6), atol=1e-5)
+    for r, c in [(lo_r, lo_c), (hi_r, hi_c), (lo_r + 1, hi_c - 1)]:
+        patch = naive_exemplar_patch(ex, r, c, window)
+        want = (patch - m.mean) @ m.basis.astype(np.float64)
+        np.testing.assert_allclose(m.proj[r * ex.shape[1] + c], want, atol=1e-4)
+    invalid = np.ones((ex.shape[0], ex.shape[1]), bool)
+    invalid[lo_r:hi_r + 1, lo_c:hi_c + 1] = False
+    assert (m.kcoh.reshape(ex.shape[0], ex.shape[1], -1)[invalid] == -1).all()
+    valid = m.kcoh.reshape(ex.shape[0], ex.shape[1], -1)[~invalid]
+    rows, cols = valid // ex.shape[1], valid % ex.shape[1]
+    assert ((rows >= lo_r) & (rows <= hi_r) & (cols >= lo_c) & (cols <= hi_c)).all()
+
+
+@pytest.mark.parametrize("exclude", [0.0, 2.0])
+def test_k_coherence_sets_equal_brute_force(rng, exclude):
+    points = rng.normal(size=(150, 5))
+    coords = np.stack(np.unravel_index(np.arange(150), (10, 15)), axis=1)
+    got = coh.k_coherence_sets(points, 5, exclude=exclude, coords=coords)
+    want = naive_k_coherence(points, 5, exclude, coords)
+    np.testing.assert_array_equal(got, want)
+    assert not (got == np.arange(150)[:, None]).any()
+
+
+def test_level_model_k_coherence_sets_equal_brute_force_in_pca_space(rng):
+    ex = random_exemplar(rng, 14, 13, 3)
+    m = coh.build_level_model(ex, 4, dims=8, k=5)
+    lo_r, hi_r, lo_c, hi_c = m.bounds
+    flat = np.array([r * 13 + c for r in range(lo_r, hi_r + 1) for c in range(lo_c, hi_c + 1)])
+    want = flat[naive_k_coherence(m.proj[flat], 5)]
+    np.testing.assert_array_equal(m.kcoh[flat], want)
+
+
+def test_candidate_set_equals_its_definition(rng):
+    ex = random_exemplar(rng, 12, 11)
+    m = coh.build_level_model(ex, 4, dims=5, k=2)
+    src = rng.integers(0, 12 * 11, size=(5, 6, 7)).astype(np.int32)
+    for view in VIEW_AXES:
+        for site in [(0, 0, 0), (4, 5, 6), (2, 3, 1)]:
+            got = coh.candidate_set(src, view, site, m)
+            want = naive_candidates(src, view, site, 11, m.bounds, m.kcoh)
+            assert got.tolist() == want
+            assert 1 <= len(got) <= 9 * 3
+
+
+def test_candidate_set_by_hand():
+    """A 3x3 block of sources copied coherently from the exemplar gives one shift + its set."""
+    ex = np.arange(100, dtype=np.float32).reshape(10, 10, 1)
+    m = coh.build_level_model(ex, 3, dims=2, k=1)
+    src = np.zeros((3, 3, 1), dtype=np.int32)
+    for i in range(3):
+        for j in range(3):
+            src[i, j, 0] = (4 + i) * 10 + (5 + j)  # voxel (i, j) copied pixel (4 + i, 5 + j)
+    got = coh.candidate_set(src, "front", (1, 1, 0), m)
+    centre = 5 * 10 + 6
+    assert got.tolist() == sorted({centre, int(m.kcoh[centre, 0])})
+
+
+def test_upsample_sources_matches_twin(rng):
+    src = rng.integers(0, 6 * 7, size=(3, 4, 2)).astype(np.int32)
+    for view in VIEW_AXES:
+        got = coh.upsample_sources(src, view, 7, (12, 14))
+        np.testing.assert_array_equal(got, naive_upsample_sources(src, view, 7, (12, 14)))
+
+
+def test_histogram_factor_is_the_papers_reweighting():
+    counts = np.array([0.0, 4.0, 8.0, 20.0])
+    np.testing.assert_allclose(coh.histogram_factor(counts, 4.0), [1, 1, 2, 5])
+    # strength = even share gives the paper's count form 1 + max(0, H - theta)
+    np.testing.assert_allclose(coh.histogram_factor(counts, 4.0, 4.0), 1 + np.maximum(0, counts - 4))
+
+
+# --------------------------------------------------------------------------- kernels vs twins
+
+
+def _search_case(rng, view, window, channels, grid):
+    ex = random_exemplar(rng, 13, 12, channels)
+    m = coh.build_level_model(ex, window, dims=6, k=3)
+    vol = rng.random((8, 6, 4, channels)).astype(np.float32)
+    src = rng.integers(0, 13 * 12, size=vol.shape[:3]).astype(np.int32)
+    assign = np.full(vol.shape[:3], -1, dtype=np.int32)
+    return ex, m, vol, src, assign
+
+
+@pytest.mark.parametrize("view", VIEWS3)
+@pytest.mark.parametrize("window,channels,grid,batches", [(3, 1, 1, 1), (4, 3, 2, 3), (4, 1, 1, 2)])
+def test_search_view_matches_twin(rng, view, window, channels, grid, batches):
+    ex, m, vol, src, assign = _search_case(rng, view, window, channels, grid)
+    ra, ca = VIEW_AXES[view]
+    na = 3 - ra - ca
+    lo_r, hi_r, lo_c, hi_c = m.bounds
+    # a previous assignment whose counts the index histogram holds, so the penalty bites
+    prev = np.full(vol.shape[:3], -1, dtype=np.int32)
+    prev_t = np.moveaxis(prev, (na, ra, ca), (0, 1, 2))
+    centres = np.array([r * 12 + c for r in range(lo_r, hi_r + 1) for c in range(lo_c, hi_c + 1)])
+    prev_t[:, ::grid, ::grid] = rng.choice(centres[:5], size=prev_t[:, ::grid, ::grid].shape)
+    hist = np.bincount(prev[prev >= 0], minlength=m.pixels).astype(np.float64)
+    n_sites = int((prev >= 0).sum())
+    phi = n_sites / m.centres
+    want_assign, want_omega, want_energy, want_hist = naive_search_view(
+        vol, src, view, m, grid=grid, batches=batches, index_hist=hist, phi=phi, index_weight=2.0,
+        r=0.8, floor=1e-3, assign_v=prev)
+    got_assign = prev.copy()
+    got_hist = hist.copy()
+    omega = np.zeros(vol.shape[:3], dtype=np.float32)
+    energy = np.zeros(vol.shape[na])
+    _k.search_view(vol, src, ra, ca, window, m.anchor, grid, 12, lo_r, hi_r, lo_c, hi_c, m.mean,
+                   m.basis, m.proj, m.kcoh, batches, got_hist, phi, 2.0, 0.8, 1e-3, got_assign,
+                   np.empty(vol.shape[:3], dtype=np.int32), omega, energy)
+    np.testing.assert_array_equal(got_assign, want_assign)
+    np.testing.assert_allclose(omega, want_omega, rtol=1e-4)
+    np.testing.assert_allclose(energy, want_energy, rtol=1e-6)
+    np.testing.assert_array_equal(got_hist, want_hist)
+
+
+def test_volume_patch_projection_is_the_models(rng):
+    """A volume slice that copies the exemplar coherently finds the copied centre at distance 0."""
+    ex = random_exemplar(rng, 16, 16)
+    m = coh.build_level_model(ex, 4, dims=40, k=2)
+    vol = np.zeros((8, 8, 2, 1), dtype=np.float32)
+    src = np.zeros((8, 8, 2), dtype=np.int32)
+    for i in range(8):
+        for j in range(8):
+            vol[i, j] = ex[3 + i, 4 + j]
+            src[i, j] = (3 + i) * 16 + 4 + j
+    assert np.allclose(naive_volume_patch(vol, "front", (3, 3, 0), 4),
+                       naive_exemplar_patch(ex, 6, 7, 4))
+    assign = np.full((8, 8, 2), -1, dtype=np.int32)
+    omega = np.zeros((8, 8, 2), dtype=np.float32)
+    lo_r, hi_r, lo_c, hi_c = m.bounds
+    _k.search_view(vol, src, 0, 1, 4, m.anchor, 1, 16, lo_r, hi_r, lo_c, hi_c, m.mean, m.basis,
+                   m.proj, m.kcoh, 1, np.zeros(m.pixels), 1.0, 0.0, 0.8, 1e-6, assign,
+                   np.empty_like(assign), omega, np.zeros(2))
+    assert assign[3, 3, 0] == 6 * 16 + 7  # interior site: the exact copy
+
+
+def _solve_case(rng, views, window, channels, grid, shared=True):
+    exemplars = [random_exemplar(rng, 11, 10, channels)]
+    for _ in views[1:]:
+        exemplars.append(exemplars[0] if shared else random_exemplar(rng, 11, 10, channels))
+    models = [coh.build_level_model(e, window, dims=4, k=2) for e in exemplars]
+    shape = (6, 4, 8)
+    assign = np.full((len(views), *shape), -1, dtype=np.int32)
+    for vi, view in enumerate(views):
+        ra, ca = VIEW_AXES[view]
+        lo_r, hi_r, lo_c, hi_c = models[vi].bounds
+        r = rng.integers(lo_r, hi_r + 1, size=shape)
+        c = rng.integers(lo_c, hi_c + 1, size=shape)
+        full = (r * 10 + c).astype(np.int32)
+        mask = np.zeros(shape, bool)
+        sl = [slice(None)] * 3
+        sl[ra] = slice(None, None, grid)
+        sl[ca] = slice(None, None, grid)
+        mask[tuple(sl)] = True
+        assign[vi] = np.where(mask, full, -1)
+    omega = rng.random((len(views), *shape)).astype(np.float32) + 0.1
+    src = rng.integers(0, 110, size=(len(views), *shape)).astype(np.int32)
+    volume = rng.random((*shape, channels)).astype(np.float32)
+    return exemplars, models, assign, omega, src, volume
+
+
+@pytest.mark.parametrize("views", [("front",), ("front", "top"), VIEWS3])
+@pytest.mark.parametrize("medoid,balance", [(0, False), (0, True), (3, False), (8, True)])
+@pytest.mark.parametrize("grid,channels", [(1, 1), (2, 3)])
+def test_solve_matches_twin(rng, views, medoid, balance, grid, channels):
+    window = 4
+    exemplars, models, assign, omega, src, volume = _solve_case(rng, views, window, channels, grid,
+                                                                shared=len(views) != 2)
+    packed, ex_off, hist_off = CW._pack(models)
+    n = volume.shape[0] * volume.shape[1] * volume.shape[2]
+    order = rng.permutation(n).astype(np.int64)
+    bounds = np.array([0, 50, 120, n], dtype=np.int64)
+    pos_hist = [np.bincount(src[vi].ravel(), minlength=110).astype(np.float64) for vi in range(len(views))]
+    theta = np.full(len(views), n / 110.0)
+    want_vol, want_src, want_hist, want_changed = naive_solve(
+        volume, src, assign, omega, views, exemplars, window=window, grid=grid, order=order,
+        bounds=bounds, pos_hist=pos_hist, theta=theta, position_weight=3.0, medoid=medoid,
+        balance=balance, r=0.8)
+    got_vol, got_src = volume.copy(), src.copy()
+    got_hist = np.concatenate(pos_hist)
+    changed = _k.solve(got_vol, got_src, assign, omega, np.array([VIEW_AXES[v] for v in views]),
+                       packed, ex_off, np.full(len(views), 10), window, coh.anchor(window), grid,
+                       order, bounds, got_hist, hist_off, theta, 3.0, medoid, balance, 0.8, 7)
+    np.testing.assert_array_equal(got_vol, want_vol)
+    np.testing.assert_array_equal(got_src, want_src)
+    np.testing.assert_array_equal(got_hist, np.concatenate(want_hist))
+    assert changed == want_changed
+
+
+def test_solve_copies_only_voted_exemplar_texels(rng):
+    views = VIEWS3
+    exemplars, models, assign, omega, src, volume = _solve_case(rng, views, 4, 3, 1)
+    packed, ex_off, hist_off = CW._pack(models)
+    n = volume.shape[0] * volume.shape[1] * volume.shape[2]
+    hist = np.concatenate([np.bincount(s.ravel(), minlength=110) for s in src]).astype(np.float64)
+    _k.solve(volume, src, assign, omega, np.array([VIEW_AXES[v] for v in views]), packed, ex_off,
+             np.full(3, 10), 4, 1, 1, np.arange(n, dtype=np.int64), np.array([0, n]), hist,
+             hist_off, np.full(3, n / 110), 1.0, 0, False, 0.8, 64)
+    colours = {tuple(c) for c in exemplars[0].reshape(-1, 3).tolist()}
+    assert {tuple(c) for c in volume.reshape(-1, 3).tolist()} <= colours
+    # every view's source is a pixel whose colour is a voted texel of that view
+    np.testing.assert_array_equal(hist, np.concatenate([np.bincount(s.ravel(), minlength=110) for s in src]))
+
+
+@pytest.mark.parametrize("medoid", [0, 8])
+def test_position_histogram_flattens_a_skewed_usage(medoid):
+    """Every neighbourhood matched with the same centre: all voxels get the same w^2 votes. Without
+    the position histogram they all copy one texel; with it the usage spreads over the votes --
+    over all 16 with the medoid solver, only to the two texels nearest the mean with the mean
+    solver (down-weighting one of 16 votes hardly moves their mean: docs/chen_wang.md)."""
+    ex = np.linspace(0, 1, 100, dtype=np.float32).reshape(10, 10, 1)
+    m = coh.build_level_model(ex, 4, dims=3, k=2)
+    shape = (8, 8, 8)
+    assign = np.full((1, *shape), 5 * 10 + 5, dtype=np.int32)
+    omega = np.ones((1, *shape), dtype=np.float32)
+    n = 512
+    order = np.random.default_rng(0).permutation(n).astype(np.int64)
+    used = {}
+    for weight in (0.0, 50.0):
+        src = np.zeros((1, *shape), dtype=np.int32)
+        vol = np.zeros((*shape, 1), dtype=np.float32)
+        hist = np.bincount(src.ravel(), minlength=100).astype(np.float64)
+        _k.solve(vol, src, assign, omega, np.array([[0, 1]]), m.exemplar.reshape(-1, 1),
+                 np.zeros(1, np.int64), np.array([10]), 4, m.anchor, 1, order,
+                 np.linspace(0, n, 65).astype(np.int64), hist, np.zeros(1, np.int64),
+                 np.array([n / 100.0]), weight, medoid, False, 0.8, 16)
+        counts = np.bincount(src.ravel(), minlength=100)
+        used[weight] = (int((counts > 0).sum()), int(counts.max()))
+    assert used[0.0] == (1, n)  # skewed: one texel everywhere
+    if medoid:
+        assert used[50.0][0] == 16  # all 16 voted texels in use
+        assert used[50.0][1] <= 2 * n // 16
+    else:
+        assert used[50.0][0] >= 2 and used[50.0][1] <= n // 2
+
+
+# --------------------------------------------------------------------------- the method
+
+
+def test_colours_are_exemplar_colours(rng):
+    ex = (rng.random((24, 24, 3)) * 255).astype(np.uint8)
+    for solver in CW.SOLVERS:
+        res = chen_wang_synthesize(ex, size=16, window=(4, 4), levels=2, iterations=2, solver=solver,
+                                   rng=0)
+        colours = {tuple(c) for c in (ex.reshape(-1, 3) / np.float32(255)).astype(np.float32).tolist()}
+        assert {tuple(c) for c in res.volume.reshape(-1, 3).tolist()} <= colours
+        assert isinstance(res, SynthesisResult) and isinstance(res.config, ChenWangConfig)
+        assert res.volume.dtype == np.float32 and res.volume.shape == (16, 16, 16, 3)
+
+
+@pytest.mark.parametrize("channels", [1, 2])
+def test_any_channel_count_and_views(rng, channels):
+    ex = rng.random((20, 20, channels)).astype(np.float32)
+    res = chen_wang_synthesize(ex, size=8, window=4, levels=1, iterations=1, views="front,top", rng=1)
+    assert res.volume.shape == (8, 8, 8, channels)
+    assert res.stats["levels"]["level_0"]["candidates_per_site"] == 54
+
+
+def test_an_exemplar_per_view(rng):
+    a = np.zeros((20, 20), dtype=np.float32)
+    b = np.ones((20, 20), dtype=np.float32)
+    res = chen_wang_synthesize(a, exemplars={"right": b}, size=8, window=4, levels=1, iterations=1,
+                               views="front,right", rng=0)
+    assert set(np.unique(res.volume)) <= {0.0, 1.0}
+
+
+def test_same_seed_same_volume_at_one_and_two_threads():
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("needs NUMBA_NUM_THREADS >= 2")
+    ex = np.random.default_rng(3).random((24, 24, 3)).astype(np.float32)
+    before = numba.get_num_threads()
+    out = {}
+    try:
+        for threads in (1, 2):
+            numba.set_num_threads(threads)
+            for solver in CW.SOLVERS:
+                out[threads, solver] = chen_wang_synthesize(
+                    ex, size=16, window=(4, 4), levels=2, iterations=2, solver=solver, rng=7).volume
+    finally:
+        numba.set_num_threads(before)
+    for solver in CW.SOLVERS:
+        np.testing.assert_array_equal(out[1, solver], out[2, solver])
+
+
+def test_periodic_exemplar_pattern_appears_in_the_constrained_slices():
+    stripes = np.tile(np.array([0, 0, 1, 1], dtype=np.uint8) * 255, (24, 6))  # period 4 along columns
+    res = chen_wang_synthesize(stripes, size=16, window=(4, 4), levels=2, iterations=3,
+                               views="front", rng=0)
+    v = res.volume[..., 0]
+    same4 = (v == np.roll(v, 4, axis=1)).mean()  # front slices: columns along j
+    same2 = (v == np.roll(v, 2, axis=1)).mean()
+    assert same4 > 0.9 and same2 < 0.2
+    assert 0.3 < v.mean() < 0.7
+
+
+def test_progress_and_checkpoint_resume(tmp_path):
+    ex = np.random.default_rng(0).random((24, 24)).astype(np.float32)
+    calls = []
+    path = tmp_path / "cw.npz"
+    kw = dict(size=16, window=(4, 4), levels=2, iterations=(2, 1), rng=5)
+    res = chen_wang_synthesize(ex, progress=lambda *a: calls.append(a), checkpoint=path, **kw)
+    assert [(c[0], c[1], c[2]) for c in calls] == [(1, 0, 2), (1, 1, 2), (1, 2, 2), (0, 0, 1), (0, 1, 1)]
+    assert path.exists()
+    again = chen_wang_synthesize(ex, checkpoint=path, **kw)  # resumes after the last level
+    np.testing.assert_array_equal(again.volume, res.volume)
+    # interrupted after the coarse level, then resumed: the uninterrupted result
+    coarse = tmp_path / "coarse.npz"
+
+    def stop(level, it, n, energy):
+        if level == 0:
+            raise _Stop
+
+    with pytest.raises(_Stop):
+        chen_wang_synthesize(ex, progress=stop, checkpoint=coarse, **kw)
+    resumed = chen_wang_synthesize(ex, checkpoint=coarse, **kw)
+    np.testing.assert_array_equal(resumed.volume, res.volume)
+    assert resumed.history == res.history
+    with pytest.raises(ParameterError, match="different configuration"):
+        chen_wang_synthesize(ex, checkpoint=path, **{**kw, "iterations": 3})
+
+
+class _Stop(Exception):
+    pass
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    ({"window": (8, 8, 6), "size": 16}, "too small for window 8 at level 2"),
+    ({"iterations": (1, 2)}, "iterations must be one integer or 3 integers"),
+    ({"solver": "mode"}, "solver must be one of mean, medoid; got 'mode'"),
+    ({"size": 30}, "not divisible by 2\\*\\*\\(levels-1\\) = 4"),
+    ({"grid": 3, "window": 4, "size": 16}, "not a multiple of 3"),
+    ({"views": "front,side"}, "view must be one of front, right, top; got 'side'"),
+    ({"k": 0}, "k must be between 1 and 64; got 0"),
+    ({"position_weight": -1}, "position_weight must be a finite number in \\[0.0, inf\\); got -1"),
+    ({"rng": -3}, "seed must be >= 0; got -3"),
+])
+def test_bad_input_raises_parameter_error(kwargs, match):
+    ex = np.zeros((64, 64), dtype=np.float32)
+    base = {"size": 32, "window": 4, "levels": 3, "iterations": 1}
+    with pytest.raises(ParameterError, match=match):
+        chen_wang_synthesize(ex, **{**base, **kwargs})
+
+
+def test_exemplar_too_small_for_a_level_window():
+    with pytest.raises(ParameterError, match="exemplar for view front of size 16x16 is too small for window 8 at level 1"):
+        chen_wang_synthesize(np.zeros((16, 16)), size=32, window=(4, 8, 4), levels=3, iterations=1)
+    with pytest.raises(ParameterError, match="same number of channels"):
+        chen_wang_synthesize(np.zeros((32, 32)), exemplars={"top": np.zeros((32, 32, 3))}, size=16,
+                             window=4, levels=1, iterations=1)
