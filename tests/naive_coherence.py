@@ -166,7 +166,7 @@ def naive_votes(site, views, assign, omega, exemplars, window, grid, pos_hist, t
 
 
 def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, order, bounds,
-                pos_hist, theta, position_weight, medoid=0, balance=False, r=0.8):
+                pos_hist, theta, position_weight, medoid=0, balance=False):
     """Literal discrete solver; returns (volume, src, pos_hist, changed)."""
     volume = volume.copy()
     src = src.copy()
@@ -190,23 +190,20 @@ def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, o
                 for v in votes:
                     v[3] /= sums[v[1]]
             if medoid:
-                merged = []
-                for v in votes:
-                    for m in merged:
-                        if m[1] == v[1] and m[2] == v[2]:
-                            m[3] += v[3]
-                            break
-                    else:
-                        merged.append(list(v))
-                # the `medoid` heaviest, ties to the earlier one (stable sort)
-                ranked = sorted(range(len(merged)), key=lambda q: -merged[q][3])[:medoid]
+                # candidates: texels of the `medoid` heaviest votes, distinct (texel, view), heaviest
+                # first, ties to the earlier vote (stable sort); energy over all votes
+                ranked, seen = [], set()
+                for q in sorted(range(len(votes)), key=lambda q: -votes[q][3]):
+                    key = (votes[q][1], votes[q][2])
+                    if key not in seen:
+                        seen.add(key)
+                        ranked.append(q)
+                ranked = ranked[:medoid]
                 best, best_e = None, np.inf
                 for q in ranked:
-                    e_sum = sum(m[3] * float(np.sqrt(((merged[q][0] - m[0]) ** 2).sum())) ** r
-                                for m in merged if ((merged[q][0] - m[0]) ** 2).sum() > 0)
+                    e_sum = sum(m[3] * float(np.sqrt(((votes[q][0] - m[0]) ** 2).sum())) for m in votes)
                     if e_sum < best_e:
-                        best, best_e = merged[q], e_sum
-                votes = merged
+                        best, best_e = votes[q], e_sum
             else:
                 wsum = sum(v[3] for v in votes)
                 mean = sum(v[3] * v[0] for v in votes) / wsum

@@ -247,14 +247,14 @@ def _votes(p0, p1, p2, assign, omega, view_axes, ex_off, ewidth, window, anchor,
 
 @jit_parallel
 def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window, anchor, grid,
-          order, batch_bounds, pos_hist, hist_off, theta, position_weight, medoid, balance, r, chunk):
+          order, batch_bounds, pos_hist, hist_off, theta, position_weight, medoid, balance, chunk):
     """Discrete solver (paper section 4.2 with eq. 4), one pass over all voxels.
 
     Voxels are visited in ``order`` (flat indices), cut into batches at ``batch_bounds``. Within a
     batch every voxel (in parallel) gathers its votes (:func:`_votes`), computes their weighted
     mean colour and copies the voted texel nearest to it (first one on ties) -- or, with
-    ``medoid > 0``, among the ``medoid`` heaviest votes (repeated votes merged first), the texel
-    ``p`` minimising ``sum_q w_q ||e_p - e_q||^r`` over all votes: ``volume`` gets its
+    ``medoid > 0``, among the texels of the ``medoid`` heaviest votes (distinct texel and view),
+    the one ``p`` minimising ``sum_q w_q ||e_p - e_q||`` over all votes (a weighted medoid): ``volume`` gets its
     colour, and each view's source becomes that view's voted texel nearest to the copied colour
     (the copied texel itself for its own view). After the batch, in one thread, the position
     histograms ``pos_hist`` (packed per view at ``hist_off``, counts of voxels per source pixel)
@@ -299,33 +299,23 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
                         vw[q] /= vsum[vv[q]]
                 best = 0
                 if medoid:
-                    # merge repeated (texel, view) votes, then the weighted robust medoid
-                    distinct = 0
-                    for q in range(count):
-                        seen = -1
-                        for q2 in range(distinct):
-                            if vg[q2] == vg[q] and vv[q2] == vv[q]:
-                                seen = q2
-                                break
-                        if seen >= 0:
-                            vw[seen] += vw[q]
-                        else:
-                            vg[distinct] = vg[q]
-                            vv[distinct] = vv[q]
-                            vw[distinct] = vw[q]
-                            distinct += 1
-                    count = distinct
-                    # candidates: the `medoid` heaviest merged votes (ties: the earlier vote)
-                    n_try = min(medoid, count)
+                    # candidates: the `medoid` heaviest votes with distinct (texel, view), heaviest
+                    # first (ties: the earlier vote)
+                    n_try = 0
                     for q in range(count):
                         taken[q] = False
-                    for a in range(n_try):
+                    for a in range(medoid):
                         top = -1
                         for q in range(count):
                             if not taken[q] and (top < 0 or vw[q] > vw[top]):
                                 top = q
-                        taken[top] = True
-                        tops[a] = top
+                        if top < 0:
+                            break
+                        for q in range(count):  # its repeats are no new candidates
+                            if vg[q] == vg[top] and vv[q] == vv[top]:
+                                taken[q] = True
+                        tops[n_try] = top
+                        n_try += 1
                     best_e = np.inf
                     for a in range(n_try):
                         q = tops[a]
@@ -335,8 +325,7 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
                             for ch in range(channels):
                                 diff = ex_flat[vg[q], ch] - ex_flat[vg[q2], ch]
                                 dd += diff * diff
-                            if dd > 0.0:
-                                e_sum += vw[q2] * dd ** (0.5 * r)
+                            e_sum += vw[q2] * np.sqrt(dd)
                         if e_sum < best_e:
                             best_e = e_sum
                             best = q

@@ -69,7 +69,7 @@ __all__ = ["ChenWangConfig", "chen_wang_synthesize", "make_chen_wang_config", "r
 ProgressCallback = Callable[[int, int, int, float], None]
 
 #: How a voxel picks among its voted texels: ``mean`` = nearest to their weighted mean (the
-#: paper's practice), ``medoid`` = the weighted robust medoid (``sum_q w_q ||e_p - e_q||^r``).
+#: paper's practice), ``medoid`` = a weighted medoid (``sum_q w_q ||e_p - e_q||``).
 SOLVERS = ("mean", "medoid")
 _SOLVE_CHUNK = 512
 #: The medoid solver tries the heaviest (merged) votes only; the energy sums over all votes.
@@ -231,9 +231,9 @@ def chen_wang_synthesize(
         voxel order). More batches track the histograms more closely, fewer run more in parallel.
     solver : {"mean", "medoid"}
         How a voxel picks among its voted texels: the one nearest to their weighted mean (the
-        paper's practice, section 4.2), or the weighted robust medoid: among the 8 heaviest
-        votes (repeated votes merged), the texel ``p`` minimising ``sum_q w_q ||e_p - e_q||^r``
-        over all votes (mode-seeking: keeps the exemplar's contrast).
+        paper's practice, section 4.2), or a weighted medoid: among the texels of the 8 heaviest
+        votes, the one ``p`` minimising ``sum_q w_q ||e_p - e_q||`` over all votes
+        (mode-seeking: keeps the exemplar's contrast, docs/chen_wang.md).
     balance_views : bool
         Scale each view's votes of a voxel to the same total weight, so no view's (coherent,
         heavily weighted) neighbourhoods outvote the others (the paper: off).
@@ -377,8 +377,7 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
                                         window, vmodels[0].anchor, config.grid, order, bounds, pos_hist,
                                         hist_off, theta, config.position_weight,
                                         _MEDOID_CANDIDATES if config.solver == "medoid" else 0,
-                                        config.balance_views, config.r,
-                                        _SOLVE_CHUNK)))
+                                        config.balance_views, _SOLVE_CHUNK)))
             t_solve += time.perf_counter() - ts
             level_history.append(energy_sum / max(1, sites))
             if progress is not None:
