@@ -90,10 +90,10 @@ class ChenWangConfig:
     r: float = 0.8
     grid: int = 1
     index_weight: float = 1.0
-    position_weight: float = 1.0
+    position_weight: float = 8.0
     coherence_exclude: float = 0.0
     batches: int = 8
-    solver: str = "mean"
+    solver: str = "medoid"
     balance_views: bool = False
     seed: int | None = None
 
@@ -191,7 +191,8 @@ def chen_wang_synthesize(
     grid: int = DEFAULTS.grid, index_weight: float = DEFAULTS.index_weight,
     position_weight: float = DEFAULTS.position_weight,
     coherence_exclude: float = DEFAULTS.coherence_exclude, batches: int = DEFAULTS.batches,
-    solver: str = DEFAULTS.solver, balance_views: bool = DEFAULTS.balance_views, rng=None, progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
+    solver: str = DEFAULTS.solver, balance_views: bool = DEFAULTS.balance_views, rng=None,
+    progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
 ) -> SynthesisResult:
     """Synthesize a solid texture with Chen & Wang's method (2010; issue 11).
 
