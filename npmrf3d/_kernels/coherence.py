@@ -88,7 +88,7 @@ def search_view(volume, src_v, ra, ca, window, anchor, grid, ewidth, lo_r, hi_r,
     ra, ca : volume axes of the exemplar row and column
     window, anchor, grid : window side, its anchor ``a`` and the site spacing in the plane
     ewidth : exemplar width; ``lo_r..hi_r`` x ``lo_c..hi_c`` the valid centres
-    mean : (d,) float64, basis : (d, D) float32, proj : (H * W, D) float32 (rows of valid centres)
+    mean : (d,) float64, basis : (d, D) float64, proj : (H * W, D) float64 (rows of valid centres)
     kcoh : (H * W, k) int32, k-coherence sets of the valid centres
     batches : int, the slices along the normal axis ``n`` form batches ``n % batches``
     index_hist : (H * W,) float64, updated in place: sites currently assigned to each centre
