@@ -140,7 +140,8 @@ def naive_search_view(volume, src_v, view, model, *, grid, batches, index_hist, 
     return assign, omega, energy, hist
 
 
-def naive_votes(site, views, assign, omega, exemplars, window, grid, pos_hist, theta, position_weight):
+def naive_votes(site, views, assign, omega, exemplars, window, grid, pos_hist, theta, position_weight,
+                position_boost=0.0):
     """Votes (texel colour, view, local texel index, weight) for one voxel, in the kernel's order."""
     a = naive_anchor(window)
     votes = []
@@ -158,15 +159,19 @@ def naive_votes(site, views, assign, omega, exemplars, window, grid, pos_hist, t
                 if e < 0:
                     continue
                 local = (e // w + orow) * w + (e % w + ocol)
-                weight = float(omega[vi][tuple(u)]) / (
-                    1.0 + position_weight * max(0.0, pos_hist[vi][local] / theta[vi] - 1.0))
+                excess = pos_hist[vi][local] / theta[vi] - 1.0
+                weight = float(omega[vi][tuple(u)])
+                if excess > 0:
+                    weight /= 1.0 + position_weight * excess
+                else:
+                    weight *= 1.0 + position_boost * (-excess)
                 colour = exemplars[vi].reshape(-1, exemplars[vi].shape[2])[local].astype(np.float64)
                 votes.append([colour, vi, local, weight])
     return votes
 
 
 def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, order, bounds,
-                pos_hist, theta, position_weight, medoid=0, balance=False):
+                pos_hist, theta, position_weight, position_boost=0.0, medoid=0, balance=False):
     """Literal discrete solver; returns (volume, src, pos_hist, changed)."""
     volume = volume.copy()
     src = src.copy()
@@ -178,7 +183,7 @@ def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, o
         for flat in order[bounds[b]:bounds[b + 1]]:
             site = (flat // (n1 * n2), (flat // n2) % n1, flat % n2)
             votes = naive_votes(site, views, assign, omega, exemplars, window, grid, pos_hist, theta,
-                                position_weight)
+                                position_weight, position_boost)
             new = [int(src[vi][site]) for vi in range(len(views))]
             if not votes:
                 updates.append((site, new, False))

@@ -215,9 +215,9 @@ def _solve_case(rng, views, window, channels, grid, shared=True):
 
 
 @pytest.mark.parametrize("views", [("front",), ("front", "top"), VIEWS3])
-@pytest.mark.parametrize("medoid,balance", [(0, False), (0, True), (3, False), (8, True)])
+@pytest.mark.parametrize("medoid,balance,boost", [(0, False, 0.0), (0, True, 2.0), (3, False, 0.0), (8, True, 5.0)])
 @pytest.mark.parametrize("grid,channels", [(1, 1), (2, 3)])
-def test_solve_matches_twin(rng, views, medoid, balance, grid, channels):
+def test_solve_matches_twin(rng, views, medoid, balance, boost, grid, channels):
     window = 4
     exemplars, models, assign, omega, src, volume = _solve_case(rng, views, window, channels, grid,
                                                                 shared=len(views) != 2)
@@ -229,13 +229,13 @@ def test_solve_matches_twin(rng, views, medoid, balance, grid, channels):
     theta = np.full(len(views), n / 110.0)
     want_vol, want_src, want_hist, want_changed = naive_solve(
         volume, src, assign, omega, views, exemplars, window=window, grid=grid, order=order,
-        bounds=bounds, pos_hist=pos_hist, theta=theta, position_weight=3.0, medoid=medoid,
+        bounds=bounds, pos_hist=pos_hist, theta=theta, position_weight=3.0, position_boost=boost, medoid=medoid,
         balance=balance)
     got_vol, got_src = volume.copy(), src.copy()
     got_hist = np.concatenate(pos_hist)
     changed = _k.solve(got_vol, got_src, assign, omega, np.array([VIEW_AXES[v] for v in views]),
                        packed, ex_off, np.full(len(views), 10), window, coh.anchor(window), grid,
-                       order, bounds, got_hist, hist_off, theta, 3.0, medoid, balance, 7)
+                       order, bounds, got_hist, hist_off, theta, 3.0, boost, medoid, balance, 7)
     np.testing.assert_array_equal(got_vol, want_vol)
     np.testing.assert_array_equal(got_src, want_src)
     np.testing.assert_array_equal(got_hist, np.concatenate(want_hist))
@@ -250,7 +250,7 @@ def test_solve_copies_only_voted_exemplar_texels(rng):
     hist = np.concatenate([np.bincount(s.ravel(), minlength=110) for s in src]).astype(np.float64)
     _k.solve(volume, src, assign, omega, np.array([VIEW_AXES[v] for v in views]), packed, ex_off,
              np.full(3, 10), 4, 1, 1, np.arange(n, dtype=np.int64), np.array([0, n]), hist,
-             hist_off, np.full(3, n / 110), 1.0, 0, False, 64)
+             hist_off, np.full(3, n / 110), 1.0, 0.0, 0, False, 64)
     colours = {tuple(c) for c in exemplars[0].reshape(-1, 3).tolist()}
     assert {tuple(c) for c in volume.reshape(-1, 3).tolist()} <= colours
     # every view's source is a pixel whose colour is a voted texel of that view
@@ -278,7 +278,7 @@ def test_position_histogram_flattens_a_skewed_usage(medoid):
         _k.solve(vol, src, assign, omega, np.array([[0, 1]]), m.exemplar.reshape(-1, 1),
                  np.zeros(1, np.int64), np.array([10]), 4, m.anchor, 1, order,
                  np.linspace(0, n, 65).astype(np.int64), hist, np.zeros(1, np.int64),
-                 np.array([n / 100.0]), weight, medoid, False, 16)
+                 np.array([n / 100.0]), weight, 0.0, medoid, False, 16)
         counts = np.bincount(src.ravel(), minlength=100)
         used[weight] = (int((counts > 0).sum()), int(counts.max()))
     assert used[0.0] == (1, n)  # skewed: one texel everywhere

@@ -188,12 +188,14 @@ def search_view(volume, src_v, ra, ca, window, anchor, grid, ewidth, lo_r, hi_r,
 
 @jit
 def _votes(p0, p1, p2, assign, omega, view_axes, ex_off, ewidth, window, anchor, grid, pos_hist,
-           hist_off, theta, position_weight, out_g, out_v, out_w):
+           hist_off, theta, position_weight, position_boost, out_g, out_v, out_w):
     """Texels voted for voxel ``(p0, p1, p2)`` by every overlapping neighbourhood of every view.
 
     A neighbourhood at site ``u`` matched with centre ``e`` votes for the texel ``e + (x - u)``
     (plane offsets) with weight ``omega[u] / (1 + position_weight * max(0, H(texel) / theta - 1))``
-    (paper eq. 4 with a strength). Votes are enumerated view by view, then by row offset
+    (paper eq. 4 with a strength); with ``position_boost > 0`` an under-used texel's weight is
+    multiplied by ``1 + position_boost * (1 - H(texel) / theta)`` (this project's addition).
+    Votes are enumerated view by view, then by row offset
     ``x_r - u_r`` from ``-anchor`` to ``window - 1 - anchor``, then by column offset; texels are
     written as packed rows ``ex_off[v] + local``. Returns the number of votes.
     """
@@ -238,6 +240,8 @@ def _votes(p0, p1, p2, assign, omega, view_axes, ex_off, ewidth, window, anchor,
                 weight = omega[v, q0, q1, q2]
                 if excess > 0.0:
                     weight = weight / (1.0 + position_weight * excess)
+                elif position_boost > 0.0:
+                    weight = weight * (1.0 - position_boost * excess)
                 out_g[count] = ex_off[v] + local
                 out_v[count] = v
                 out_w[count] = weight
@@ -247,7 +251,7 @@ def _votes(p0, p1, p2, assign, omega, view_axes, ex_off, ewidth, window, anchor,
 
 @jit_parallel
 def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window, anchor, grid,
-          order, batch_bounds, pos_hist, hist_off, theta, position_weight, medoid, balance, chunk):
+          order, batch_bounds, pos_hist, hist_off, theta, position_weight, position_boost, medoid, balance, chunk):
     """Discrete solver (paper section 4.2 with eq. 4), one pass over all voxels.
 
     Voxels are visited in ``order`` (flat indices), cut into batches at ``batch_bounds``. Within a
@@ -284,7 +288,8 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
                 p1 = (flat // n2) % n1
                 p2 = flat % n2
                 count = _votes(p0, p1, p2, assign, omega, view_axes, ex_off, ewidth, window,
-                               anchor, grid, pos_hist, hist_off, theta, position_weight, vg, vv, vw)
+                               anchor, grid, pos_hist, hist_off, theta, position_weight, position_boost,
+                               vg, vv, vw)
                 for v in range(n_views):
                     new_src[t, v] = src[v, p0, p1, p2]
                 if count == 0:

@@ -81,7 +81,7 @@ class ChenWangConfig:
     """A validated Chen–Wang run; every default lives here (see :func:`chen_wang_synthesize`)."""
 
     size: tuple[int, int, int] = (64, 64, 64)
-    window: tuple[int, ...] = (8, 8, 6)
+    window: tuple[int, ...] = (8, 6, 4)
     levels: int = 3
     views: tuple[str, ...] = VIEWS
     iterations: tuple[int, ...] = (4, 4, 3)
@@ -91,6 +91,7 @@ class ChenWangConfig:
     grid: int = 1
     index_weight: float = 1.0
     position_weight: float = 8.0
+    position_boost: float = 0.0
     coherence_exclude: float = 0.0
     batches: int = 8
     solver: str = "medoid"
@@ -122,7 +123,8 @@ def make_chen_wang_config(
     *, size=DEFAULTS.size, window=DEFAULTS.window, levels=DEFAULTS.levels, views=DEFAULTS.views,
     iterations=DEFAULTS.iterations, k=DEFAULTS.k, pca_dims=DEFAULTS.pca_dims, r=DEFAULTS.r,
     grid=DEFAULTS.grid, index_weight=DEFAULTS.index_weight,
-    position_weight=DEFAULTS.position_weight, coherence_exclude=DEFAULTS.coherence_exclude,
+    position_weight=DEFAULTS.position_weight, position_boost=DEFAULTS.position_boost,
+    coherence_exclude=DEFAULTS.coherence_exclude,
     batches=DEFAULTS.batches, solver=DEFAULTS.solver, balance_views=DEFAULTS.balance_views,
     seed=None,
 ) -> ChenWangConfig:
@@ -156,6 +158,7 @@ def make_chen_wang_config(
     r = check.real("r", r, low=0.0, high=2.0, low_open=True)
     index_weight = check.real("index_weight", index_weight, low=0.0)
     position_weight = check.real("position_weight", position_weight, low=0.0)
+    position_boost = check.real("position_boost", position_boost, low=0.0)
     coherence_exclude = check.real("coherence_exclude", coherence_exclude, low=0.0)
     batches = check.integer("batches", batches, low=1, high=1024)
     solver = check.choice("solver", solver, SOLVERS)
@@ -165,7 +168,7 @@ def make_chen_wang_config(
     return ChenWangConfig(size=dims, window=window, levels=levels, views=views,
                           iterations=iterations, k=k, pca_dims=pca_dims, r=r, grid=grid,
                           index_weight=index_weight, position_weight=position_weight,
-                          coherence_exclude=coherence_exclude, batches=batches, solver=solver,
+                          position_boost=position_boost, coherence_exclude=coherence_exclude, batches=batches, solver=solver,
                           balance_views=bool(balance_views), seed=seed)
 
 
@@ -190,6 +193,7 @@ def chen_wang_synthesize(
     k: int = DEFAULTS.k, pca_dims: int = DEFAULTS.pca_dims, r: float = DEFAULTS.r,
     grid: int = DEFAULTS.grid, index_weight: float = DEFAULTS.index_weight,
     position_weight: float = DEFAULTS.position_weight,
+    position_boost: float = DEFAULTS.position_boost,
     coherence_exclude: float = DEFAULTS.coherence_exclude, batches: int = DEFAULTS.batches,
     solver: str = DEFAULTS.solver, balance_views: bool = DEFAULTS.balance_views, rng=None,
     progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
@@ -225,6 +229,9 @@ def chen_wang_synthesize(
     index_weight, position_weight : float >= 0
         Strengths of the index- and position-histogram factors ``1 + w * max(0, H / even - 1)``
         (0 = off; see :func:`npmrf3d.coherence.histogram_factor`).
+    position_boost : float >= 0
+        This project's addition: votes for under-used exemplar pixels get their weight
+        multiplied by ``1 + position_boost * (1 - H_p / theta)`` (0 = off, the paper).
     coherence_exclude : float >= 0
         k-coherence sets skip centres within this many pixels of the query (0 = off).
     batches : int
@@ -272,7 +279,8 @@ def chen_wang_synthesize(
     config = make_chen_wang_config(
         size=size, window=window, levels=levels, views=views, iterations=iterations, k=k,
         pca_dims=pca_dims, r=r, grid=grid, index_weight=index_weight,
-        position_weight=position_weight, coherence_exclude=coherence_exclude, batches=batches,
+        position_weight=position_weight, position_boost=position_boost,
+        coherence_exclude=coherence_exclude, batches=batches,
         solver=solver, balance_views=balance_views, seed=seed)
     generator = check.rng(rng)
     fit = types.SimpleNamespace(window=config.window[0], levels=config.levels, toroidal_exemplar=False)
@@ -376,7 +384,7 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
             order = rng.permutation(n_vox).astype(np.int64)
             changed.append(int(_k.solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth,
                                         window, vmodels[0].anchor, config.grid, order, bounds, pos_hist,
-                                        hist_off, theta, config.position_weight,
+                                        hist_off, theta, config.position_weight, config.position_boost,
                                         _MEDOID_CANDIDATES if config.solver == "medoid" else 0,
                                         config.balance_views, _SOLVE_CHUNK)))
             t_solve += time.perf_counter() - ts
