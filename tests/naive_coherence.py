@@ -103,8 +103,30 @@ def naive_candidate_list(src_v, view, site, ewidth, bounds, kcoh):
     return out
 
 
+M64 = (1 << 64) - 1
+
+
+def naive_mix(x):
+    """splitmix64 finaliser (64-bit wrapping), shifted right by one."""
+    z = (x + 0x9E3779B97F4A7C15) & M64
+    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & M64
+    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & M64
+    z = z ^ (z >> 31)
+    return z >> 1
+
+
+def naive_random_centres(salt, site_flat, n_random, bounds, ewidth):
+    lo_r, hi_r, lo_c, hi_c = bounds
+    nr, nc = hi_r - lo_r + 1, hi_c - lo_c + 1
+    out = []
+    for t in range(n_random):
+        cell = naive_mix(salt + site_flat * n_random + t) % (nr * nc)
+        out.append((lo_r + cell // nc) * ewidth + lo_c + cell % nc)
+    return out
+
+
 def naive_search_view(volume, src_v, view, model, *, grid, batches, index_hist, phi, index_weight,
-                      r, floor, assign_v):
+                      r, floor, assign_v, n_random=0, salt=0):
     """Literal search phase of one view; returns (assign, omega, energy per slice, index_hist)."""
     ra, ca = NAIVE_VIEW_AXES[view]
     na = 3 - ra - ca
@@ -123,7 +145,10 @@ def naive_search_view(volume, src_v, view, model, *, grid, batches, index_hist, 
                     site = naive_site(view, n, row, col)
                     y = (naive_volume_patch(volume, view, site, window) - model.mean) @ model.basis.astype(np.float64)
                     best, best_cost, best_d2 = None, np.inf, 0.0
-                    for e in naive_candidate_list(src_v, view, site, w, model.bounds, model.kcoh):
+                    cands = naive_candidate_list(src_v, view, site, w, model.bounds, model.kcoh)
+                    flat = (site[0] * volume.shape[1] + site[1]) * volume.shape[2] + site[2]
+                    cands += naive_random_centres(salt, flat, n_random, model.bounds, w)
+                    for e in cands:
                         d2 = float(((y - model.proj[e].astype(np.float64)) ** 2).sum())
                         cost = d2 * (1.0 + index_weight * max(0.0, hist[e] / phi - 1.0))
                         if cost < best_cost:

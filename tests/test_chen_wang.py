@@ -138,8 +138,8 @@ def _search_case(rng, view, window, channels, grid):
 
 
 @pytest.mark.parametrize("view", VIEWS3)
-@pytest.mark.parametrize("window,channels,grid,batches", [(3, 1, 1, 1), (4, 3, 2, 3), (4, 1, 1, 2)])
-def test_search_view_matches_twin(rng, view, window, channels, grid, batches):
+@pytest.mark.parametrize("window,channels,grid,batches,n_random", [(3, 1, 1, 1, 0), (4, 3, 2, 3, 4), (4, 1, 1, 2, 0)])
+def test_search_view_matches_twin(rng, view, window, channels, grid, batches, n_random):
     ex, m, vol, src, assign = _search_case(rng, view, window, channels, grid)
     ra, ca = VIEW_AXES[view]
     na = 3 - ra - ca
@@ -154,13 +154,13 @@ def test_search_view_matches_twin(rng, view, window, channels, grid, batches):
     phi = n_sites / m.centres
     want_assign, want_omega, want_energy, want_hist = naive_search_view(
         vol, src, view, m, grid=grid, batches=batches, index_hist=hist, phi=phi, index_weight=2.0,
-        r=0.8, floor=1e-3, assign_v=prev)
+        r=0.8, floor=1e-3, assign_v=prev, n_random=n_random, salt=123456789)
     got_assign = prev.copy()
     got_hist = hist.copy()
     omega = np.zeros(vol.shape[:3], dtype=np.float32)
     energy = np.zeros(vol.shape[na])
     _k.search_view(vol, src, ra, ca, window, m.anchor, grid, 12, lo_r, hi_r, lo_c, hi_c, m.mean,
-                   m.basis, m.proj, m.kcoh, batches, got_hist, phi, 2.0, 0.8, 1e-3, got_assign,
+                   m.basis, m.proj, m.kcoh, batches, got_hist, phi, 2.0, 0.8, 1e-3, n_random, 123456789, got_assign,
                    np.empty(vol.shape[:3], dtype=np.int32), omega, energy)
     np.testing.assert_array_equal(got_assign, want_assign)
     np.testing.assert_allclose(omega, want_omega, rtol=1e-4)
@@ -184,7 +184,7 @@ def test_volume_patch_projection_is_the_models(rng):
     omega = np.zeros((8, 8, 2), dtype=np.float32)
     lo_r, hi_r, lo_c, hi_c = m.bounds
     _k.search_view(vol, src, 0, 1, 4, m.anchor, 1, 16, lo_r, hi_r, lo_c, hi_c, m.mean, m.basis,
-                   m.proj, m.kcoh, 1, np.zeros(m.pixels), 1.0, 0.0, 0.8, 1e-6, assign,
+                   m.proj, m.kcoh, 1, np.zeros(m.pixels), 1.0, 0.0, 0.8, 1e-6, 0, 0, assign,
                    np.empty_like(assign), omega, np.zeros(2))
     assert assign[3, 3, 0] == 6 * 16 + 7  # interior site: the exact copy
 

@@ -33,6 +33,30 @@ from npmrf3d._kernels._jit import jit, jit_parallel, prange
 
 
 @jit
+def mix(x):
+    """splitmix64 finaliser of a non-negative int64 (wrapping arithmetic): a random-looking
+    int64 in [0, 2^63) that depends on ``x`` only (per-site randomness, independent of threads)."""
+    z = np.uint64(x) + np.uint64(0x9E3779B97F4A7C15)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    z = z ^ (z >> np.uint64(31))
+    return np.int64(z >> np.uint64(1))
+
+
+@jit
+def random_centres(salt, site, n_random, lo_r, hi_r, lo_c, hi_c, ewidth, out, start):
+    """Append ``n_random`` valid centres drawn from ``mix(salt + site * n_random + t)`` to ``out``
+    at ``start``; return the new count."""
+    nr = hi_r - lo_r + 1
+    nc = hi_c - lo_c + 1
+    for t in range(n_random):
+        h = mix(salt + site * n_random + t)
+        cell = h % (nr * nc)
+        out[start + t] = (lo_r + cell // nc) * ewidth + lo_c + cell % nc
+    return start + n_random
+
+
+@jit
 def candidates(src_v, ra, ca, pos0, pos1, pos2, ewidth, lo_r, hi_r, lo_c, hi_c, kcoh, out):
     """Fill ``out`` with the candidate centres of the site ``(pos0, pos1, pos2)``; return count.
 
@@ -78,7 +102,7 @@ def candidates(src_v, ra, ca, pos0, pos1, pos2, ewidth, lo_r, hi_r, lo_c, hi_c, 
 @jit_parallel
 def search_view(volume, src_v, ra, ca, window, anchor, grid, ewidth, lo_r, hi_r, lo_c, hi_c,
                 mean, basis, proj, kcoh, batches, index_hist, phi, index_weight, r, floor,
-                assign_v, fresh_v, omega_v, energy):
+                n_random, salt, assign_v, fresh_v, omega_v, energy):
     """Search phase of one view (paper section 4.3 with eq. 5-6).
 
     Parameters
@@ -95,6 +119,8 @@ def search_view(volume, src_v, ra, ca, window, anchor, grid, ewidth, lo_r, hi_r,
     phi, index_weight : the index histogram's even share and strength; the distance is
         multiplied by ``1 + index_weight * max(0, index_hist[e] / phi - 1)``
     r, floor : IRLS exponent and distance floor, ``omega = max(dist, floor) ** (r - 2)``
+    n_random, salt : extra uniformly random valid centres per site (:func:`random_centres` with
+        the flat voxel index as site; 0 = none, the paper)
     assign_v : (N0, N1, N2) int32, in/out: the centre matched at every site (-1 elsewhere;
         on entry the previous assignment, whose counts ``index_hist`` holds)
     fresh_v : (N0, N1, N2) int32, scratch for the new assignments of a batch
@@ -109,7 +135,7 @@ def search_view(volume, src_v, ra, ca, window, anchor, grid, ewidth, lo_r, hi_r,
     channels = shape[3]
     d = window * window * channels
     dims = basis.shape[1]
-    cap = 9 * (1 + kcoh.shape[1])
+    cap = 9 * (1 + kcoh.shape[1]) + n_random
     gr = nr // grid
     gc = nc // grid
     for b in range(batches):
@@ -147,6 +173,9 @@ def search_view(volume, src_v, ra, ca, window, anchor, grid, ewidth, lo_r, hi_r,
                             y[j] += xm * basis[m, j]
                     count = candidates(src_v, ra, ca, p0, p1, p2, ewidth, lo_r, hi_r, lo_c, hi_c,
                                        kcoh, cand)
+                    if n_random > 0:
+                        count = random_centres(salt, (p0 * shape[1] + p1) * shape[2] + p2, n_random,
+                                               lo_r, hi_r, lo_c, hi_c, ewidth, cand, count)
                     best = -1
                     best_cost = np.inf
                     best_d2 = 0.0

@@ -93,6 +93,7 @@ class ChenWangConfig:
     position_weight: float = 8.0
     position_boost: float = 0.0
     coherence_exclude: float = 0.0
+    random_candidates: int = 0
     batches: int = 8
     solver: str = "medoid"
     balance_views: bool = False
@@ -124,7 +125,7 @@ def make_chen_wang_config(
     iterations=DEFAULTS.iterations, k=DEFAULTS.k, pca_dims=DEFAULTS.pca_dims, r=DEFAULTS.r,
     grid=DEFAULTS.grid, index_weight=DEFAULTS.index_weight,
     position_weight=DEFAULTS.position_weight, position_boost=DEFAULTS.position_boost,
-    coherence_exclude=DEFAULTS.coherence_exclude,
+    coherence_exclude=DEFAULTS.coherence_exclude, random_candidates=DEFAULTS.random_candidates,
     batches=DEFAULTS.batches, solver=DEFAULTS.solver, balance_views=DEFAULTS.balance_views,
     seed=None,
 ) -> ChenWangConfig:
@@ -160,6 +161,7 @@ def make_chen_wang_config(
     position_weight = check.real("position_weight", position_weight, low=0.0)
     position_boost = check.real("position_boost", position_boost, low=0.0)
     coherence_exclude = check.real("coherence_exclude", coherence_exclude, low=0.0)
+    random_candidates = check.integer("random_candidates", random_candidates, low=0, high=256)
     batches = check.integer("batches", batches, low=1, high=1024)
     solver = check.choice("solver", solver, SOLVERS)
     views = check.views(views, VIEWS)
@@ -168,7 +170,8 @@ def make_chen_wang_config(
     return ChenWangConfig(size=dims, window=window, levels=levels, views=views,
                           iterations=iterations, k=k, pca_dims=pca_dims, r=r, grid=grid,
                           index_weight=index_weight, position_weight=position_weight,
-                          position_boost=position_boost, coherence_exclude=coherence_exclude, batches=batches, solver=solver,
+                          position_boost=position_boost, coherence_exclude=coherence_exclude,
+                          random_candidates=random_candidates, batches=batches, solver=solver,
                           balance_views=bool(balance_views), seed=seed)
 
 
@@ -194,7 +197,8 @@ def chen_wang_synthesize(
     grid: int = DEFAULTS.grid, index_weight: float = DEFAULTS.index_weight,
     position_weight: float = DEFAULTS.position_weight,
     position_boost: float = DEFAULTS.position_boost,
-    coherence_exclude: float = DEFAULTS.coherence_exclude, batches: int = DEFAULTS.batches,
+    coherence_exclude: float = DEFAULTS.coherence_exclude,
+    random_candidates: int = DEFAULTS.random_candidates, batches: int = DEFAULTS.batches,
     solver: str = DEFAULTS.solver, balance_views: bool = DEFAULTS.balance_views, rng=None,
     progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
 ) -> SynthesisResult:
@@ -234,6 +238,10 @@ def chen_wang_synthesize(
         multiplied by ``1 + position_boost * (1 - H_p / theta)`` (0 = off, the paper).
     coherence_exclude : float >= 0
         k-coherence sets skip centres within this many pixels of the query (0 = off).
+    random_candidates : int >= 0
+        This project's addition: that many uniformly random valid centres join every site's
+        candidate set (drawn per site from a hash of the seed, so thread-independent; 0 = the
+        paper). They let the index histogram reach exemplar parts the coherent candidates miss.
     batches : int
         Histogram updates per pass (search: interleaved slice groups; solver: parts of a random
         voxel order). More batches track the histograms more closely, fewer run more in parallel.
@@ -280,7 +288,7 @@ def chen_wang_synthesize(
         size=size, window=window, levels=levels, views=views, iterations=iterations, k=k,
         pca_dims=pca_dims, r=r, grid=grid, index_weight=index_weight,
         position_weight=position_weight, position_boost=position_boost,
-        coherence_exclude=coherence_exclude, batches=batches,
+        coherence_exclude=coherence_exclude, random_candidates=random_candidates, batches=batches,
         solver=solver, balance_views=balance_views, seed=seed)
     generator = check.rng(rng)
     fit = types.SimpleNamespace(window=config.window[0], levels=config.levels, toroidal_exemplar=False)
@@ -375,8 +383,8 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
                 _k.search_view(volume, src[vi], ra, ca, window, m.anchor, config.grid, widths[vi],
                                lo_r, hi_r, lo_c, hi_c, m.mean, m.basis, m.proj, m.kcoh,
                                min(config.batches, shape[na]), index_hist[vi], phi,
-                               config.index_weight, config.r, floor, assign[vi], fresh, omega[vi],
-                               energy)
+                               config.index_weight, config.r, floor, config.random_candidates,
+                               int(rng.integers(0, 2**62)), assign[vi], fresh, omega[vi], energy)
                 energy_sum += float(energy.sum())
                 sites += n_sites
             t_search += time.perf_counter() - ts
