@@ -89,11 +89,11 @@ class ChenWangConfig:
     pca_dims: int = 20
     r: float = 0.8
     grid: int = 1
-    index_weight: float = 1.0
-    position_weight: float = 8.0
-    position_boost: float = 0.0
+    index_weight: float = 8.0
+    position_weight: float = 32.0
+    position_boost: float = 16.0
     coherence_exclude: float = 0.0
-    random_candidates: int = 0
+    random_candidates: int = 8
     batches: int = 8
     solver: str = "medoid"
     balance_views: bool = False
