@@ -70,7 +70,7 @@ def main(argv=None) -> int:
         sec = res.timings[level]
         searched = st["sites_per_iteration"] * st["iterations"]
         print(f"{level}: {st['shape'][0]}^3, window {st['window']}, {st['iterations']} iterations, "
-              f"{st['candidates_per_site']} candidates per site and view (with repeats), PCA dims "
+              f"{st['candidates_per_site']} candidates per site and view (with repeats; 8 random), PCA dims "
               f"{sorted(set(st['pca_dims'].values()))}: {sec:6.2f} s (search {st['search_seconds']:.2f} s, "
               f"{searched / st['search_seconds']:,.0f} sites/s; solve {st['solve_seconds']:.2f} s); "
               f"changed voxels {st['changed']}")

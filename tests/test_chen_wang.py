@@ -308,7 +308,7 @@ def test_any_channel_count_and_views(rng, channels):
     ex = rng.random((20, 20, channels)).astype(np.float32)
     res = chen_wang_synthesize(ex, size=8, window=4, levels=1, iterations=1, views="front,top", rng=1)
     assert res.volume.shape == (8, 8, 8, channels)
-    assert res.stats["levels"]["level_0"]["candidates_per_site"] == 54
+    assert res.stats["levels"]["level_0"]["candidates_per_site"] == 54 + 8
 
 
 def test_an_exemplar_per_view(rng):

@@ -405,7 +405,7 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
         used = [float((pos_hist[hist_off[vi]:hist_off[vi] + m.pixels] > 0).mean()) for vi, m in enumerate(vmodels)]
         stats["levels"][f"level_{level}"] = {
             "shape": list(shape), "window": window, "iterations": n_iter,
-            "candidates_per_site": 9 * (1 + config.k), "sites_per_iteration": sites,
+            "candidates_per_site": 9 * (1 + config.k) + config.random_candidates, "sites_per_iteration": sites,
             "pca_dims": {v: int(vmodels[vi].basis.shape[1]) for vi, v in enumerate(views)},
             "centres": {v: int(vmodels[vi].centres) for vi, v in enumerate(views)},
             "search_seconds": t_search, "solve_seconds": t_solve, "changed": changed,
