@@ -402,3 +402,27 @@ def test_exemplar_too_small_for_a_level_window():
     with pytest.raises(ParameterError, match="same number of channels"):
         chen_wang_synthesize(np.zeros((32, 32)), exemplars={"top": np.zeros((32, 32, 3))}, size=16,
                              window=4, levels=1, iterations=1)
+
+
+def test_solve_does_not_depend_on_the_order_within_a_batch(rng):
+    """The run visits each batch in memory order (faster); only the batches' order matters."""
+    views = VIEWS3
+    exemplars, models, assign, omega, src, volume = _solve_case(rng, views, 4, 3, 1)
+    packed, ex_off, hist_off = CW._pack(models)
+    n = volume.shape[0] * volume.shape[1] * volume.shape[2]
+    order = rng.permutation(n).astype(np.int64)
+    bounds = np.array([0, 60, 130, n], dtype=np.int64)
+    out = []
+    for shuffle in (False, True):
+        o = order.copy()
+        for b in range(3):
+            seg = o[bounds[b]:bounds[b + 1]]
+            seg[:] = rng.permutation(seg) if shuffle else np.sort(seg)
+        vol, s = volume.copy(), src.copy()
+        hist = np.concatenate([np.bincount(x.ravel(), minlength=110) for x in src]).astype(np.float64)
+        _k.solve(vol, s, assign, omega, np.array([VIEW_AXES[v] for v in views]), packed, ex_off,
+                 np.full(3, 10), 4, 1, 1, o, bounds, hist, hist_off, np.full(3, n / 110), 3.0, 4.0, 8,
+                 False, 16)
+        out.append((vol, s, hist))
+    for a, b in zip(*out):
+        np.testing.assert_array_equal(a, b)

@@ -390,6 +390,10 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
             t_search += time.perf_counter() - ts
             ts = time.perf_counter()
             order = rng.permutation(n_vox).astype(np.int64)
+            for b in range(len(bounds) - 1):
+                # within a batch the histograms are frozen and every voxel depends only on them
+                # and the votes, so visiting a batch in memory order gives the same volume faster
+                order[bounds[b]:bounds[b + 1]].sort()
             changed.append(int(_k.solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth,
                                         window, vmodels[0].anchor, config.grid, order, bounds, pos_hist,
                                         hist_off, theta, config.position_weight, config.position_boost,
