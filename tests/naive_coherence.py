@@ -103,16 +103,12 @@ def naive_candidate_list(src_v, view, site, ewidth, bounds, kcoh):
     return out
 
 
-M64 = (1 << 64) - 1
-
-
 def naive_mix(x):
-    """splitmix64 finaliser (64-bit wrapping), shifted right by one."""
-    z = (x + 0x9E3779B97F4A7C15) & M64
-    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & M64
-    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & M64
-    z = z ^ (z >> 31)
-    return z >> 1
+    """The kernel's 31-bit hash, in Python integers."""
+    h = (x ^ (x >> 31)) & 0x7FFFFFFF
+    for shift, mult in ((15, 0x2C1B3C6D), (12, 0x297A2D39), (15, 0x2C1B3C6D)):
+        h = ((h ^ (h >> shift)) * mult) & 0x7FFFFFFF
+    return h ^ (h >> 15)
 
 
 def naive_random_centres(salt, site_flat, n_random, bounds, ewidth):

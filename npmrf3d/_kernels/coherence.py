@@ -34,19 +34,20 @@ from npmrf3d._kernels._jit import jit, jit_parallel, prange
 
 @jit
 def mix(x):
-    """splitmix64 finaliser of a non-negative int64 (wrapping arithmetic): a random-looking
-    int64 in [0, 2^63) that depends on ``x`` only (per-site randomness, independent of threads)."""
-    z = np.uint64(x) + np.uint64(0x9E3779B97F4A7C15)
-    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    z = z ^ (z >> np.uint64(31))
-    return np.int64(z >> np.uint64(1))
+    """A 31-bit integer hash of a non-negative ``x < 2**62`` (per-site randomness that depends on
+    ``x`` only, so on no thread count). Products stay below ``2**62``: no overflow, so the same
+    code runs compiled and as plain Python (``NUMBA_DISABLE_JIT``)."""
+    h = (x ^ (x >> 31)) & 0x7FFFFFFF
+    h = ((h ^ (h >> 15)) * 0x2C1B3C6D) & 0x7FFFFFFF
+    h = ((h ^ (h >> 12)) * 0x297A2D39) & 0x7FFFFFFF
+    h = ((h ^ (h >> 15)) * 0x2C1B3C6D) & 0x7FFFFFFF
+    return h ^ (h >> 15)
 
 
 @jit
 def random_centres(salt, site, n_random, lo_r, hi_r, lo_c, hi_c, ewidth, out, start):
     """Append ``n_random`` valid centres drawn from ``mix(salt + site * n_random + t)`` to ``out``
-    at ``start``; return the new count."""
+    at ``start``; return the new count (``salt < 2**31``)."""
     nr = hi_r - lo_r + 1
     nc = hi_c - lo_c + 1
     for t in range(n_random):

@@ -384,7 +384,7 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
                                lo_r, hi_r, lo_c, hi_c, m.mean, m.basis, m.proj, m.kcoh,
                                min(config.batches, shape[na]), index_hist[vi], phi,
                                config.index_weight, config.r, floor, config.random_candidates,
-                               int(rng.integers(0, 2**62)), assign[vi], fresh, omega[vi], energy)
+                               int(rng.integers(0, 2**31)), assign[vi], fresh, omega[vi], energy)
                 energy_sum += float(energy.sum())
                 sites += n_sites
             t_search += time.perf_counter() - ts
