@@ -281,7 +281,8 @@ def _votes(p0, p1, p2, assign, omega, view_axes, ex_off, ewidth, window, anchor,
 
 @jit_parallel
 def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window, anchor, grid,
-          order, batch_bounds, pos_hist, hist_off, theta, position_weight, position_boost, medoid, balance, chunk):
+          order, batch_bounds, pos_hist, hist_off, theta, position_weight, position_boost, medoid, balance, chunk,
+          likelihood=0, h2c=1.0, outlier=0.0):
     """Discrete solver (paper section 4.2 with eq. 4), one pass over all voxels.
 
     Voxels are visited in ``order`` (flat indices), cut into batches at ``batch_bounds``. Within a
@@ -293,6 +294,13 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
     (the copied texel itself for its own view). After the batch, in one thread, the position
     histograms ``pos_hist`` (packed per view at ``hist_off``, counts of voxels per source pixel)
     move from the old sources to the new ones. Returns the number of voxels whose colour changed.
+
+    With ``likelihood`` 1 (ML_H2b) or 2 (ML_H2a) the candidates of the ``medoid`` heaviest votes
+    are scored instead by the NP-MRF rule (the coherent NP-MRF sampler, :mod:`npmrf3d.coherent`):
+    per view, a Parzen estimate of the candidate colour's probability from that view's votes,
+    ``L_v(p) = sum_{q in v} w_q exp(-||e_p - e_q||^2 / h2c) / sum_{q in v} w_q``, mixed with an
+    ``outlier`` share; the views are combined by the product (1) or the minimum (2) and the
+    highest score wins (first on ties).
     """
     n_views = assign.shape[0]
     n0, n1, n2, channels = volume.shape
@@ -312,6 +320,7 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
             vsum = np.empty(n_views, dtype=np.float64)
             taken = np.zeros(cap, dtype=np.bool_)
             tops = np.empty(max(medoid, 1), dtype=np.int64)
+            lik = np.empty(n_views, dtype=np.float64)
             for t in range(c * chunk, min(m, (c + 1) * chunk)):
                 flat = order[start + t]
                 p0 = flat // (n1 * n2)
@@ -352,8 +361,33 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
                         tops[n_try] = top
                         n_try += 1
                     best_e = np.inf
+                    if likelihood:
+                        for v in range(n_views):
+                            vsum[v] = 0.0
+                        for q in range(count):
+                            vsum[vv[q]] += vw[q]
                     for a in range(n_try):
                         q = tops[a]
+                        if likelihood:
+                            for v in range(n_views):
+                                lik[v] = 0.0
+                            for q2 in range(count):
+                                dd = 0.0
+                                for ch in range(channels):
+                                    diff = ex_flat[vg[q], ch] - ex_flat[vg[q2], ch]
+                                    dd += diff * diff
+                                lik[vv[q2]] += vw[q2] * np.exp(-dd / h2c)
+                            score = 0.0 if likelihood == 1 else np.inf
+                            for v in range(n_views):
+                                lv = (1.0 - outlier) * lik[v] / vsum[v] + outlier if vsum[v] > 0.0 else outlier
+                                if likelihood == 1:
+                                    score += np.log(lv)
+                                else:
+                                    score = min(score, lv)
+                            if -score < best_e:
+                                best_e = -score
+                                best = q
+                            continue
                         e_sum = 0.0
                         for q2 in range(count):
                             dd = 0.0

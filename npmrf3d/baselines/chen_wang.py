@@ -302,10 +302,14 @@ def chen_wang_synthesize(
 
 def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rng: np.random.Generator, *,
         progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
-        t_start: float | None = None) -> SynthesisResult:
+        t_start: float | None = None, decision: tuple[int, float, float] = (0, 0.0, 0.0)) -> SynthesisResult:
     """Run a validated configuration on validated float32 ``(H, W, C)`` exemplars (one per view).
 
     The body of :func:`chen_wang_synthesize`, with the signature of a registered method.
+    ``decision = (likelihood, centre_bandwidth, outlier)`` switches the solver's choice among the
+    heaviest votes to the NP-MRF rule (``likelihood`` 1 = ML_H2b, 2 = ML_H2a; the centre kernel's
+    width is ``centre_bandwidth`` times the exemplar's standard deviation); used by the coherent
+    NP-MRF sampler (:mod:`npmrf3d.coherent`), 0 = Chen–Wang's own solver.
     """
     t_start = time.perf_counter() if t_start is None else t_start
     views = config.views
@@ -324,7 +328,7 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
     volume = src = None
     prev_widths = None
     first_level = config.levels - 1
-    key = _config_key(config, per_view)
+    key = _config_key(config, per_view) + (f"|decision={list(decision)}" if decision[0] else "")
     resumed = _load_checkpoint(checkpoint, key)
     if resumed is not None:
         volume, src, done_level, rng_state, history, timings, stats, prev_widths = resumed
@@ -397,8 +401,9 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
             changed.append(int(_k.solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth,
                                         window, vmodels[0].anchor, config.grid, order, bounds, pos_hist,
                                         hist_off, theta, config.position_weight, config.position_boost,
-                                        _MEDOID_CANDIDATES if config.solver == "medoid" else 0,
-                                        config.balance_views, _SOLVE_CHUNK)))
+                                        _MEDOID_CANDIDATES if config.solver == "medoid" or decision[0] else 0,
+                                        config.balance_views, _SOLVE_CHUNK, decision[0],
+                                        2.0 * (decision[1] * sigma) ** 2 or 1.0, decision[2])))
             t_solve += time.perf_counter() - ts
             level_history.append(energy_sum / max(1, sites))
             if progress is not None:
