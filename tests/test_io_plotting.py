@@ -15,11 +15,6 @@ from npmrf3d.errors import ParameterError
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
-@pytest.fixture
-def rng() -> np.random.Generator:
-    return np.random.default_rng(0)
-
-
 def random_volume(rng: np.random.Generator, channels: int) -> np.ndarray:
     return rng.random((4, 5, 6, channels), dtype=np.float32)
 

@@ -21,11 +21,7 @@ import pytest
 
 import npmrf3d
 from npmrf3d import data
-
-
-def checker(side: int = 24, block: int = 2) -> np.ndarray:
-    r = np.arange(side) // block
-    return (((r[:, None] + r[None, :]) % 2) * 255).astype(np.uint8)
+from tests.conftest import checkerboard as checker
 
 
 def _ihc():

@@ -70,7 +70,7 @@ from ..config import SynthesisResult
 from ..neighborhood import VIEW_AXES, VIEWS
 from ..pyramid import LevelState, level_shape
 from ..pyramid import upsample as _pyramid_upsample
-from . import _kopf_kernels as _k
+from .._kernels import kopf as _k
 
 __all__ = ["KopfConfig", "UPSAMPLING", "kopf_synthesize"]
 
