@@ -19,7 +19,8 @@ import numpy as np
 
 from . import _validation as check
 from . import io
-from .cli import BUNDLED_PREFIX, PROG, _check_out, _exemplar_source, say
+from .cli import PROG, _check_out, say
+from .exemplar import BUNDLED_PREFIX, exemplar_source
 from .errors import ParameterError
 from .neighborhood import VIEWS
 
@@ -129,7 +130,7 @@ def _read_exemplars(args: argparse.Namespace, views: tuple[str, ...]
     cache: dict[str, np.ndarray] = {}
     for view in views:
         own = getattr(args, f"exemplar_{view}")
-        path, name = _exemplar_source(own if own is not None else args.exemplar)
+        path, name = exemplar_source(own if own is not None else args.exemplar)
         if name not in cache:
             label = f"exemplar for view {view}" if own is not None else "exemplar"
             cache[name] = load_exemplar(path, name=label)

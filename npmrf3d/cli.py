@@ -15,18 +15,18 @@ import os
 import pathlib
 import sys
 import time
-from datetime import datetime, timezone
 
 from . import data, io
 from .config import VARIANTS
 from .errors import ParameterError
+from .exemplar import BUNDLED_PREFIX, exemplar_source, resolve_exemplars
 from .neighborhood import VIEWS
 from .pyramid import INHERIT, UPSAMPLING
+from .runs import RUN_FILES, run_record, write_run
 
 __all__ = ["main", "build_parser"]
 
 PROG = "npmrf3d"
-BUNDLED_PREFIX = "bundled:"
 _DEFAULT_RULE = VARIANTS["default"]
 _HEURISTIC_NAMES = ("ML_H1a", "ML_H1b", "ML_H2a", "ML_H2b")
 #: Modules that add further sub-commands: each has ``register(commands, formatter_class)``,
@@ -71,7 +71,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="synthesise a solid texture from an exemplar and write a run folder",
         description=(
             "Synthesise a solid texture whose slices look like the exemplar and write\n"
-            f"{', '.join(io.RUN_FILES)} into the output folder.\n\n"
+            f"{', '.join(RUN_FILES)} into the output folder.\n\n"
             "examples:\n"
             "  npmrf3d synth                                  # bundled exemplar, 32^3\n"
             "  npmrf3d synth wood.png --size 64 --out wood    # your own image\n"
@@ -281,19 +281,7 @@ def _parse_size(text: str) -> int | tuple[int, ...]:
     return numbers[0] if len(numbers) == 1 else tuple(numbers)
 
 
-def _exemplar_source(text: str | None) -> tuple[pathlib.Path | None, str | None]:
-    """(file to load, what run.json records) for an EXEMPLAR or --exemplar-VIEW argument."""
-    if text is None:
-        return None, None
-    if text.startswith(BUNDLED_PREFIX):
-        name = text[len(BUNDLED_PREFIX):]
-        return data.path(name), f"{BUNDLED_PREFIX}{name}"
-    if not text.strip():
-        raise ParameterError("exemplar file name is empty")
-    return pathlib.Path(text), text
-
-
-def _check_out(out: pathlib.Path, overwrite: bool, files: tuple[str, ...] = io.RUN_FILES,
+def _check_out(out: pathlib.Path, overwrite: bool, files: tuple[str, ...] = RUN_FILES,
                what: str = "a run") -> None:
     """The output folder must be usable (checked before the work; the writers check again).
 
@@ -332,10 +320,10 @@ def _output_folder(args: argparse.Namespace) -> pathlib.Path:
 
 def _view_sources(args: argparse.Namespace):
     """(EXEMPLAR file, {view: --exemplar-VIEW file}, views -> {view: name for run.json})."""
-    exemplar, exemplar_name = _exemplar_source(args.exemplar)
+    exemplar, exemplar_name = exemplar_source(args.exemplar)
     per_view_sources, names = {}, {}
     for view in VIEWS:
-        source, name = _exemplar_source(getattr(args, f"exemplar_{view}"))
+        source, name = exemplar_source(getattr(args, f"exemplar_{view}"))
         if source is not None:
             per_view_sources[view], names[view] = source, name
     return exemplar, per_view_sources, lambda views: {v: names.get(v, exemplar_name) for v in views}
@@ -344,26 +332,13 @@ def _view_sources(args: argparse.Namespace):
 def _write_result(out: pathlib.Path, args: argparse.Namespace, argv: list[str], command: str,
                   result, per_view: dict, sources: dict, title: str, **extra) -> None:
     """Write the run folder (volume, TIFF, preview, run.json with ``extra``) and say so."""
-    record = {
-        "command": command,
-        "argv": [PROG, *argv],
-        "config": result.config.to_dict(),
-        "seed": result.config.seed,
-        "exemplars": sources,
-        **extra,
-        "versions": io.package_versions(),
-        "threads": result.stats["threads"],
-        "timings": result.timings,
-        "history": result.history,
-        "stats": result.stats,
-        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-    }
-    io.write_run(out, volume=result.volume, exemplars=per_view, record=record,
-                 overwrite=args.overwrite, title=title)
+    record = run_record(command, result, exemplars=sources, argv=[PROG, *argv], **extra)
+    write_run(out, volume=result.volume, exemplars=per_view, record=record,
+              overwrite=args.overwrite, title=title)
     if not args.quiet:
         shape = "x".join(str(n) for n in result.volume.shape)
         labels = f"{len(result.labels)} labels, " if len(result.labels) else ""
-        print(f"wrote {out}{os.sep}: {', '.join(io.RUN_FILES)}")
+        print(f"wrote {out}{os.sep}: {', '.join(RUN_FILES)}")
         print(f"volume {shape} (N1xN2xN3xC), {labels}{result.timings['total']:.1f} s")
 
 
@@ -436,7 +411,7 @@ class _Progress:
 
 
 def _synth(args: argparse.Namespace, argv: list[str]) -> int:
-    from .synthesis import make_config, resolve_exemplars, run
+    from .synthesis import make_config, run
 
     t_start = time.perf_counter()
     config = make_config(
@@ -455,7 +430,8 @@ def _synth(args: argparse.Namespace, argv: list[str]) -> int:
     _check_checkpoint(checkpoint)
 
     exemplar, per_view_sources, source_names = _view_sources(args)
-    per_view = resolve_exemplars(exemplar, per_view_sources, config.views, config)
+    per_view = resolve_exemplars(exemplar, per_view_sources, config.views, window=config.window,
+                                 levels=config.levels, toroidal=config.toroidal_exemplar)
     sources = source_names(config.views)
     if not args.quiet and config.palette is None and config.grey_levels is None:
         _note_many_values(per_view)

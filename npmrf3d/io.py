@@ -1,4 +1,4 @@
-"""Reading and writing exemplars, volumes, run folders and checkpoints.
+"""Reading and writing exemplars, volumes, JSON and checkpoints (run folders: :mod:`npmrf3d.runs`).
 
 Conventions
 -----------
@@ -10,7 +10,7 @@ Conventions
   :func:`write_volume_tiff`.
 * Every file is written atomically (temporary name in the same folder, then
   :func:`os.replace`), and a run folder is staged completely before it is moved into
-  place (:func:`write_run`), so an interrupted or failed write never leaves partial output.
+  place (:func:`npmrf3d.runs.write_run`), so an interrupted or failed write never leaves partial output.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import os
 import pathlib
 import platform
 import secrets
-import shutil
+import sys
 import tempfile
 from collections.abc import Callable, Mapping
 from typing import Any
@@ -33,7 +33,6 @@ from npmrf3d.errors import ParameterError
 
 __all__ = [
     "IMAGE_EXTENSIONS",
-    "RUN_FILES",
     "TIFF_EXTENSIONS",
     "as_volume",
     "atomic_write",
@@ -44,7 +43,6 @@ __all__ = [
     "save_checkpoint",
     "to_jsonable",
     "write_json",
-    "write_run",
     "write_volume_tiff",
 ]
 
@@ -52,9 +50,6 @@ __all__ = [
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".gif")
 #: Extensions read and written with tifffile.
 TIFF_EXTENSIONS = (".tif", ".tiff")
-#: The files that make up one run folder, in the order they are moved into place
-#: (``run.json`` last, so its presence marks a complete run).
-RUN_FILES = ("volume.npy", "volume.tif", "preview.png", "run.json")
 
 _READABLE_EXTENSIONS = (*IMAGE_EXTENSIONS, *TIFF_EXTENSIONS, ".npy")
 _VERSIONED_PACKAGES = (
@@ -353,83 +348,6 @@ def write_json(path: str | os.PathLike[str], obj: Any) -> pathlib.Path:
     return atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
 
 
-def write_run(
-    out_dir: str | os.PathLike[str],
-    *,
-    volume: np.ndarray,
-    exemplars: Mapping[str, np.ndarray],
-    record: Mapping[str, Any],
-    overwrite: bool = False,
-    title: str | None = None,
-) -> pathlib.Path:
-    """Write a complete run folder: ``volume.npy``, ``volume.tif``, ``preview.png``, ``run.json``.
-
-    The four files are written into a staging folder ``.<name>.partial-<random>`` next to
-    ``out_dir`` and then moved into ``out_dir`` (``run.json`` last); the staging folder is
-    always removed, so a failure never leaves partial output. Other files in ``out_dir`` are
-    left alone.
-
-    Parameters
-    ----------
-    out_dir : str or os.PathLike
-        Output folder; created (with its parents) if missing.
-    volume : numpy.ndarray
-        Synthesised volume of shape ``(N1, N2, N3, C)``.
-    exemplars : Mapping[str, numpy.ndarray]
-        View name (``"front"``, ``"right"``, ``"top"``) -> exemplar of shape ``(H, W, C)``;
-        several views may share one array. Used for the preview only.
-    record : Mapping[str, Any]
-        Run description saved as ``run.json`` (converted with :func:`to_jsonable`).
-    overwrite : bool, optional
-        Replace the files of a previous run in ``out_dir``.
-    title : str, optional
-        Title of the preview figure.
-
-    Returns
-    -------
-    pathlib.Path
-        ``out_dir``.
-
-    Raises
-    ------
-    ParameterError
-        If ``out_dir`` is an existing file, or already holds a run and ``overwrite`` is False.
-    TypeError
-        If ``record`` cannot be converted to JSON (checked before anything is written).
-    """
-    from npmrf3d.plotting import preview_figure, save_figure
-
-    out_dir = pathlib.Path(out_dir)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise ParameterError(f"output folder '{out_dir}' exists and is not a folder")
-    previous = [name for name in RUN_FILES if (out_dir / name).exists()]
-    if previous and not overwrite:
-        raise ParameterError(
-            f"output folder '{out_dir}' already holds a run ({', '.join(previous)}); "
-            "pass overwrite=True (--overwrite) or choose another --out"
-        )
-    volume = as_volume(volume)
-    text = _json_text(record)  # fail on a bad record before touching the disk
-
-    target = out_dir.absolute()
-    # stage in the nearest existing ancestor, so that a failure leaves no new folders behind
-    anchor = target.parent
-    while not anchor.exists():
-        anchor = anchor.parent
-    staging = pathlib.Path(tempfile.mkdtemp(prefix=f".{target.name}.partial-", dir=anchor))
-    try:
-        np.save(staging / "volume.npy", volume, allow_pickle=False)
-        write_volume_tiff(staging / "volume.tif", volume)
-        save_figure(preview_figure(volume, exemplars, title=title), staging / "preview.png")
-        (staging / "run.json").write_text(text, encoding="utf-8")
-        out_dir.mkdir(parents=True, exist_ok=True)
-        for name in RUN_FILES:
-            os.replace(staging / name, out_dir / name)
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
-    return out_dir
-
-
 # --------------------------------------------------------------------------- checkpoints
 
 
@@ -499,10 +417,8 @@ def _version(distribution: str) -> str:
     try:
         return importlib.metadata.version(distribution)
     except importlib.metadata.PackageNotFoundError:
-        if distribution == "npmrf3d":  # running from a source checkout
-            import npmrf3d
-
-            return getattr(npmrf3d, "__version__", "not installed")
+        if distribution == "npmrf3d":  # running from a source checkout (already imported)
+            return getattr(sys.modules.get("npmrf3d"), "__version__", "not installed")
         return "not installed"
 
 

@@ -13,7 +13,7 @@ import numpy as np
 from . import _validation as check
 from ._kernels import _jit
 from .config import VARIANTS, SynthesisConfig, SynthesisResult
-from .exemplar import load_exemplar, make_labels
+from .exemplar import make_labels, resolve_exemplars
 from .heuristics import DECISIONS, get_heuristic
 from .neighborhood import VIEWS, colour_classes
 from .parzen import PRUNE, adaptive_floor, build_view_models
@@ -96,30 +96,6 @@ def make_config(
         proposal=proposal, variant=variant, rule=rule, grey_levels=grey_levels, palette=palette,
         toroidal_exemplar=bool(toroidal_exemplar), seed=seed,
     )
-
-
-def resolve_exemplars(exemplar, exemplars: dict | None, views: tuple[str, ...], config) -> dict[str, np.ndarray]:
-    """One float32 (H, W, C) exemplar per constrained view, validated against the window."""
-    exemplars = dict(exemplars or {})
-    unknown = set(exemplars) - set(views)
-    if unknown:
-        check.fail(f"exemplars given for views that are not constrained: {', '.join(sorted(unknown))}; "
-                   f"constrained views are {', '.join(views)}")
-    out, cache = {}, {}
-    for v in views:
-        source = exemplars.get(v, exemplar)
-        key = id(source) if not isinstance(source, (str, Path)) else str(source)
-        if key not in cache:
-            cache[key] = load_exemplar(source, name=f"exemplar for view {v}" if v in exemplars else "exemplar")
-        out[v] = cache[key]
-    channels = {a.shape[2] for a in out.values()}
-    if len(channels) > 1:
-        check.fail(f"all exemplars must have the same number of channels; got {sorted(channels)}")
-    for v, a in out.items():
-        check.exemplar_fits(a, window=config.window, levels=config.levels,
-                            toroidal=config.toroidal_exemplar,
-                            name="exemplar" if len(out) == 1 or v not in exemplars else f"exemplar for view {v}")
-    return out
 
 
 def synthesize(
@@ -221,7 +197,8 @@ def synthesize(
         palette=palette, toroidal_exemplar=toroidal_exemplar, seed=seed,
     )
     generator = check.rng(rng)
-    per_view = resolve_exemplars(exemplar, exemplars, config.views, config)
+    per_view = resolve_exemplars(exemplar, exemplars, config.views, window=config.window,
+                                 levels=config.levels, toroidal=config.toroidal_exemplar)
     return run(config, per_view, generator, progress=progress, checkpoint=checkpoint, t_start=t_start)
 
 

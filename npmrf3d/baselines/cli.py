@@ -15,6 +15,7 @@ import time
 from .. import data, io
 from ..errors import ParameterError
 from ..neighborhood import VIEWS
+from ..runs import RUN_FILES
 
 __all__ = ["register"]
 
@@ -42,7 +43,7 @@ def register(commands, formatter_class) -> None:
             "NP_K (Kopf et al. 2007): minimise the robust distance between the volume's\n"
             "axis-orthogonal 2D neighbourhoods and their nearest exemplar neighbourhoods\n"
             "(PCA + approximate kd-tree search on a sparse grid, IRLS averaging, histogram\n"
-            f"matching), coarse to fine. Writes {', '.join(io.RUN_FILES)} into the output folder.\n\n"
+            f"matching), coarse to fine. Writes {', '.join(RUN_FILES)} into the output folder.\n\n"
             "examples:\n"
             "  npmrf3d baseline kopf                                # bundled exemplar, 32^3\n"
             "  npmrf3d baseline kopf bundled:ihc --size 128 --out ihc-kopf\n"
@@ -173,7 +174,7 @@ def _run(args: argparse.Namespace, argv: list[str]) -> int:
     import numpy as np
 
     from ..cli import _output_folder, _parse_size, _Progress, _view_sources, _write_result
-    from ..synthesis import resolve_exemplars
+    from ..exemplar import resolve_exemplars
     from .kopf import _constraint_arrays, make_kopf_config, run_kopf
 
     t_start = time.perf_counter()
@@ -188,7 +189,8 @@ def _run(args: argparse.Namespace, argv: list[str]) -> int:
     )
     out = _output_folder(args)
     exemplar, per_view_sources, source_names = _view_sources(args)
-    per_view = resolve_exemplars(exemplar, per_view_sources, config.views, _config_fit(config))
+    per_view = resolve_exemplars(exemplar, per_view_sources, config.views, window=config.window,
+                                 levels=config.levels)
     sources = source_names(config.views)
     channels = next(iter(per_view.values())).shape[2]
     target, tau = _constraint_arrays(constraint, weight, config.size, channels)
@@ -205,10 +207,3 @@ def _run(args: argparse.Namespace, argv: list[str]) -> int:
     _write_result(out, args, argv, "baseline kopf", result, per_view, sources, title,
                   constraint=args.constraint, constraint_weight=args.constraint_weight)
     return 0
-
-
-def _config_fit(config):
-    """What :func:`npmrf3d.synthesis.resolve_exemplars` checks the exemplars against."""
-    import types
-
-    return types.SimpleNamespace(window=config.window, levels=config.levels, toroidal_exemplar=False)

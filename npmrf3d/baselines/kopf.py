@@ -67,6 +67,7 @@ from scipy.spatial import cKDTree
 from .. import _validation as check
 from .._kernels import _jit
 from ..config import SynthesisResult
+from ..exemplar import resolve_exemplars
 from ..neighborhood import VIEW_AXES, VIEWS
 from ..pyramid import LevelState, level_shape
 from ..pyramid import upsample as _pyramid_upsample
@@ -592,8 +593,6 @@ def kopf_synthesize(
     >>> res.volume.shape
     (8, 8, 8, 1)
     """
-    from ..synthesis import resolve_exemplars
-
     t_start = time.perf_counter()
     seed = rng if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) else None
     config = make_kopf_config(
@@ -603,8 +602,8 @@ def kopf_synthesize(
         constrained=constraint is not None, seed=seed,
     )
     generator = check.rng(rng)
-    fit = types.SimpleNamespace(window=config.window, levels=config.levels, toroidal_exemplar=False)
-    per_view = resolve_exemplars(exemplar, exemplars, config.views, fit)
+    per_view = resolve_exemplars(exemplar, exemplars, config.views, window=config.window,
+                                 levels=config.levels)
     channels = next(iter(per_view.values())).shape[2]
     target, tau = _constraint_arrays(constraint, constraint_weight, config.size, channels)
     return run_kopf(config, per_view, generator, constraint=target, constraint_weight=tau,

@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from npmrf3d.errors import ParameterError
+from npmrf3d.exemplar import exemplar_slice
 
 __all__ = [
     "GREY_BINS",
@@ -56,22 +57,6 @@ def load_reference(path) -> np.ndarray:
     from npmrf3d.io import read_volume
 
     return read_volume(path)
-
-
-def exemplar_slice(volume: np.ndarray, axis: int = 0, index: int | None = None) -> np.ndarray:
-    """The slice across ``axis`` at ``index`` (default: the middle) as an ``(H, W, C)`` image.
-
-    >>> v = np.arange(24, dtype=np.float32).reshape(2, 3, 4, 1)
-    >>> exemplar_slice(v, 2, 0)[..., 0].tolist()
-    [[0.0, 4.0, 8.0], [12.0, 16.0, 20.0]]
-    """
-    if axis not in (0, 1, 2):
-        raise ParameterError(f"slice axis must be 0, 1 or 2; got {axis!r}")
-    n = volume.shape[axis]
-    index = n // 2 if index is None else int(index)
-    if not 0 <= index < n:
-        raise ParameterError(f"slice index must be in [0, {n - 1}] for axis {axis}; got {index}")
-    return np.ascontiguousarray(np.take(volume, index, axis=axis))
 
 
 def reference_slices(volume: np.ndarray) -> dict[str, np.ndarray]:

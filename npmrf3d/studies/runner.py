@@ -46,6 +46,8 @@ import numpy as np
 
 from npmrf3d._kernels import _jit
 from npmrf3d.errors import ParameterError
+from npmrf3d.exemplar import exemplar_slice, named_exemplar
+from npmrf3d.runs import run_record, write_run
 from npmrf3d.metrics import METRICS
 
 from .grid import RunSpec, Study
@@ -101,20 +103,6 @@ def structureless(exemplar: np.ndarray, size: int, rng) -> np.ndarray:
 def is_finished(run_dir: pathlib.Path) -> bool:
     """True when ``run_dir`` holds a complete run (``run.json`` and ``metrics.json``)."""
     return all((pathlib.Path(run_dir) / name).is_file() for name in FINISHED_FILES)
-
-
-def _config_dict(result) -> Any:
-    config = getattr(result, "config", None)
-    if config is None:
-        return None
-    if hasattr(config, "to_dict"):
-        return config.to_dict()
-    from npmrf3d.io import to_jsonable
-
-    try:
-        return to_jsonable(config)
-    except TypeError:
-        return repr(config)
 
 
 def _synthesise(spec: RunSpec, exemplar: np.ndarray, real: np.ndarray | None):
@@ -174,11 +162,9 @@ def execute_run(spec: RunSpec, study_dir: str, threads: int | None = None) -> di
             from . import groundtruth
 
             real = groundtruth.load_reference(spec.reference)
-            exemplar = groundtruth.exemplar_slice(real, spec.slice_axis, spec.slice_index)
+            exemplar = exemplar_slice(real, spec.slice_axis, spec.slice_index)
         else:
-            from .catalog import load_exemplar
-
-            exemplar = load_exemplar(spec.exemplar, spec.crop)
+            exemplar = named_exemplar(spec.exemplar, spec.crop)
         volume, per_view, result = _synthesise(spec, exemplar, real)
         if real is not None:
             from . import groundtruth
@@ -194,29 +180,17 @@ def execute_run(spec: RunSpec, study_dir: str, threads: int | None = None) -> di
             measured["groundtruth"] = truth
         wall = time.perf_counter() - t_start
         timings = dict(getattr(result, "timings", None) or {"total": wall})
-        record = {
-            "command": "study",
-            "study": spec.study,
-            "run_id": spec.run_id,
-            "spec": spec.to_dict(),
-            "seed": spec.seed,
-            "config": _config_dict(result),
-            "exemplars": {v: spec.exemplar for v in per_view},
-            "versions": io.package_versions(),
-            "threads": used_threads,
-            "host": socket.gethostname(),
-            "pid": os.getpid(),
-            "timings": timings,
-            "wall_seconds": wall,
-            "history": getattr(result, "history", None),
-            "stats": getattr(result, "stats", None),
-            "labels": None if result is None or getattr(result, "labels", None) is None
+        record = run_record(
+            "study", result, exemplars={v: spec.exemplar for v in per_view}, threads=used_threads,
+            study=spec.study, run_id=spec.run_id, spec=spec.to_dict(), seed=spec.seed,
+            host=socket.gethostname(), pid=os.getpid(), wall_seconds=wall,
+            labels=None if result is None or getattr(result, "labels", None) is None
             else int(len(result.labels)),
-            "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        }
+        )
+        record["timings"] = timings
         title = f"{spec.study}: {spec.method} on {spec.exemplar}, seed {spec.seed}"
         (run_dir / "metrics.json").unlink(missing_ok=True)  # finished = both files, written last
-        io.write_run(run_dir, volume=volume, exemplars=per_view, record=record, overwrite=True,
+        write_run(run_dir, volume=volume, exemplars=per_view, record=record, overwrite=True,
                      title=title)
         io.write_json(run_dir / "metrics.json", measured)
         return make_row(spec, "done", record, measured)
