@@ -27,8 +27,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from npmrf3d import metrics
 from npmrf3d.errors import ParameterError
 from npmrf3d.exemplar import exemplar_slice
+from npmrf3d.io import read_volume
 
 __all__ = [
     "GREY_BINS",
@@ -54,8 +56,6 @@ MAX_LAG = 32
 def load_reference(path) -> np.ndarray:
     """The real volume as float32 ``(N1, N2, N3, C)`` (``.npy`` or ``.tif``, see
     :func:`npmrf3d.io.read_volume`)."""
-    from npmrf3d.io import read_volume
-
     return read_volume(path)
 
 
@@ -172,8 +172,6 @@ def compare(volume: np.ndarray, real: np.ndarray, exemplar: np.ndarray, *,
         ``two_point_l2_mean``, ``fractions``, ``fractions_real``, ``fraction_l1``, ``phases``
         (list or None), ``max_lag`` and ``slice_metrics`` (see the module docstring).
     """
-    from .runner import evaluate_metrics
-
     phases = phases_of(exemplar)
     if max_lag is None:
         max_lag = max(1, min(MAX_LAG, min(volume.shape[:3]) // 2, min(real.shape[:3]) // 2))
@@ -193,5 +191,6 @@ def compare(volume: np.ndarray, real: np.ndarray, exemplar: np.ndarray, *,
     out["fractions"] = mine_f.tolist()
     out["fractions_real"] = real_f.tolist()
     out["fraction_l1"] = float(np.abs(mine_f - real_f).sum())
-    out["slice_metrics"] = evaluate_metrics(volume, reference_slices(real))
+    slices = reference_slices(real)
+    out["slice_metrics"] = metrics.evaluate(volume, slices, views=list(slices))
     return out

@@ -27,9 +27,7 @@ Behaviour
 
 from __future__ import annotations
 
-import csv
 import dataclasses
-import json
 import logging
 import math
 import os
@@ -40,7 +38,6 @@ import time
 import traceback
 from collections.abc import Callable, Sequence
 from datetime import datetime, timezone
-from typing import Any
 
 import numpy as np
 
@@ -48,9 +45,14 @@ from npmrf3d._kernels import _jit
 from npmrf3d.errors import ParameterError
 from npmrf3d.exemplar import exemplar_slice, named_exemplar
 from npmrf3d.runs import run_record, write_run
-from npmrf3d.metrics import METRICS
+from npmrf3d import io, metrics
+from npmrf3d.metrics import METRICS, largest_value_share
 
+from . import groundtruth
+from .figures import make_figures
 from .grid import RunSpec, Study
+from .table import BASE_COLUMNS, is_finished, load_row, make_row, write_csv
+from .table import read_results  # noqa: F401 (re-exported: runner.read_results)
 
 __all__ = [
     "StudyOutcome",
@@ -63,26 +65,16 @@ __all__ = [
     "structureless",
 ]
 
-#: The files that mark a finished run.
-FINISHED_FILES = ("run.json", "metrics.json")
 #: The metrics of the studies (the paper's three first), as :data:`npmrf3d.metrics.METRICS`.
 HEADLINE_METRICS = METRICS
-#: Leading columns of results.csv; metric columns follow, ``error`` comes last.
-BASE_COLUMNS = ("study", "run_id", "exemplar", "method", "algorithm", "seed", "size", "levels",
-                "status", "seconds", "wall_seconds", "threads", "largest_value_share")
-
 
 # --------------------------------------------------------------------------- metrics
-
 
 def evaluate_metrics(volume: np.ndarray, exemplars: dict[str, np.ndarray],
                      views: Sequence[str] | None = None) -> dict:
     """:func:`npmrf3d.metrics.evaluate` of ``volume`` against the exemplars of ``views``."""
-    from npmrf3d import metrics
-
     views = tuple(exemplars) if views is None else tuple(views)
     return metrics.evaluate(volume, {v: exemplars[v] for v in views}, views=list(views))
-
 
 def structureless(exemplar: np.ndarray, size: int, rng) -> np.ndarray:
     """The structureless control: ``size^3`` voxels drawn independently from the exemplar's
@@ -96,14 +88,7 @@ def structureless(exemplar: np.ndarray, size: int, rng) -> np.ndarray:
     picks = generator.integers(0, len(flat), size=size ** 3)
     return flat[picks].reshape(size, size, size, flat.shape[1])
 
-
 # --------------------------------------------------------------------------- one run
-
-
-def is_finished(run_dir: pathlib.Path) -> bool:
-    """True when ``run_dir`` holds a complete run (``run.json`` and ``metrics.json``)."""
-    return all((pathlib.Path(run_dir) / name).is_file() for name in FINISHED_FILES)
-
 
 def _synthesise(spec: RunSpec, exemplar: np.ndarray, real: np.ndarray | None):
     """(volume, per-view exemplars, result or None) for one run."""
@@ -133,7 +118,6 @@ def _synthesise(spec: RunSpec, exemplar: np.ndarray, real: np.ndarray | None):
         return np.ascontiguousarray(real[:n, :n, :n]), per_view, None
     raise ParameterError(f"unknown algorithm {spec.algorithm!r}")
 
-
 def execute_run(spec: RunSpec, study_dir: str, threads: int | None = None) -> dict:
     """Run one specification and write its folder; never raises (a failure is a row).
 
@@ -150,8 +134,6 @@ def execute_run(spec: RunSpec, study_dir: str, threads: int | None = None) -> di
     dict
         The run's row of ``results.csv`` (``status`` ``done`` or ``failed``).
     """
-    from npmrf3d import io
-
     run_dir = pathlib.Path(study_dir) / spec.run_id
     t_start = time.perf_counter()
     try:
@@ -159,22 +141,16 @@ def execute_run(spec: RunSpec, study_dir: str, threads: int | None = None) -> di
         (run_dir / "error.json").unlink(missing_ok=True)
         real = None
         if spec.reference is not None:
-            from . import groundtruth
-
             real = groundtruth.load_reference(spec.reference)
             exemplar = exemplar_slice(real, spec.slice_axis, spec.slice_index)
         else:
             exemplar = named_exemplar(spec.exemplar, spec.crop)
         volume, per_view, result = _synthesise(spec, exemplar, real)
         if real is not None:
-            from . import groundtruth
-
             truth = groundtruth.compare(volume, real, exemplar)
             scores = truth.pop("slice_metrics")
         else:
             truth, scores = None, evaluate_metrics(volume, per_view, spec.views)
-        from npmrf3d.metrics import largest_value_share
-
         measured = {"metrics": scores, "largest_value_share": largest_value_share(volume)}
         if truth is not None:
             measured["groundtruth"] = truth
@@ -197,11 +173,8 @@ def execute_run(spec: RunSpec, study_dir: str, threads: int | None = None) -> di
     except Exception as exc:  # a failed run is recorded, the others go on
         return record_failure(spec, study_dir, exc, time.perf_counter() - t_start)
 
-
 def record_failure(spec: RunSpec, study_dir, exc: BaseException, wall: float = math.nan) -> dict:
     """Write ``error.json`` for a failed run and return its row."""
-    from npmrf3d import io
-
     message = f"{type(exc).__name__}: {exc}".strip()
     error = {
         "run_id": spec.run_id,
@@ -220,45 +193,7 @@ def record_failure(spec: RunSpec, study_dir, exc: BaseException, wall: float = m
         pass
     return make_row(spec, "failed", {"wall_seconds": wall}, None, error=message)
 
-
-def make_row(spec: RunSpec, status: str, record: dict | None, measured: dict | None, *,
-             error: str = "") -> dict:
-    """The ``results.csv`` row of a run (metric columns ``mean_<metric>``, ``<view>_<metric>``)."""
-    record = record or {}
-    timings = record.get("timings") or {}
-    row: dict[str, Any] = {
-        "study": spec.study, "run_id": spec.run_id, "exemplar": spec.exemplar,
-        "method": spec.method, "algorithm": spec.algorithm, "seed": spec.seed,
-        "size": spec.size, "levels": spec.levels, "status": status,
-        "seconds": timings.get("total", math.nan), "wall_seconds": record.get("wall_seconds", math.nan),
-        "threads": record.get("threads", ""),
-        "largest_value_share": (measured or {}).get("largest_value_share", math.nan),
-    }
-    if measured:
-        scores = measured.get("metrics") or {}
-        for name, value in (scores.get("mean") or {}).items():
-            row[f"mean_{name}"] = value
-        for view, values in (scores.get("per_view") or {}).items():
-            for name, value in values.items():
-                row[f"{view}_{name}"] = value
-        truth = measured.get("groundtruth")
-        if truth:
-            for axis, value in truth["two_point_l2"].items():
-                row[f"two_point_l2_{axis}"] = value
-            row["two_point_l2"] = truth["two_point_l2_mean"]
-            row["fraction_l1"] = truth["fraction_l1"]
-    row["error"] = error
-    return row
-
-
-def _load_row(spec: RunSpec, run_dir: pathlib.Path) -> dict:
-    record = json.loads((run_dir / "run.json").read_text(encoding="utf-8"))
-    measured = json.loads((run_dir / "metrics.json").read_text(encoding="utf-8"))
-    return make_row(spec, "skipped", record, measured)
-
-
 # --------------------------------------------------------------------------- schedulers
-
 
 class _ProgressBar:
     """tqdm over runs on stderr, opened at the first finished run (after the scheduler line)."""
@@ -283,7 +218,6 @@ class _ProgressBar:
     def close(self) -> None:
         if self.bar is not None:
             self.bar.close()
-
 
 def plan_workers(workers: int | None, threads: int | None, cores: int | None = None) -> tuple[int, int]:
     """(workers, numba threads per worker) with ``workers * threads <= cores``.
@@ -310,7 +244,6 @@ def plan_workers(workers: int | None, threads: int | None, cores: int | None = N
                              f"cores of this machine; use fewer --workers or --threads")
     return workers, threads
 
-
 def _start_local_cluster(workers: int, threads: int):
     from distributed import LocalCluster
 
@@ -320,14 +253,12 @@ def _start_local_cluster(workers: int, threads: int):
     return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                         dashboard_address=":0", silence_logs=logging.WARNING, env=env)
 
-
 def _dashboard(client) -> str:
     try:
         import bokeh  # noqa: F401
     except ImportError:
         return f"{client.dashboard_link} (not served: install bokeh to see it)"
     return str(client.dashboard_link)
-
 
 def _run_dask(pending, study_dir, scheduler, workers, threads, echo, bar):
     from distributed import Client, as_completed
@@ -365,7 +296,6 @@ def _run_dask(pending, study_dir, scheduler, workers, threads, echo, bar):
             cluster.close()
     return rows, {"scheduler": where, "workers": workers, "threads": task_threads}
 
-
 def _run_serial(pending, study_dir, threads, echo, bar):
     echo("serial: one run after the other in this process")
     bar.start()
@@ -375,9 +305,7 @@ def _run_serial(pending, study_dir, threads, echo, bar):
         bar(rows[spec.run_id])
     return rows, {"scheduler": "serial", "workers": 1, "threads": threads}
 
-
 # --------------------------------------------------------------------------- a study
-
 
 @dataclasses.dataclass
 class StudyOutcome:
@@ -388,38 +316,6 @@ class StudyOutcome:
     counts: dict[str, int]
     wall_seconds: float
     figures: list[pathlib.Path]
-
-
-def _write_csv(path: pathlib.Path, rows: list[dict], head: Sequence[str] = ()) -> pathlib.Path:
-    from npmrf3d.io import atomic_write
-
-    columns = list(head)
-    for row in rows:
-        columns += [k for k in row if k not in columns and k != "error"]
-    if any("error" in row for row in rows):
-        columns.append("error")
-
-    def write(tmp):
-        with open(tmp, "w", newline="", encoding="utf-8") as handle:
-            writer = csv.DictWriter(handle, fieldnames=columns, restval="")
-            writer.writeheader()
-            for row in rows:
-                writer.writerow({k: _csv_value(v) for k, v in row.items()})
-
-    return atomic_write(path, write)
-
-
-def _csv_value(value):
-    if isinstance(value, float):
-        return "" if math.isnan(value) else repr(value)
-    return value
-
-
-def read_results(path) -> list[dict]:
-    """Rows of a ``results.csv`` (numbers stay strings)."""
-    with open(path, newline="", encoding="utf-8") as handle:
-        return list(csv.DictReader(handle))
-
 
 def run_study(study: Study, *, mode: str = "quick", out="study-results", scheduler: str | None = None,
               workers: int | None = None, threads: int | None = None, seeds=None, exemplars=None,
@@ -455,14 +351,10 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
     -------
     StudyOutcome
     """
-    from npmrf3d import io
-
     echo = echo or (lambda message: None)
     t_start = time.perf_counter()
     reference = None
     if volume is not None:
-        from . import groundtruth
-
         reference = str(pathlib.Path(volume).absolute())
         shape = groundtruth.load_reference(reference).shape
         base_sizes = sizes if sizes is not None else study.scale(mode).sizes
@@ -485,7 +377,7 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
         run_dir = study_dir / spec.run_id
         if is_finished(run_dir):
             try:
-                rows[spec.run_id] = _load_row(spec, run_dir)
+                rows[spec.run_id] = load_row(spec, run_dir)
                 continue
             except (OSError, ValueError, KeyError):  # unreadable: run it again
                 pass
@@ -507,9 +399,7 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
         rows.update(new)
 
     ordered = [rows[s.run_id] for s in specs]
-    _write_csv(study_dir / "results.csv", ordered, BASE_COLUMNS)
-    from .report import make_figures
-
+    write_csv(study_dir / "results.csv", ordered, BASE_COLUMNS)
     figures = make_figures(study, study_dir, specs, ordered)
     counts = {status: sum(r["status"] == status for r in ordered) for status in ("done", "skipped", "failed")}
     wall = time.perf_counter() - t_start
