@@ -9,9 +9,11 @@ measurement (``benchmarks/bench_quality.py``, ``docs/quality.md``).
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
+
+from .relax import RELAXATIONS, AnnealOptions, IcmOptions
 
 __all__ = ["DecisionRule", "SynthesisConfig", "SynthesisResult", "VARIANTS"]
 
@@ -63,8 +65,11 @@ VARIANTS: dict[str, DecisionRule] = {
 class SynthesisConfig:
     """A validated NP-MRF synthesis run (see :func:`npmrf3d.synthesize` for the meaning).
 
-    ``xi``, ``stop`` and ``max_sweeps`` drive ICM; ``sampler`` ... ``proposal`` drive annealing;
-    both sets are always stored, the relaxation not chosen ignores its set.
+    ``xi``, ``stop`` and ``max_sweeps`` drive ICM (:class:`npmrf3d.relax.IcmOptions`);
+    ``sampler`` ... ``proposal`` drive annealing (:class:`npmrf3d.relax.AnnealOptions`). Both
+    sets stay flat fields here so that ``run.json`` records and checkpoints keep their layout;
+    their defaults come from the two options classes, and :attr:`relaxation_options` gives the
+    chosen relaxation's own options.
     """
 
     size: tuple[int, int, int]
@@ -75,15 +80,15 @@ class SynthesisConfig:
     views: tuple[str, ...] = ("front", "right", "top")
     upsample: str = "1/8"
     inherit: str = "resynth"
-    xi: float = -3.0
-    stop: float = 0.95
-    max_sweeps: int = 30
-    sampler: str = "heat-bath"
-    schedule: str = "geometric"
-    t0: float = 1.0
-    t_end: float = 0.05
-    proposals: int = 10
-    proposal: str = "exemplar"
+    xi: float = IcmOptions.xi
+    stop: float = IcmOptions.stop
+    max_sweeps: int = IcmOptions.max_sweeps
+    sampler: str = AnnealOptions.sampler
+    schedule: str = AnnealOptions.schedule
+    t0: float = AnnealOptions.t0
+    t_end: float = AnnealOptions.t_end
+    proposals: int = AnnealOptions.proposals
+    proposal: str = AnnealOptions.proposal
     variant: str = "default"
     rule: DecisionRule = field(default_factory=DecisionRule)
     grey_levels: int | None = None
@@ -94,6 +99,12 @@ class SynthesisConfig:
     def to_dict(self) -> dict:
         """Plain JSON-able dictionary (tuples become lists)."""
         return asdict(self)
+
+    @property
+    def relaxation_options(self) -> IcmOptions | AnnealOptions:
+        """The options of the chosen relaxation, as its own frozen dataclass."""
+        cls = RELAXATIONS[self.relaxation].options
+        return cls(**{f.name: getattr(self, f.name) for f in fields(cls)})
 
 
 @dataclass(frozen=True)

@@ -53,6 +53,7 @@ Choices where the paper is silent (also in ``docs/kopf.md``)
 
 from __future__ import annotations
 
+import json
 import math
 import time
 import types
@@ -61,7 +62,6 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
-from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from .. import _validation as check
@@ -69,13 +69,14 @@ from .._kernels import _jit
 from ..config import SynthesisResult
 from ..exemplar import resolve_exemplars
 from ..neighborhood import VIEW_AXES, VIEWS
-from ..pyramid import LevelState, level_shape
-from ..pyramid import upsample as _pyramid_upsample
+from ..pyramid import Levels, LevelState, run_pyramid
+from ..pyramid import upsample as pyramid_upsample
 from .._kernels import kopf as _k
 
 __all__ = ["KopfConfig", "UPSAMPLING", "kopf_synthesize"]
 
-#: Up-sampling between levels: the paper's trilinear interpolation, or the project's pyramid.
+#: Up-sampling between levels: the paper's trilinear interpolation, or the project's pyramid
+#: (names of :data:`npmrf3d.pyramid.UPSAMPLERS`, the paper's first).
 UPSAMPLING = ("trilinear", "8/8", "1/8")
 #: Default mean-shift bandwidths (start, end) of each level, as multiples of the exemplar's
 #: standard deviation (pooled over channels).
@@ -483,14 +484,13 @@ def optimisation_phase(volume: np.ndarray, assign: np.ndarray, omega: np.ndarray
 
 
 def _upsample(volume: np.ndarray, mode: str, pixels: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    if mode == "trilinear":
-        out = ndimage.zoom(volume, (2, 2, 2, 1), order=1, mode="grid-wrap", grid_mode=True)
-        return np.ascontiguousarray(out, dtype=np.float32)
+    """The finer level's volume by :data:`npmrf3d.pyramid.UPSAMPLERS` ``mode``; ``1/8`` draws the
+    7 new children uniformly from the level's exemplar ``pixels``."""
     shape = volume.shape[:3]
     parent = LevelState(volume=volume, labels_volume=np.zeros(shape, dtype=np.int32),
                         temps=np.zeros(shape, dtype=np.float32), inherited=np.zeros(shape, dtype=bool))
-    freq = np.full(len(pixels), 1.0 / len(pixels))
-    return np.ascontiguousarray(_pyramid_upsample(parent, mode, pixels, freq, rng).volume, dtype=np.float32)
+    freq = None if pixels is None else np.full(len(pixels), 1.0 / len(pixels))
+    return np.ascontiguousarray(pyramid_upsample(parent, mode, pixels, freq, rng).volume, dtype=np.float32)
 
 
 def _coarsen_constraint(t, tau, level):
@@ -514,7 +514,7 @@ def kopf_synthesize(
     variance: float = 0.95, grid: int = 2, histogram_bins: int = 16,
     histogram_weight: float = DEFAULT_HISTOGRAM_WEIGHT, mean_shift=DEFAULT_MEAN_SHIFT,
     upsample: str = "trilinear", constraint=None, constraint_weight=None, rng=None,
-    progress: ProgressCallback | None = None,
+    progress: ProgressCallback | None = None, checkpoint=None,
 ) -> SynthesisResult:
     """Synthesize a solid texture with NP_K (Kopf et al. 2007; SPEC.md section 6).
 
@@ -574,6 +574,9 @@ def kopf_synthesize(
         Called as ``progress(level, iteration, iterations, energy)`` before the first iteration
         of each level (``iteration = 0``, energy nan) and after every iteration (energy = mean
         ``||s - e||^r`` of that iteration's search).
+    checkpoint : path, optional
+        A ``.npz`` file written after each level; if it exists and holds a checkpoint of the
+        same configuration and exemplars, synthesis resumes after its last finished level.
 
     Returns
     -------
@@ -607,48 +610,60 @@ def kopf_synthesize(
     channels = next(iter(per_view.values())).shape[2]
     target, tau = _constraint_arrays(constraint, constraint_weight, config.size, channels)
     return run_kopf(config, per_view, generator, constraint=target, constraint_weight=tau,
-                    progress=progress, t_start=t_start)
+                    progress=progress, checkpoint=checkpoint, t_start=t_start)
 
 
-def run_kopf(config: KopfConfig, per_view: Mapping[str, np.ndarray], rng: np.random.Generator, *,
-             constraint=None, constraint_weight=None, progress: ProgressCallback | None = None,
-             t_start: float | None = None) -> SynthesisResult:
-    """Run a validated configuration on validated exemplars (the body of :func:`kopf_synthesize`)."""
-    t_start = time.perf_counter() if t_start is None else t_start
-    views = config.views
-    distinct = list({id(a): a for a in (per_view[v] for v in views)}.values())
-    channels = distinct[0].shape[2]
-    pooled = np.concatenate([a.reshape(-1, channels) for a in distinct]).astype(np.float64)
-    lo = pooled.min(axis=0)
-    span = pooled.max(axis=0) - lo
-    scale = np.where(span > 0, config.histogram_bins / np.where(span > 0, span, 1.0), 0.0)
-    sigma = float(pooled.std()) or 1.0
-    view_axes = np.array([VIEW_AXES[v] for v in views], dtype=np.int64)
-    timings = {"setup": time.perf_counter() - t_start}
-    history: list[list[float]] = []
-    stats: dict = {"threads": _jit.thread_count(), "levels": {}}
-    volume = None
-    for level in range(config.levels - 1, -1, -1):
-        t0 = time.perf_counter()
-        shape = level_shape(config.size, level)
-        level_ex = {id(a): downsample_exemplar(a, level) for a in distinct}
+class _KopfLevels(Levels):
+    """NP_K's side of :func:`npmrf3d.pyramid.run_pyramid`; the state is the volume itself."""
+
+    def __init__(self, config: KopfConfig, per_view: Mapping[str, np.ndarray], constraint,
+                 constraint_weight):
+        self.config, self.per_view = config, per_view
+        self.constraint, self.constraint_weight = constraint, constraint_weight
+        self.size, self.levels = config.size, config.levels
+        self.key = json.dumps(config.to_dict(), sort_keys=True, default=str)
+        self.distinct = list({id(a): a for a in (per_view[v] for v in config.views)}.values())
+        self.channels = self.distinct[0].shape[2]
+        pooled = np.concatenate([a.reshape(-1, self.channels) for a in self.distinct]).astype(np.float64)
+        self.lo = pooled.min(axis=0)
+        span = pooled.max(axis=0) - self.lo
+        self.scale = np.where(span > 0, config.histogram_bins / np.where(span > 0, span, 1.0), 0.0)
+        self.sigma = float(pooled.std()) or 1.0
+        self.view_axes = np.array([VIEW_AXES[v] for v in config.views], dtype=np.int64)
+        # the volume's bytes depend on the exemplars and the constraint too
+        self.fingerprint = {"exemplars": np.concatenate([a.ravel() for a in self.distinct])}
+        if constraint is not None:
+            self.fingerprint["constraint"] = constraint
+            self.fingerprint["constraint_weight"] = constraint_weight
+
+    def prepare(self, level, shape):
+        config, views, per_view = self.config, self.config.views, self.per_view
+        level_ex = {id(a): downsample_exemplar(a, level) for a in self.distinct}
         indices = {key: PatchIndex(ex, config.window, config.variance) for key, ex in level_ex.items()}
-        view_index = [indices[id(per_view[v])] for v in views]
-        pixels = np.concatenate([ex.reshape(-1, channels) for ex in level_ex.values()])
-        if volume is None:
-            volume = np.ascontiguousarray(pixels[rng.integers(0, len(pixels), size=shape)], dtype=np.float32)
-        else:
-            volume = _upsample(volume, config.upsample, pixels, rng)
-        hist_target = np.mean([channel_histograms(level_ex[id(per_view[v])], lo, scale, config.histogram_bins)
-                               / (level_ex[id(per_view[v])].shape[0] * level_ex[id(per_view[v])].shape[1])
-                               for v in views], axis=0)
-        packed = _pack_exemplars(view_index, lo, scale, config.histogram_bins)
-        target, tau = _coarsen_constraint(constraint, constraint_weight, level)
-        d = config.window ** 2 * channels
-        floor = 1e-3 * sigma * math.sqrt(d)
-        n_iter = config.iterations[config.levels - 1 - level]
-        if progress is not None:
-            progress(level, 0, n_iter, float("nan"))
+        self.view_index = [indices[id(per_view[v])] for v in views]
+        self.pixels = np.concatenate([ex.reshape(-1, self.channels) for ex in level_ex.values()])
+        self.hist_target = np.mean(
+            [channel_histograms(level_ex[id(per_view[v])], self.lo, self.scale, config.histogram_bins)
+             / (level_ex[id(per_view[v])].shape[0] * level_ex[id(per_view[v])].shape[1])
+             for v in views], axis=0)
+        self.packed = _pack_exemplars(self.view_index, self.lo, self.scale, config.histogram_bins)
+        self.target, self.tau = _coarsen_constraint(self.constraint, self.constraint_weight, level)
+        self.floor = 1e-3 * self.sigma * math.sqrt(config.window ** 2 * self.channels)
+        self.n_iter = config.iterations[config.levels - 1 - level]
+
+    def initial(self, shape, rng):
+        return np.ascontiguousarray(self.pixels[rng.integers(0, len(self.pixels), size=shape)],
+                                    dtype=np.float32)
+
+    def upsample(self, state, rng):
+        return _upsample(state, self.config.upsample, self.pixels, rng)
+
+    def start(self, level, state):
+        return self.n_iter, float("nan")
+
+    def relax(self, level, volume, rng, on_step):
+        config, views, n_iter = self.config, self.config.views, self.n_iter
+        shape = volume.shape[:3]
         level_history = []
         t_search = t_opt = 0.0
         queries = 0
@@ -659,8 +674,8 @@ def run_kopf(config: KopfConfig, per_view: Mapping[str, np.ndarray], rng: np.ran
             energy = 0.0
             for vi, view in enumerate(views):
                 assign[vi], omega[vi], e, q = search_view(
-                    volume, view, view_index[vi], grid=config.grid, eps=config.eps, r=config.r,
-                    floor=floor, offset=int(packed.offsets[vi]))
+                    volume, view, self.view_index[vi], grid=config.grid, eps=config.eps, r=config.r,
+                    floor=self.floor, offset=int(self.packed.offsets[vi]))
                 energy += e
                 queries += q
             t_search += time.perf_counter() - ts
@@ -670,26 +685,46 @@ def run_kopf(config: KopfConfig, per_view: Mapping[str, np.ndarray], rng: np.ran
             else:
                 h0, h1 = config.mean_shift
                 frac = it / (n_iter - 1) if n_iter > 1 else 1.0
-                bandwidth = sigma * h0 * (h1 / h0) ** frac
+                bandwidth = self.sigma * h0 * (h1 / h0) ** frac
             order = rng.permutation(volume.shape[0] * volume.shape[1] * volume.shape[2]).astype(np.int64)
-            hist = channel_histograms(volume, lo, scale, config.histogram_bins)
-            optimisation_phase(volume, assign, omega, view_axes, packed, window=config.window,
-                               grid=config.grid, order=order, hist=hist, hist_target=hist_target,
-                               histogram_weight=config.histogram_weight, lo=lo, scale=scale,
-                               bins=config.histogram_bins, bandwidth=bandwidth, constraint=target, tau=tau)
+            hist = channel_histograms(volume, self.lo, self.scale, config.histogram_bins)
+            optimisation_phase(volume, assign, omega, self.view_axes, self.packed,
+                               window=config.window, grid=config.grid, order=order, hist=hist,
+                               hist_target=self.hist_target, histogram_weight=config.histogram_weight,
+                               lo=self.lo, scale=self.scale, bins=config.histogram_bins,
+                               bandwidth=bandwidth, constraint=self.target, tau=self.tau)
             t_opt += time.perf_counter() - ts
             sites = sum(int((assign[vi] >= 0).sum()) for vi in range(len(views)))
             level_history.append(energy / max(1, sites))
-            if progress is not None:
-                progress(level, it + 1, n_iter, level_history[-1])
-        history.append(level_history)
-        timings[f"level_{level}"] = time.perf_counter() - t0
-        stats["levels"][f"level_{level}"] = {
+            on_step(it + 1, level_history[-1])
+        stats = {
             "shape": list(shape), "iterations": n_iter, "queries": queries,
             "search_seconds": t_search, "optimise_seconds": t_opt,
-            "pca_dims": {v: view_index[vi].dims for vi, v in enumerate(views)},
-            "patches": {v: int(view_index[vi].patches.shape[0]) for vi, v in enumerate(views)},
+            "pca_dims": {v: self.view_index[vi].dims for vi, v in enumerate(views)},
+            "patches": {v: int(self.view_index[vi].patches.shape[0]) for vi, v in enumerate(views)},
         }
-    timings["total"] = time.perf_counter() - t_start
-    return SynthesisResult(volume=volume, history=history, config=config, timings=timings,
-                           labels=np.zeros((0, channels), dtype=np.float32), stats=stats)
+        return volume, level_history, stats
+
+    def to_arrays(self, volume):
+        return {"volume": volume}
+
+    def from_arrays(self, arrays):
+        return np.ascontiguousarray(arrays["volume"], dtype=np.float32)
+
+
+def run_kopf(config: KopfConfig, per_view: Mapping[str, np.ndarray], rng: np.random.Generator, *,
+             constraint=None, constraint_weight=None, progress: ProgressCallback | None = None,
+             checkpoint=None, t_start: float | None = None) -> SynthesisResult:
+    """Run a validated configuration on validated exemplars (the body of :func:`kopf_synthesize`).
+
+    ``checkpoint``: a ``.npz`` file written after each level, resumed from when it matches (as
+    for :func:`npmrf3d.synthesize`).
+    """
+    t_start = time.perf_counter() if t_start is None else t_start
+    levels = _KopfLevels(config, per_view, constraint, constraint_weight)
+    out = run_pyramid(levels, rng, progress=progress, checkpoint=checkpoint,
+                      timings={"setup": time.perf_counter() - t_start},
+                      stats={"threads": _jit.thread_count()}, t_start=t_start)
+    return SynthesisResult(volume=out.state, history=out.history, config=config,
+                           timings=out.timings, labels=np.zeros((0, levels.channels), dtype=np.float32),
+                           stats=out.stats)
