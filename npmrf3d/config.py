@@ -9,13 +9,15 @@ measurement (``benchmarks/bench_quality.py``, ``docs/quality.md``).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, fields
+from typing import Any
 
 import numpy as np
 
 from .relax import RELAXATIONS, AnnealOptions, IcmOptions
 
-__all__ = ["DecisionRule", "SynthesisConfig", "SynthesisResult", "VARIANTS"]
+__all__ = ["DecisionRule", "SynthesisConfig", "SynthesisMethod", "SynthesisResult", "VARIANTS"]
 
 
 @dataclass(frozen=True)
@@ -134,3 +136,46 @@ class SynthesisResult:
     timings: dict
     labels: np.ndarray
     stats: dict
+
+
+#: ``run(per_view_exemplars, config, rng, *, progress=None, checkpoint=None, **inputs)``: make a
+#: volume from validated exemplars (view -> float32 (H, W, C)) and a validated configuration.
+MethodRun = Callable[..., SynthesisResult]
+
+
+@dataclass(frozen=True)
+class SynthesisMethod:
+    """One way of making a volume: an entry of :data:`npmrf3d.methods.METHODS`.
+
+    Attributes
+    ----------
+    name : str
+        Registry name (``npmrf``, ``kopf``, ...), used by the studies, the CLI and ``run.json``.
+    run : callable
+        ``run(per_view_exemplars, config, rng, *, progress=None, checkpoint=None) ->
+        SynthesisResult``; ``progress(level, step, steps, value)`` as in
+        :func:`npmrf3d.pyramid.run_pyramid`. Method-specific inputs that are not configuration
+        (NP_K's constraint volume) may follow as further keyword arguments.
+    make_config : callable
+        Plain keyword arguments -> a validated ``config_class`` instance (raises
+        :class:`npmrf3d.ParameterError`).
+    config_class : type
+        The method's frozen configuration dataclass; its field defaults are the defaults of
+        the API and the command line.
+    synthesize : callable
+        The public one-call function (``synthesize(exemplar=None, *, ..., rng=None, progress=None)``):
+        validate, load the exemplars, run.
+    fit : callable
+        ``fit(config) -> dict(window=..., levels=..., toroidal=...)``: what
+        :func:`npmrf3d.exemplar.resolve_exemplars` checks every exemplar against.
+    description : str
+        One line for ``npmrf3d info`` and error messages.
+    """
+
+    name: str
+    run: MethodRun
+    make_config: Callable[..., Any]
+    config_class: type
+    synthesize: Callable[..., SynthesisResult]
+    fit: Callable[[Any], dict]
+    description: str = ""

@@ -12,7 +12,7 @@ import numpy as np
 
 from . import _validation as check
 from ._kernels import _jit
-from .config import VARIANTS, SynthesisConfig, SynthesisResult
+from .config import VARIANTS, SynthesisConfig, SynthesisMethod, SynthesisResult
 from .exemplar import make_labels, resolve_exemplars
 from .heuristics import DECISIONS, get_heuristic
 from .neighborhood import VIEWS, colour_classes
@@ -21,7 +21,7 @@ from .pyramid import INHERIT, UPSAMPLING, Levels, LevelState, random_state, run_
 from .relax import RELAXATIONS
 from .relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
 
-__all__ = ["synthesize", "make_config"]
+__all__ = ["METHOD", "make_config", "npmrf_method", "run", "synthesize"]
 
 ProgressCallback = Callable[[int, int, int, float], None]
 
@@ -283,3 +283,19 @@ def run(config: SynthesisConfig, per_view: dict[str, np.ndarray], rng: np.random
 
 def _config_key(config: SynthesisConfig) -> str:
     return json.dumps(config.to_dict(), sort_keys=True, default=str)
+
+
+def npmrf_method(per_view: dict[str, np.ndarray], config: SynthesisConfig, rng: np.random.Generator, *,
+                 progress: ProgressCallback | None = None,
+                 checkpoint: str | Path | None = None) -> SynthesisResult:
+    """The NP-MRF sampler in the common method signature (:data:`npmrf3d.methods.METHODS`)."""
+    return run(config, per_view, rng, progress=progress, checkpoint=checkpoint)
+
+
+#: The registry entry of the NP-MRF sampler.
+METHOD = SynthesisMethod(
+    name="npmrf", run=npmrf_method, make_config=make_config, config_class=SynthesisConfig,
+    synthesize=synthesize,
+    fit=lambda c: {"window": c.window, "levels": c.levels, "toroidal": c.toroidal_exemplar},
+    description="the NP-MRF sampler (ICM or annealing; SPEC.md sections 2-5)",
+)

@@ -66,14 +66,14 @@ from scipy.spatial import cKDTree
 
 from .. import _validation as check
 from .._kernels import _jit
-from ..config import SynthesisResult
+from ..config import SynthesisMethod, SynthesisResult
 from ..exemplar import resolve_exemplars
 from ..neighborhood import VIEW_AXES, VIEWS
 from ..pyramid import Levels, LevelState, run_pyramid
 from ..pyramid import upsample as pyramid_upsample
 from .._kernels import kopf as _k
 
-__all__ = ["KopfConfig", "UPSAMPLING", "kopf_synthesize"]
+__all__ = ["METHOD", "KopfConfig", "UPSAMPLING", "kopf_method", "kopf_synthesize", "make_kopf_config"]
 
 #: Up-sampling between levels: the paper's trilinear interpolation, or the project's pyramid
 #: (names of :data:`npmrf3d.pyramid.UPSAMPLERS`, the paper's first).
@@ -728,3 +728,23 @@ def run_kopf(config: KopfConfig, per_view: Mapping[str, np.ndarray], rng: np.ran
     return SynthesisResult(volume=out.state, history=out.history, config=config,
                            timings=out.timings, labels=np.zeros((0, levels.channels), dtype=np.float32),
                            stats=out.stats)
+
+
+def kopf_method(per_view: Mapping[str, np.ndarray], config: KopfConfig, rng: np.random.Generator, *,
+                progress: ProgressCallback | None = None, checkpoint=None, constraint=None,
+                constraint_weight=None) -> SynthesisResult:
+    """NP_K in the common method signature (:data:`npmrf3d.methods.METHODS`); ``constraint``
+    and ``constraint_weight`` are raw arrays, validated here."""
+    channels = next(iter(per_view.values())).shape[2]
+    target, tau = _constraint_arrays(constraint, constraint_weight, config.size, channels)
+    return run_kopf(config, per_view, rng, constraint=target, constraint_weight=tau,
+                    progress=progress, checkpoint=checkpoint)
+
+
+#: The registry entry of NP_K.
+METHOD = SynthesisMethod(
+    name="kopf", run=kopf_method, make_config=make_kopf_config, config_class=KopfConfig,
+    synthesize=kopf_synthesize,
+    fit=lambda c: {"window": c.window, "levels": c.levels, "toroidal": False},
+    description="NP_K, texture optimisation with histogram matching (Kopf et al. 2007)",
+)

@@ -24,6 +24,7 @@ import numpy as np
 
 from npmrf3d.errors import ParameterError
 from npmrf3d.io import atomic_write
+from npmrf3d.methods import METHODS
 
 from .figures import make_figures  # noqa: F401 (re-exported: report.make_figures)
 from .table import as_float, metric_columns, read_results, unique
@@ -65,11 +66,18 @@ def _fmt(value: str) -> str:
     return str(value)
 
 
+#: What the study-only algorithms are (the registered methods describe themselves).
+_STUDY_ONLY = {"control": "structureless control: voxels drawn independently from the exemplar",
+               "real": "a crop of the real volume (ground-truth study)"}
+
+
 def _params_table(declaration: dict) -> str:
     rows = []
     for m in declaration.get("methods", []):
         params = ", ".join(f"{k}={v}" for k, v in m["params"].items())
-        rows.append(f"<tr><td>{_esc(m['name'])}</td><td>{_esc(m['algorithm'])}</td>"
+        known = METHODS.get(m["algorithm"])
+        what = known.description if known is not None else _STUDY_ONLY.get(m["algorithm"], "")
+        rows.append(f"<tr><td>{_esc(m['name'])}</td><td title='{_esc(what)}'>{_esc(m['algorithm'])}</td>"
                     f"<td>{_esc(params)}</td></tr>")
     common = ", ".join(f"{k}={v}" for k, v in declaration.get("common", {}).items())
     return ("<table class='params'><tr><th>method</th><th>algorithm</th><th>parameters</th></tr>"

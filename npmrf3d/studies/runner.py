@@ -44,6 +44,7 @@ import numpy as np
 from npmrf3d._kernels import _jit
 from npmrf3d.errors import ParameterError
 from npmrf3d.exemplar import exemplar_slice, named_exemplar
+from npmrf3d.methods import METHODS
 from npmrf3d.runs import run_record, write_run
 from npmrf3d import io, metrics
 from npmrf3d.metrics import METRICS, largest_value_share
@@ -94,20 +95,8 @@ def _synthesise(spec: RunSpec, exemplar: np.ndarray, real: np.ndarray | None):
     """(volume, per-view exemplars, result or None) for one run."""
     views = spec.views
     per_view = {v: exemplar for v in views}
-    kwargs = spec.kwargs()
-    if spec.algorithm == "npmrf":
-        import npmrf3d
-
-        result = npmrf3d.synthesize(exemplar, **kwargs)
-        return result.volume, per_view, result
-    if spec.algorithm == "kopf":
-        try:
-            from npmrf3d.baselines.kopf import kopf_synthesize
-        except ImportError as exc:
-            raise RuntimeError(
-                f"the NP_K baseline (npmrf3d.baselines.kopf.kopf_synthesize) is not available "
-                f"in this installation: {exc}") from exc
-        result = kopf_synthesize(exemplar, **kwargs)
+    if spec.algorithm in METHODS:
+        result = METHODS[spec.algorithm].synthesize(exemplar, **spec.kwargs())
         return result.volume, per_view, result
     if spec.algorithm == "control":
         return structureless(exemplar, spec.size, spec.seed), per_view, None
@@ -116,7 +105,9 @@ def _synthesise(spec: RunSpec, exemplar: np.ndarray, real: np.ndarray | None):
             raise ParameterError("method 'real' needs a reference volume (ground-truth study)")
         n = spec.size
         return np.ascontiguousarray(real[:n, :n, :n]), per_view, None
-    raise ParameterError(f"unknown algorithm {spec.algorithm!r}")
+    raise ParameterError(f"unknown algorithm {spec.algorithm!r}: registered methods are "
+                         f"{', '.join(METHODS)}; study-only: control, real")
+
 
 def execute_run(spec: RunSpec, study_dir: str, threads: int | None = None) -> dict:
     """Run one specification and write its folder; never raises (a failure is a row).
@@ -157,7 +148,7 @@ def execute_run(spec: RunSpec, study_dir: str, threads: int | None = None) -> di
         wall = time.perf_counter() - t_start
         timings = dict(getattr(result, "timings", None) or {"total": wall})
         record = run_record(
-            "study", result, exemplars={v: spec.exemplar for v in per_view}, threads=used_threads,
+            "study", result, method=spec.algorithm if spec.algorithm in METHODS else None, exemplars={v: spec.exemplar for v in per_view}, threads=used_threads,
             study=spec.study, run_id=spec.run_id, spec=spec.to_dict(), seed=spec.seed,
             host=socket.gethostname(), pid=os.getpid(), wall_seconds=wall,
             labels=None if result is None or getattr(result, "labels", None) is None
