@@ -17,7 +17,10 @@ import numpy as np
 
 from .relax import RELAXATIONS, AnnealOptions, IcmOptions
 
-__all__ = ["DecisionRule", "SynthesisConfig", "SynthesisMethod", "SynthesisResult", "VARIANTS"]
+#: Side of the cube made when no size is given (API and command line, every method).
+DEFAULT_SIZE = 32
+
+__all__ = ["DEFAULT_SIZE", "DecisionRule", "SynthesisConfig", "SynthesisMethod", "SynthesisResult", "VARIANTS"]
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ import numpy as np
 
 from . import _validation as check
 from ._kernels import _jit
-from .config import VARIANTS, SynthesisConfig, SynthesisMethod, SynthesisResult
+from .config import DEFAULT_SIZE, VARIANTS, SynthesisConfig, SynthesisMethod, SynthesisResult
 from .exemplar import make_labels, resolve_exemplars
 from .heuristics import DECISIONS, get_heuristic
 from .neighborhood import VIEWS, colour_classes
@@ -30,10 +30,14 @@ ProgressCallback = Callable[[int, int, int, float], None]
 DEFAULT_UPSAMPLE = {"icm": "1/8", "anneal": "8/8"}
 
 
+_C = SynthesisConfig  # every default below is a field default of the configuration
+
+
 def make_config(
-    *, size=32, window=7, levels=3, heuristic="ML_H2b", relaxation="icm", views=VIEWS,
-    upsample=None, inherit="resynth", xi=-3.0, stop=0.95, max_sweeps=30, sampler="heat-bath",
-    schedule="geometric", t0=1.0, t_end=0.05, proposals=10, proposal="exemplar", variant="default",
+    *, size=DEFAULT_SIZE, window=_C.window, levels=_C.levels, heuristic=_C.heuristic,
+    relaxation=_C.relaxation, views=_C.views, upsample=None, inherit=_C.inherit, xi=_C.xi,
+    stop=_C.stop, max_sweeps=_C.max_sweeps, sampler=_C.sampler, schedule=_C.schedule, t0=_C.t0,
+    t_end=_C.t_end, proposals=_C.proposals, proposal=_C.proposal, variant=_C.variant,
     bandwidth=None, centre_bandwidth=None, adaptive=None, decision=None, tau=None,
     histogram_weight=None, outlier=None, grey_levels=None, palette=None, toroidal_exemplar=False,
     seed=None,
@@ -99,10 +103,12 @@ def make_config(
 
 
 def synthesize(
-    exemplar=None, *, size=32, window=7, levels=3, heuristic="ML_H2b", relaxation="icm",
-    views=VIEWS, exemplars: dict | None = None, upsample=None, inherit="resynth", xi=-3.0,
-    stop=0.95, max_sweeps=30, sampler="heat-bath", schedule="geometric", t0=1.0, t_end=0.05,
-    proposals=10, proposal="exemplar", variant="default", bandwidth=None, centre_bandwidth=None,
+    exemplar=None, *, size=DEFAULT_SIZE, window=_C.window, levels=_C.levels,
+    heuristic=_C.heuristic, relaxation=_C.relaxation, views=_C.views,
+    exemplars: dict | None = None, upsample=None, inherit=_C.inherit, xi=_C.xi, stop=_C.stop,
+    max_sweeps=_C.max_sweeps, sampler=_C.sampler, schedule=_C.schedule, t0=_C.t0,
+    t_end=_C.t_end, proposals=_C.proposals, proposal=_C.proposal, variant=_C.variant,
+    bandwidth=None, centre_bandwidth=None,
     adaptive=None, decision=None, tau=None, histogram_weight=None, outlier=None, grey_levels=None,
     palette=None, toroidal_exemplar=False, rng=None, progress: ProgressCallback | None = None,
     checkpoint: str | Path | None = None,
@@ -286,10 +292,14 @@ def _config_key(config: SynthesisConfig) -> str:
 
 
 def npmrf_method(per_view: dict[str, np.ndarray], config: SynthesisConfig, rng: np.random.Generator, *,
-                 progress: ProgressCallback | None = None,
-                 checkpoint: str | Path | None = None) -> SynthesisResult:
-    """The NP-MRF sampler in the common method signature (:data:`npmrf3d.methods.METHODS`)."""
-    return run(config, per_view, rng, progress=progress, checkpoint=checkpoint)
+                 progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
+                 t_start: float | None = None) -> SynthesisResult:
+    """The NP-MRF sampler in the common method signature (:data:`npmrf3d.methods.METHODS`).
+
+    ``t_start`` (optional, every method accepts it): ``time.perf_counter()`` when the caller
+    started, so that ``timings["setup"]`` includes loading the exemplars.
+    """
+    return run(config, per_view, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
 
 
 #: The registry entry of the NP-MRF sampler.

@@ -111,7 +111,7 @@ def test_anneal_run_writes_a_colour_run(capsys, tmp_path):
 
 
 def test_synth_suggests_a_palette_for_many_colours(capsys, tmp_path, monkeypatch):
-    monkeypatch.setattr(cli, "MANY_VALUES", 50)
+    monkeypatch.setattr(cli.synth, "MANY_VALUES", 50)
     code, _, err = run_cli(capsys, "synth", "bundled:ihc64", "--size", "8", "--levels", "1",
                            "--window", "3", "--max-sweeps", "1", "--grey-levels", "4",
                            "--out", str(tmp_path / "a"))
@@ -223,7 +223,7 @@ def test_parameter_error_from_writing_is_one_line(tmp_path, exemplar, capsys, mo
     def refuse(*args, **kwargs):
         raise ParameterError("disk says no\nsecond line")
 
-    monkeypatch.setattr(cli, "write_run", refuse)
+    monkeypatch.setattr(cli._common, "write_run", refuse)
     out_dir = tmp_path / "run"
     code, out, err = run_cli(capsys, "synth", str(exemplar), *TINY, "--out", str(out_dir),
                              "--quiet")

@@ -289,7 +289,7 @@ def test_cli_study_and_errors(tmp_path, capsys, blobs):
 
 
 def test_study_script_entry_point(tmp_path):
-    from npmrf3d.studies.cli import study_main
+    from npmrf3d.cli.study import study_main
 
     assert study_main("views", ["--quick", "--out", str(tmp_path), "--scheduler", "serial",
                                 "--quiet"]) == 0

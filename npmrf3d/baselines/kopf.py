@@ -66,7 +66,7 @@ from scipy.spatial import cKDTree
 
 from .. import _validation as check
 from .._kernels import _jit
-from ..config import SynthesisMethod, SynthesisResult
+from ..config import DEFAULT_SIZE, SynthesisMethod, SynthesisResult
 from ..exemplar import resolve_exemplars
 from ..neighborhood import VIEW_AXES, VIEWS
 from ..pyramid import Levels, LevelState, run_pyramid
@@ -83,6 +83,8 @@ UPSAMPLING = ("trilinear", "8/8", "1/8")
 DEFAULT_MEAN_SHIFT = (1.0, 0.25)
 #: Default strength of the histogram re-weighting (1 = the paper's formula with bin counts).
 DEFAULT_HISTOGRAM_WEIGHT = 1.0
+#: Default search + optimisation iterations of every level.
+DEFAULT_ITERATIONS = 5
 _MEAN_SHIFT_ITERATIONS = 8
 _CHUNK_BYTES = 48 * 2**20  # neighbourhood vectors gathered per KD-tree batch
 _SWEEP_CHUNK = 1 << 15  # voxels gathered per optimisation batch
@@ -98,7 +100,7 @@ class KopfConfig:
     window: int = 8
     levels: int = 3
     views: tuple[str, ...] = VIEWS
-    iterations: tuple[int, ...] = (5, 5, 5)
+    iterations: tuple[int, ...] = (DEFAULT_ITERATIONS,) * 3
     r: float = 0.8
     eps: float = 2.0
     variance: float = 0.95
@@ -119,9 +121,11 @@ class KopfConfig:
 
 
 def make_kopf_config(
-    *, size=32, window=8, levels=3, views=VIEWS, iterations=5, r=0.8, eps=2.0, variance=0.95,
-    grid=2, histogram_bins=16, histogram_weight=DEFAULT_HISTOGRAM_WEIGHT,
-    mean_shift=DEFAULT_MEAN_SHIFT, upsample="trilinear", constrained=False, seed=None,
+    *, size=DEFAULT_SIZE, window=KopfConfig.window, levels=KopfConfig.levels, views=KopfConfig.views,
+    iterations=DEFAULT_ITERATIONS, r=KopfConfig.r, eps=KopfConfig.eps, variance=KopfConfig.variance,
+    grid=KopfConfig.grid, histogram_bins=KopfConfig.histogram_bins,
+    histogram_weight=KopfConfig.histogram_weight, mean_shift=KopfConfig.mean_shift,
+    upsample=KopfConfig.upsample, constrained=False, seed=None,
 ) -> KopfConfig:
     """Validate plain keyword arguments into a frozen :class:`KopfConfig`."""
     levels = check.integer("levels", levels, low=1, high=8)
@@ -509,11 +513,13 @@ def _coarsen_constraint(t, tau, level):
 
 
 def kopf_synthesize(
-    exemplar=None, *, size=32, window: int = 8, levels: int = 3, views=VIEWS,
-    exemplars: Mapping | None = None, iterations=5, r: float = 0.8, eps: float = 2.0,
-    variance: float = 0.95, grid: int = 2, histogram_bins: int = 16,
-    histogram_weight: float = DEFAULT_HISTOGRAM_WEIGHT, mean_shift=DEFAULT_MEAN_SHIFT,
-    upsample: str = "trilinear", constraint=None, constraint_weight=None, rng=None,
+    exemplar=None, *, size=DEFAULT_SIZE, window: int = KopfConfig.window,
+    levels: int = KopfConfig.levels, views=KopfConfig.views, exemplars: Mapping | None = None,
+    iterations=DEFAULT_ITERATIONS, r: float = KopfConfig.r, eps: float = KopfConfig.eps,
+    variance: float = KopfConfig.variance, grid: int = KopfConfig.grid,
+    histogram_bins: int = KopfConfig.histogram_bins,
+    histogram_weight: float = KopfConfig.histogram_weight, mean_shift=KopfConfig.mean_shift,
+    upsample: str = KopfConfig.upsample, constraint=None, constraint_weight=None, rng=None,
     progress: ProgressCallback | None = None, checkpoint=None,
 ) -> SynthesisResult:
     """Synthesize a solid texture with NP_K (Kopf et al. 2007; SPEC.md section 6).
@@ -732,13 +738,13 @@ def run_kopf(config: KopfConfig, per_view: Mapping[str, np.ndarray], rng: np.ran
 
 def kopf_method(per_view: Mapping[str, np.ndarray], config: KopfConfig, rng: np.random.Generator, *,
                 progress: ProgressCallback | None = None, checkpoint=None, constraint=None,
-                constraint_weight=None) -> SynthesisResult:
+                constraint_weight=None, t_start: float | None = None) -> SynthesisResult:
     """NP_K in the common method signature (:data:`npmrf3d.methods.METHODS`); ``constraint``
     and ``constraint_weight`` are raw arrays, validated here."""
     channels = next(iter(per_view.values())).shape[2]
     target, tau = _constraint_arrays(constraint, constraint_weight, config.size, channels)
     return run_kopf(config, per_view, rng, constraint=target, constraint_weight=tau,
-                    progress=progress, checkpoint=checkpoint)
+                    progress=progress, checkpoint=checkpoint, t_start=t_start)
 
 
 #: The registry entry of NP_K.

@@ -33,7 +33,6 @@ import math
 import os
 import pathlib
 import socket
-import sys
 import time
 import traceback
 from collections.abc import Callable, Sequence
@@ -186,29 +185,23 @@ def record_failure(spec: RunSpec, study_dir, exc: BaseException, wall: float = m
 
 # --------------------------------------------------------------------------- schedulers
 
-class _ProgressBar:
-    """tqdm over runs on stderr, opened at the first finished run (after the scheduler line)."""
+class _Progress:
+    """Counts finished runs and hands each to the caller's ``progress(row, done, total)``
+    (``row = None`` when the runs start); the library draws no bar itself."""
 
-    def __init__(self, name: str, total: int, enabled: bool):
-        self.name, self.total, self.enabled, self.bar = name, total, enabled, None
+    def __init__(self, callback, total: int):
+        self.callback = callback if callable(callback) else None
+        self.total, self.done = total, 0
 
     def start(self) -> None:
-        if self.enabled and self.bar is None:
-            from tqdm import tqdm
-
-            self.bar = tqdm(total=self.total, desc=self.name, unit="run", file=sys.stderr,
-                            dynamic_ncols=True)
+        if self.callback is not None:
+            self.callback(None, 0, self.total)
 
     def __call__(self, row: dict) -> None:
-        self.start()
-        if self.bar is not None:
-            self.bar.update(1)
-            if row["status"] == "failed":
-                self.bar.write(f"run {row['run_id']} failed: {row['error']}", file=sys.stderr)
+        self.done += 1
+        if self.callback is not None:
+            self.callback(row, self.done, self.total)
 
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
 
 def plan_workers(workers: int | None, threads: int | None, cores: int | None = None) -> tuple[int, int]:
     """(workers, numba threads per worker) with ``workers * threads <= cores``.
@@ -311,7 +304,8 @@ class StudyOutcome:
 def run_study(study: Study, *, mode: str = "quick", out="study-results", scheduler: str | None = None,
               workers: int | None = None, threads: int | None = None, seeds=None, exemplars=None,
               sizes=None, levels: int | None = None, volume=None, slice_axis: int = 0,
-              slice_index: int | None = None, progress: bool = True,
+              slice_index: int | None = None,
+              progress: Callable[[dict | None, int, int], None] | bool | None = None,
               echo: Callable[[str], None] | None = None) -> StudyOutcome:
     """Run (or resume) a study and write its runs, ``results.csv``, figures and ``study.json``.
 
@@ -333,8 +327,11 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
         The real volume of the ground-truth study.
     slice_axis, slice_index : int
         Which slice of ``volume`` is the exemplar (default: the middle one across axis 0).
-    progress : bool
-        A tqdm bar over the runs on stderr.
+    progress : callable, optional
+        Called as ``progress(row, done, total)`` after every finished run (its
+        ``results.csv`` row) and once as ``progress(None, 0, total)`` when the runs start;
+        ``npmrf3d study`` draws its bar with it. A bool (the former "draw a bar" switch) is
+        accepted and ignored: the library draws nothing.
     echo : callable or None
         Where the one-line messages go (None: nowhere).
 
@@ -378,15 +375,11 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
 
     info = {"scheduler": "none (nothing to run)", "workers": 0, "threads": threads}
     if pending:
-        progress_bar = _ProgressBar(study.name, len(pending), enabled=progress)
-        try:
-            if scheduler == "serial":
-                new, info = _run_serial(pending, study_dir, threads, echo, progress_bar)
-            else:
-                new, info = _run_dask(pending, study_dir, scheduler, workers, threads, echo,
-                                      progress_bar)
-        finally:
-            progress_bar.close()
+        reporter = _Progress(progress, len(pending))
+        if scheduler == "serial":
+            new, info = _run_serial(pending, study_dir, threads, echo, reporter)
+        else:
+            new, info = _run_dask(pending, study_dir, scheduler, workers, threads, echo, reporter)
         rows.update(new)
 
     ordered = [rows[s.run_id] for s in specs]
