@@ -22,7 +22,7 @@ from scipy.cluster.vq import kmeans2, vq
 from . import _validation as check
 from . import data
 from .errors import ParameterError
-from .io import read_array
+from ._files import read_array
 from .neighborhood import window_offsets
 
 __all__ = [

@@ -26,7 +26,7 @@ import numpy as np
 from scipy import ndimage
 
 from . import _validation as check
-from .io import load_checkpoint, save_checkpoint
+from ._files import load_checkpoint, save_checkpoint
 
 __all__ = ["INHERIT", "LABEL_UPSAMPLING", "LevelState", "Levels", "UPSAMPLERS", "UPSAMPLING",
            "level_shape", "random_state", "run_pyramid", "upsample"]

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from npmrf3d.errors import ParameterError
-from npmrf3d.io import _json_text, as_volume, package_versions, to_jsonable, write_volume_tiff
+from npmrf3d._files import json_text, as_volume, package_versions, to_jsonable, write_volume_tiff
 from npmrf3d.plotting import preview_figure, save_figure
 
 __all__ = ["RUN_FILES", "config_dict", "run_record", "write_run"]
@@ -139,7 +139,7 @@ def write_run(
             "pass overwrite=True (--overwrite) or choose another --out"
         )
     volume = as_volume(volume)
-    text = _json_text(record)  # fail on a bad record before touching the disk
+    text = json_text(record)  # fail on a bad record before touching the disk
 
     target = out_dir.absolute()
     # stage in the nearest existing ancestor, so that a failure leaves no new folders behind

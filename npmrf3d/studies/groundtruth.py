@@ -30,7 +30,7 @@ import numpy as np
 from npmrf3d import metrics
 from npmrf3d.errors import ParameterError
 from npmrf3d.exemplar import exemplar_slice
-from npmrf3d.io import read_volume
+from npmrf3d._files import read_volume
 
 __all__ = [
     "GREY_BINS",

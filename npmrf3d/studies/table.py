@@ -13,7 +13,7 @@ import pathlib
 from collections.abc import Sequence
 from typing import Any
 
-from npmrf3d.io import atomic_write
+from npmrf3d._files import atomic_write
 
 from .grid import RunSpec
 
