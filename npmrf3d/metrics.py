@@ -1,5 +1,11 @@
 """Input-versus-output measures (SPEC.md section 7), per constrained view.
 
+Why one module of ~880 lines: each public metric here is a few lines on top of shared helpers
+(value ranges, histograms, slices in view orientation, settings) that ``docs/metrics.md``
+documents as one unit and ``tests/test_metrics.py`` checks against independent
+implementations; :data:`METRIC_FUNCTIONS` is the registry :func:`evaluate` loops over. Split
+it (e.g. ``metrics/histograms.py``, ``metrics/texture.py``) when a new family of metrics comes.
+
 The exemplar of a view is compared with *all* the volume's slices orthogonal to that view
 (pooled). Slices are oriented as in :mod:`npmrf3d.neighborhood` so the exemplar's rows and
 columns line up with the slice's: front slices are ``volume[:, :, k]`` (rows i, columns j),
