@@ -1,5 +1,8 @@
 """Reading and writing exemplars, volumes, JSON and checkpoints: the bottom of the file layer.
 
+(Why over 400 lines: eight small readers and writers, each with the checks and messages of
+STYLE.md practice 7 and a numpydoc docstring; they share the atomic-write and error helpers.)
+
 Public through :mod:`npmrf3d.io` (which adds the run folders of :mod:`npmrf3d.runs`); the
 model layer and :mod:`npmrf3d.plotting` import this module directly, so that reading an
 exemplar never imports matplotlib and no arrow points back up.
