@@ -15,36 +15,8 @@ Conventions
   moved into place (:func:`write_run`).
 """
 
-from ._files import (
-    IMAGE_EXTENSIONS,
-    TIFF_EXTENSIONS,
-    as_volume,
-    atomic_write,
-    load_checkpoint,
-    package_versions,
-    read_array,
-    read_volume,
-    save_checkpoint,
-    to_jsonable,
-    write_json,
-    write_volume_tiff,
-)
+from ._files import *  # noqa: F403 (the public file functions, listed in _files.__all__)
+from ._files import __all__ as _FILES
 from .runs import RUN_FILES, run_record, write_run
 
-__all__ = [
-    "IMAGE_EXTENSIONS",
-    "RUN_FILES",
-    "TIFF_EXTENSIONS",
-    "as_volume",
-    "atomic_write",
-    "load_checkpoint",
-    "package_versions",
-    "read_array",
-    "read_volume",
-    "run_record",
-    "save_checkpoint",
-    "to_jsonable",
-    "write_json",
-    "write_run",
-    "write_volume_tiff",
-]
+__all__ = [*_FILES, "RUN_FILES", "run_record", "write_run"]

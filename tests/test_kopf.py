@@ -363,27 +363,6 @@ def test_voxel_constraints_pull_the_constrained_slice():
     assert abs(np.abs(held[:, :, 10, 0] - smile).mean() - np.abs(free[:, :, 10, 0] - smile).mean()) < 0.1
 
 
-def test_resume_from_checkpoint_gives_the_uninterrupted_result(tmp_path):
-    path = tmp_path / "kopf.npz"
-    kw = dict(size=16, window=4, levels=2, iterations=2, rng=5)
-    full = kopf_synthesize(stripes(), **kw).volume
-
-    class Stop(Exception):
-        pass
-
-    def interrupt(level, step, steps, energy):
-        if level == 0 and step == 1:
-            raise Stop
-
-    with pytest.raises(Stop):
-        kopf_synthesize(stripes(), progress=interrupt, checkpoint=path, **kw)
-    assert path.exists()
-    resumed = kopf_synthesize(stripes(), checkpoint=path, **kw)
-    np.testing.assert_array_equal(full, resumed.volume)
-    with pytest.raises(ParameterError, match="different configuration"):
-        kopf_synthesize(stripes(vertical=False), checkpoint=path, **kw)
-
-
 def test_same_seed_same_volume_and_other_seed_differs():
     ex = stripes(4, 24)
     kw = dict(size=16, window=4, levels=2, iterations=2)

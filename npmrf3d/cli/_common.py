@@ -13,10 +13,11 @@ import os
 import pathlib
 import sys
 
+import numpy as np
 from tqdm import tqdm
 
 from ..errors import ParameterError
-from ..exemplar import exemplar_source
+from ..exemplar import exemplar_source, resolve_exemplars
 from ..neighborhood import VIEWS
 from ..pyramid import level_shape
 from ..runs import RUN_FILES, run_record, write_run
@@ -139,6 +140,29 @@ def view_sources(args: argparse.Namespace):
         if source is not None:
             per_view_sources[view], names[view] = source, name
     return exemplar, per_view_sources, lambda views: {v: names.get(v, exemplar_name) for v in views}
+
+
+def prepare_run(args: argparse.Namespace, method, config):
+    """Checks and inputs shared by every command that runs a method of the registry, in the
+    order that keeps user errors ahead of any work: the ``--out`` folder, the ``--checkpoint``,
+    the exemplars. Returns (out, checkpoint, per-view exemplars, per-view names for run.json)."""
+    out = output_folder(args)
+    checkpoint = pathlib.Path(args.checkpoint) if getattr(args, "checkpoint", None) is not None else None
+    check_checkpoint(checkpoint)
+    exemplar, per_view_sources, source_names = view_sources(args)
+    per_view = resolve_exemplars(exemplar, per_view_sources, config.views, **method.fit(config))
+    return out, checkpoint, per_view, source_names(config.views)
+
+
+def run_method(args: argparse.Namespace, method, config, per_view: dict, *, checkpoint=None,
+               t_start: float | None = None, unit: str = "sweep", symbol: str = "T", **inputs):
+    """``method.run`` seeded by ``config.seed`` with a bar per level (none with ``--quiet``)."""
+    progress = LevelProgress(config.size, enabled=not args.quiet, unit=unit, symbol=symbol)
+    try:
+        return method.run(per_view, config, np.random.default_rng(config.seed), progress=progress,
+                          checkpoint=checkpoint, t_start=t_start, **inputs)
+    finally:
+        progress.close()
 
 
 def write_result(out: pathlib.Path, args: argparse.Namespace, argv: list[str], command: str,

@@ -12,28 +12,16 @@ before any synthesis work and without leaving files behind.
 from __future__ import annotations
 
 import argparse
-import pathlib
 import time
-
-import numpy as np
 
 from .. import data, io
 from ..baselines.kopf import DEFAULT_ITERATIONS, METHOD, UPSAMPLING, KopfConfig
 from ..config import DEFAULT_SIZE
 from ..errors import ParameterError
-from ..exemplar import BUNDLED_PREFIX, resolve_exemplars
+from ..exemplar import BUNDLED_PREFIX
 from ..neighborhood import VIEWS
 from ..runs import RUN_FILES
-from ._common import (
-    LevelProgress,
-    check_checkpoint,
-    choices,
-    default,
-    output_folder,
-    parse_size,
-    view_sources,
-    write_result,
-)
+from ._common import choices, default, parse_size, prepare_run, run_method, write_result
 
 __all__ = ["register"]
 
@@ -41,10 +29,8 @@ __all__ = ["register"]
 _OPTION_NAMES = ("histogram_bins", "histogram_weight", "mean_shift", "constraint_weight",
                  "iterations", "variance", "grid", "eps", "window", "levels")
 
-
 def _d(name: str):
     return default(KopfConfig, name)
-
 
 def register(commands, formatter_class) -> None:
     """Add ``baseline`` with its nested sub-command ``kopf`` to the ``npmrf3d`` parser."""
@@ -140,7 +126,6 @@ def register(commands, formatter_class) -> None:
                           "no checkpoint)")
     kopf.set_defaults(handler=_kopf)
 
-
 def _parse_iterations(text: str):
     parts = [p.strip() for p in str(text).split(",")]
     try:
@@ -148,7 +133,6 @@ def _parse_iterations(text: str):
     except ValueError:
         raise ParameterError(f"--iterations must be an integer or comma-separated integers; got {text!r}") from None
     return numbers[0] if len(numbers) == 1 else tuple(numbers)
-
 
 def _parse_mean_shift(text: str):
     if str(text).strip().lower() in ("none", "off", ""):
@@ -164,7 +148,6 @@ def _parse_mean_shift(text: str):
                              f"got {text!r}")
     return numbers[0] if len(numbers) == 1 else tuple(numbers)
 
-
 def _constraint_weight(text: str | None):
     if text is None:
         return None
@@ -178,20 +161,17 @@ def _constraint_weight(text: str | None):
                              f"got shape {weights.shape}")
     return weights[..., 0]
 
-
 def _option_message(message: str) -> str:
     for name in _OPTION_NAMES:
         if message.startswith(f"{name} must "):
             return "--" + name.replace("_", "-") + message[len(name):]
     return message
 
-
 def _kopf(args: argparse.Namespace, argv: list[str]) -> int:
     try:
         return _run(args, argv)
     except ParameterError as exc:
         raise ParameterError(_option_message(str(exc))) from None
-
 
 def _run(args: argparse.Namespace, argv: list[str]) -> int:
     t_start = time.perf_counter()
@@ -204,20 +184,9 @@ def _run(args: argparse.Namespace, argv: list[str]) -> int:
         histogram_weight=args.histogram_weight, mean_shift=_parse_mean_shift(args.mean_shift),
         upsample=args.upsample, constrained=constraint is not None, seed=args.seed,
     )
-    out = output_folder(args)
-    checkpoint = pathlib.Path(args.checkpoint) if args.checkpoint is not None else None
-    check_checkpoint(checkpoint)
-    exemplar, per_view_sources, source_names = view_sources(args)
-    per_view = resolve_exemplars(exemplar, per_view_sources, config.views, **METHOD.fit(config))
-    sources = source_names(config.views)
-
-    progress = LevelProgress(config.size, enabled=not args.quiet, unit="iter", symbol="E")
-    try:
-        result = METHOD.run(per_view, config, np.random.default_rng(config.seed), progress=progress,
-                            checkpoint=checkpoint, constraint=constraint, constraint_weight=weight,
-                            t_start=t_start)
-    finally:
-        progress.close()
+    out, checkpoint, per_view, sources = prepare_run(args, METHOD, config)
+    result = run_method(args, METHOD, config, per_view, checkpoint=checkpoint, t_start=t_start,
+                        unit="iter", symbol="E", constraint=constraint, constraint_weight=weight)
 
     title = (f"NP_K (Kopf et al. 2007), window {config.window}, {config.levels} levels, "
              f"seed {config.seed}")

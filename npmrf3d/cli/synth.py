@@ -9,14 +9,13 @@ API, the configuration and the command line cannot disagree (``tests/test_defaul
 from __future__ import annotations
 
 import argparse
-import pathlib
 import time
 
 import numpy as np
 
 from .. import data
 from ..config import DEFAULT_SIZE, VARIANTS, SynthesisConfig
-from ..exemplar import BUNDLED_PREFIX, resolve_exemplars
+from ..exemplar import BUNDLED_PREFIX
 from ..heuristics import DECISIONS, HEURISTICS
 from ..neighborhood import VIEWS
 from ..pyramid import INHERIT, UPSAMPLING
@@ -24,18 +23,7 @@ from ..relax import RELAXATIONS
 from ..relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
 from ..runs import RUN_FILES
 from ..synthesis import METHOD
-from ._common import (
-    PROG,
-    LevelProgress,
-    check_checkpoint,
-    choices,
-    default,
-    output_folder,
-    parse_size,
-    say,
-    view_sources,
-    write_result,
-)
+from ._common import PROG, choices, default, parse_size, prepare_run, run_method, say, write_result
 
 __all__ = ["register", "run"]
 
@@ -275,22 +263,10 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
         grey_levels=args.grey_levels,
         palette=args.palette, toroidal_exemplar=args.toroidal_exemplar, seed=args.seed,
     )
-    out = output_folder(args)
-    checkpoint = pathlib.Path(args.checkpoint) if args.checkpoint is not None else None
-    check_checkpoint(checkpoint)
-
-    exemplar, per_view_sources, source_names = view_sources(args)
-    per_view = resolve_exemplars(exemplar, per_view_sources, config.views, **METHOD.fit(config))
-    sources = source_names(config.views)
+    out, checkpoint, per_view, sources = prepare_run(args, METHOD, config)
     if not args.quiet and config.palette is None and config.grey_levels is None:
         _note_many_values(per_view)
-
-    progress = LevelProgress(config.size, enabled=not args.quiet)
-    try:
-        result = METHOD.run(per_view, config, np.random.default_rng(config.seed), progress=progress,
-                            checkpoint=checkpoint, t_start=t_start)
-    finally:
-        progress.close()
+    result = run_method(args, METHOD, config, per_view, checkpoint=checkpoint, t_start=t_start)
 
     title = (f"npmrf3d {config.heuristic}, variant {config.variant}, window {config.window}, "
              f"{config.levels} levels, seed {config.seed}")
