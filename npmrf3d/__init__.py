@@ -13,6 +13,9 @@ load_exemplar
     Read an exemplar image or array as float32 (H, W, C).
 SynthesisConfig, SynthesisResult, DecisionRule, VARIANTS
     Run configuration, result object and decision-rule presets.
+METHODS, get_method
+    The method registry: every way of making a volume by name (``npmrf``, ``kopf``), each with
+    ``run(per_view_exemplars, config, rng, *, progress, checkpoint)`` and its config class.
 ParameterError
     The exception raised for user mistakes.
 """
@@ -25,6 +28,7 @@ from .config import VARIANTS, DecisionRule, SynthesisConfig, SynthesisResult
 from .errors import ParameterError
 from .exemplar import load_exemplar
 from .heuristics import HEURISTICS
+from .methods import METHODS, get_method
 from .synthesis import make_config, synthesize
 
 try:
@@ -34,6 +38,7 @@ except PackageNotFoundError:  # running from a source tree that was not installe
 
 __all__ = [
     "HEURISTICS",
+    "METHODS",
     "VARIANTS",
     "DecisionRule",
     "ParameterError",
@@ -41,6 +46,7 @@ __all__ = [
     "SynthesisResult",
     "__version__",
     "data",
+    "get_method",
     "kopf_synthesize",
     "load_exemplar",
     "metrics",

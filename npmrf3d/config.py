@@ -9,11 +9,18 @@ measurement (``benchmarks/bench_quality.py``, ``docs/quality.md``).
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any
 
 import numpy as np
 
-__all__ = ["DecisionRule", "SynthesisConfig", "SynthesisResult", "VARIANTS"]
+from .relax import RELAXATIONS, AnnealOptions, IcmOptions
+
+#: Side of the cube made when no size is given (API and command line, every method).
+DEFAULT_SIZE = 32
+
+__all__ = ["DEFAULT_SIZE", "DecisionRule", "SynthesisConfig", "SynthesisMethod", "SynthesisResult", "VARIANTS"]
 
 
 @dataclass(frozen=True)
@@ -63,8 +70,11 @@ VARIANTS: dict[str, DecisionRule] = {
 class SynthesisConfig:
     """A validated NP-MRF synthesis run (see :func:`npmrf3d.synthesize` for the meaning).
 
-    ``xi``, ``stop`` and ``max_sweeps`` drive ICM; ``sampler`` ... ``proposal`` drive annealing;
-    both sets are always stored, the relaxation not chosen ignores its set.
+    ``xi``, ``stop`` and ``max_sweeps`` drive ICM (:class:`npmrf3d.relax.IcmOptions`);
+    ``sampler`` ... ``proposal`` drive annealing (:class:`npmrf3d.relax.AnnealOptions`). Both
+    sets stay flat fields here so that ``run.json`` records and checkpoints keep their layout;
+    their defaults come from the two options classes, and :attr:`relaxation_options` gives the
+    chosen relaxation's own options.
     """
 
     size: tuple[int, int, int]
@@ -75,15 +85,15 @@ class SynthesisConfig:
     views: tuple[str, ...] = ("front", "right", "top")
     upsample: str = "1/8"
     inherit: str = "resynth"
-    xi: float = -3.0
-    stop: float = 0.95
-    max_sweeps: int = 30
-    sampler: str = "heat-bath"
-    schedule: str = "geometric"
-    t0: float = 1.0
-    t_end: float = 0.05
-    proposals: int = 10
-    proposal: str = "exemplar"
+    xi: float = IcmOptions.xi
+    stop: float = IcmOptions.stop
+    max_sweeps: int = IcmOptions.max_sweeps
+    sampler: str = AnnealOptions.sampler
+    schedule: str = AnnealOptions.schedule
+    t0: float = AnnealOptions.t0
+    t_end: float = AnnealOptions.t_end
+    proposals: int = AnnealOptions.proposals
+    proposal: str = AnnealOptions.proposal
     variant: str = "default"
     rule: DecisionRule = field(default_factory=DecisionRule)
     grey_levels: int | None = None
@@ -94,6 +104,12 @@ class SynthesisConfig:
     def to_dict(self) -> dict:
         """Plain JSON-able dictionary (tuples become lists)."""
         return asdict(self)
+
+    @property
+    def relaxation_options(self) -> IcmOptions | AnnealOptions:
+        """The options of the chosen relaxation, as its own frozen dataclass."""
+        cls = RELAXATIONS[self.relaxation].options
+        return cls(**{f.name: getattr(self, f.name) for f in fields(cls)})
 
 
 @dataclass(frozen=True)
@@ -123,3 +139,46 @@ class SynthesisResult:
     timings: dict
     labels: np.ndarray
     stats: dict
+
+
+#: ``run(per_view_exemplars, config, rng, *, progress=None, checkpoint=None, **inputs)``: make a
+#: volume from validated exemplars (view -> float32 (H, W, C)) and a validated configuration.
+MethodRun = Callable[..., SynthesisResult]
+
+
+@dataclass(frozen=True)
+class SynthesisMethod:
+    """One way of making a volume: an entry of :data:`npmrf3d.methods.METHODS`.
+
+    Attributes
+    ----------
+    name : str
+        Registry name (``npmrf``, ``kopf``, ...), used by the studies, the CLI and ``run.json``.
+    run : callable
+        ``run(per_view_exemplars, config, rng, *, progress=None, checkpoint=None) ->
+        SynthesisResult``; ``progress(level, step, steps, value)`` as in
+        :func:`npmrf3d.pyramid.run_pyramid`. Method-specific inputs that are not configuration
+        (NP_K's constraint volume) may follow as further keyword arguments.
+    make_config : callable
+        Plain keyword arguments -> a validated ``config_class`` instance (raises
+        :class:`npmrf3d.ParameterError`).
+    config_class : type
+        The method's frozen configuration dataclass; its field defaults are the defaults of
+        the API and the command line.
+    synthesize : callable
+        The public one-call function (``synthesize(exemplar=None, *, ..., rng=None, progress=None)``):
+        validate, load the exemplars, run.
+    fit : callable
+        ``fit(config) -> dict(window=..., levels=..., toroidal=...)``: what
+        :func:`npmrf3d.exemplar.resolve_exemplars` checks every exemplar against.
+    description : str
+        One line for ``npmrf3d info`` and error messages.
+    """
+
+    name: str
+    run: MethodRun
+    make_config: Callable[..., Any]
+    config_class: type
+    synthesize: Callable[..., SynthesisResult]
+    fit: Callable[[Any], dict]
+    description: str = ""

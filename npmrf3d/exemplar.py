@@ -13,15 +13,37 @@ are taken from each of them (never across phases). Same statistics, ``4^l`` time
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 from scipy.cluster.vq import kmeans2, vq
 
 from . import _validation as check
+from . import data
+from .errors import ParameterError
+from ._files import read_array
 from .neighborhood import window_offsets
 
-__all__ = ["decimation_phases", "extract_patches", "load_exemplar", "make_labels"]
+__all__ = [
+    "BUNDLED_PREFIX",
+    "decimation_phases",
+    "etr_available",
+    "exemplar_slice",
+    "exemplar_source",
+    "extract_patches",
+    "load_exemplar",
+    "make_labels",
+    "named_exemplar",
+    "resolve_exemplars",
+]
+
+#: Prefix of a bundled exemplar on the command line (``bundled:gravel64``).
+BUNDLED_PREFIX = "bundled:"
+#: Where Debian's extremetuxracer-data package puts its terrain photographs (GPL-2+).
+ETR_DIR = Path("/usr/share/games/etr/terrains")
+ETR_PREFIX = "etr:"
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".gif", ".tif", ".tiff", ".npy")
 
 
 def load_exemplar(source=None, *, name: str = "exemplar") -> np.ndarray:
@@ -46,17 +68,151 @@ def load_exemplar(source=None, *, name: str = "exemplar") -> np.ndarray:
     (8, 9, 1)
     """
     if source is None:
-        from . import data
-
         source = data.path(data.DEFAULT_EXEMPLAR)
     if isinstance(source, (str, Path)):
-        from .io import read_array
-
         array = read_array(source, what="exemplar file")
         name = f"{name} '{source}'"
     else:
         array = np.asarray(source)
     return check.exemplar_array(array, name=name)
+
+
+# --------------------------------------------------------------------------- exemplar sources
+#
+# The three ways a run names its exemplar, in one place: a command-line argument (a file or
+# ``bundled:NAME``), a study's exemplar name (bundled, ``etr:NAME`` or a file, optionally
+# cropped) and a slice of a real volume (the ground-truth study). Each resolves to a float32
+# (H, W, C) array; :func:`resolve_exemplars` then gives every constrained view its own.
+
+
+def exemplar_source(text: str | None) -> tuple[Path | None, str | None]:
+    """(file to load, what ``run.json`` records) for an EXEMPLAR or ``--exemplar-VIEW`` argument.
+
+    >>> exemplar_source("bundled:gravel64")[1]
+    'bundled:gravel64'
+    >>> exemplar_source(None)
+    (None, None)
+    """
+    if text is None:
+        return None, None
+    if text.startswith(BUNDLED_PREFIX):
+        name = text[len(BUNDLED_PREFIX):]
+        return data.path(name), f"{BUNDLED_PREFIX}{name}"
+    if not text.strip():
+        raise ParameterError("exemplar file name is empty")
+    return Path(text), text
+
+
+def etr_available(folder: Path | None = None) -> list[str]:
+    """Names ``etr:<stem>`` of the installed Extreme Tux Racer terrain photographs (may be empty)."""
+    folder = ETR_DIR if folder is None else Path(folder)
+    if not folder.is_dir():
+        return []
+    return sorted(f"{ETR_PREFIX}{p.stem}" for p in folder.iterdir()
+                  if p.suffix.lower() in IMAGE_SUFFIXES)
+
+
+def named_exemplar(name: str, crop: int | None = None) -> np.ndarray:
+    """A study exemplar as float32 ``(H, W, C)``; ``crop`` keeps the top-left ``crop x crop``.
+
+    ``name`` is a bundled name, ``etr:NAME`` (an installed Extreme Tux Racer terrain) or an
+    image file path.
+
+    Raises
+    ------
+    ParameterError
+        Unknown name, missing file, or an ``etr:`` name without the Debian package installed.
+
+    Examples
+    --------
+    >>> named_exemplar("gravel64", crop=16).shape
+    (16, 16, 1)
+    """
+    if name in data.available():
+        image = load_exemplar(data.path(name))
+    elif name.startswith(ETR_PREFIX):
+        stem = name[len(ETR_PREFIX):]
+        if not ETR_DIR.is_dir():
+            raise ParameterError(
+                f"exemplar {name!r} is an Extreme Tux Racer terrain photograph, read at run time "
+                f"from {ETR_DIR}, which does not exist: install Debian's extremetuxracer-data "
+                f"package (GPL-2+, so it is not bundled with npmrf3d) or choose another exemplar")
+        files = [p for p in sorted(ETR_DIR.iterdir())
+                 if p.stem == stem and p.suffix.lower() in IMAGE_SUFFIXES]
+        if not files:
+            raise ParameterError(f"no terrain photograph {stem!r} in {ETR_DIR}; installed: "
+                                 f"{', '.join(etr_available()) or 'none'}")
+        image = load_exemplar(files[0])
+    elif Path(name).suffix.lower() in IMAGE_SUFFIXES:
+        image = load_exemplar(name)
+    else:
+        raise ParameterError(
+            f"unknown exemplar {name!r}: use a bundled name ({', '.join(data.available())}), "
+            f"'etr:NAME' for an installed Extreme Tux Racer terrain, or an image file path")
+    if crop is not None:
+        image = np.ascontiguousarray(image[:crop, :crop])
+    return image
+
+
+def exemplar_slice(volume: np.ndarray, axis: int = 0, index: int | None = None) -> np.ndarray:
+    """The slice across ``axis`` at ``index`` (default: the middle) of a ``(N1, N2, N3, C)``
+    volume as an ``(H, W, C)`` exemplar image.
+
+    >>> v = np.arange(24, dtype=np.float32).reshape(2, 3, 4, 1)
+    >>> exemplar_slice(v, 2, 0)[..., 0].tolist()
+    [[0.0, 4.0, 8.0], [12.0, 16.0, 20.0]]
+    """
+    if axis not in (0, 1, 2):
+        raise ParameterError(f"slice axis must be 0, 1 or 2; got {axis!r}")
+    n = volume.shape[axis]
+    index = n // 2 if index is None else int(index)
+    if not 0 <= index < n:
+        raise ParameterError(f"slice index must be in [0, {n - 1}] for axis {axis}; got {index}")
+    return np.ascontiguousarray(np.take(volume, index, axis=axis))
+
+
+def resolve_exemplars(exemplar, exemplars: Mapping | None, views: tuple[str, ...], *,
+                      window: int, levels: int, toroidal: bool = False) -> dict[str, np.ndarray]:
+    """One float32 (H, W, C) exemplar per constrained view, validated against the window.
+
+    Parameters
+    ----------
+    exemplar : path, array or None
+        Used for every view without an entry in ``exemplars`` (None: the bundled default).
+    exemplars : mapping view -> path or array, optional
+    views : tuple of str
+        The constrained views (validated).
+    window, levels : int
+        Every exemplar must hold a whole window at the coarsest level.
+    toroidal : bool
+        Whether exemplar patches may wrap around (relaxes the size requirement).
+
+    Views given the same source share one array (so the label set is built once per source).
+    A method that takes 3D exemplars will add a volume branch here (a ``(D, H, W, C)`` source
+    giving each view its slices); today every source is a 2D image.
+    """
+    exemplars = dict(exemplars or {})
+    unknown = set(exemplars) - set(views)
+    if unknown:
+        check.fail(f"exemplars given for views that are not constrained: {', '.join(sorted(unknown))}; "
+                   f"constrained views are {', '.join(views)}")
+    out, cache = {}, {}
+    for v in views:
+        source = exemplars.get(v, exemplar)
+        key = id(source) if not isinstance(source, (str, Path)) else str(source)
+        if key not in cache:
+            cache[key] = load_exemplar(source, name=f"exemplar for view {v}" if v in exemplars else "exemplar")
+        out[v] = cache[key]
+    channels = {a.shape[2] for a in out.values()}
+    if len(channels) > 1:
+        check.fail(f"all exemplars must have the same number of channels; got {sorted(channels)}")
+    for v, a in out.items():
+        check.exemplar_fits(a, window=window, levels=levels, toroidal=toroidal,
+                            name="exemplar" if len(out) == 1 or v not in exemplars else f"exemplar for view {v}")
+    return out
+
+
+# --------------------------------------------------------------------------- label sets
 
 
 def make_labels(

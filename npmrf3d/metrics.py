@@ -1,5 +1,11 @@
 """Input-versus-output measures (SPEC.md section 7), per constrained view.
 
+Why one module of ~880 lines: each public metric here is a few lines on top of shared helpers
+(value ranges, histograms, slices in view orientation, settings) that ``docs/metrics.md``
+documents as one unit and ``tests/test_metrics.py`` checks against independent
+implementations; :data:`METRIC_FUNCTIONS` is the registry :func:`evaluate` loops over. Split
+it (e.g. ``metrics/histograms.py``, ``metrics/texture.py``) when a new family of metrics comes.
+
 The exemplar of a view is compared with *all* the volume's slices orthogonal to that view
 (pooled). Slices are oriented as in :mod:`npmrf3d.neighborhood` so the exemplar's rows and
 columns line up with the slice's: front slices are ``volume[:, :, k]`` (rows i, columns j),
@@ -31,8 +37,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Iterable, Mapping
-from typing import Any
+from collections.abc import Callable, Iterable, Mapping
+from typing import Any, NamedTuple
 
 import numpy as np
 from scipy import ndimage
@@ -712,6 +718,65 @@ def _prepare(volume: Any, exemplars: Any, views: Any) -> tuple[np.ndarray, dict[
     return v, out
 
 
+# --------------------------------------------------------------------------- the registry
+
+
+class ViewPair(NamedTuple):
+    """One view's exemplar and the volume's slices orthogonal to it, as :func:`evaluate` passes
+    them to every function of :data:`METRIC_FUNCTIONS`."""
+
+    exemplar: np.ndarray  # (H, W, C) float64
+    slices: np.ndarray  # (S, A, B, C) float64
+    grey_exemplar: np.ndarray  # (H, W)
+    grey_slices: np.ndarray  # (S, A, B)
+    joint_bins: int  # bins per channel of the joint colour histogram
+
+
+def _histogram_metric(pair: ViewPair, s: MetricSettings) -> tuple[float, dict]:
+    e, slices = pair.exemplar, pair.slices
+    ranges = _channel_ranges(e)
+    (glo, ghi), = _channel_ranges(pair.grey_exemplar[..., None])
+    grey_kl = kl_divergence(_histogram(pair.grey_exemplar, s.bins, glo, ghi),
+                            _histogram(pair.grey_slices, s.bins, glo, ghi), eps=s.eps)
+    channel_kl = [kl_divergence(_histogram(e[..., c], s.bins, lo, hi),
+                                _histogram(slices[..., c], s.bins, lo, hi), eps=s.eps)
+                  for c, (lo, hi) in enumerate(ranges)]
+    if e.shape[-1] == 1:
+        hist_kl = grey_kl
+    else:
+        hist_kl = kl_divergence(_joint_histogram(e, ranges, pair.joint_bins),
+                                _joint_histogram(slices, ranges, pair.joint_bins), eps=s.eps)
+    return hist_kl, {"histogram_kl_grey": grey_kl, "histogram_kl_channels": channel_kl}
+
+
+def _autocorrelation_metric(pair: ViewPair, s: MetricSettings) -> tuple[float, dict]:
+    lag = effective_max_lag(s.max_lag, pair.exemplar.shape, pair.slices.shape[1:])
+    difference = autocorrelation(pair.grey_exemplar, lag) - autocorrelation(pair.grey_slices, lag)
+    return float(np.sqrt((difference**2).sum())), {"max_lag": lag}
+
+
+def _orientation_metric(pair: ViewPair, s: MetricSettings) -> tuple[float, dict]:
+    kw = _orientation_kwargs(s)
+    return kl_divergence(orientation_histogram(pair.grey_exemplar, **kw),
+                         orientation_histogram(pair.grey_slices, **kw), eps=s.eps), {}
+
+
+def _sliced_wasserstein_metric(pair: ViewPair, s: MetricSettings) -> tuple[float, dict]:
+    sw, patch = _sliced_wasserstein(pair.exemplar, pair.slices, s)
+    return sw, {"patch": patch}
+
+
+#: name -> ``metric(pair, settings) -> (value, details)``: what :func:`evaluate` computes per
+#: view, in the order of :data:`METRICS` (a new metric is one function plus one line here).
+METRIC_FUNCTIONS: dict[str, Callable[[ViewPair, MetricSettings], tuple[float, dict]]] = {
+    "histogram_kl": _histogram_metric,
+    "autocorrelation_l2": _autocorrelation_metric,
+    "orientation_kl": _orientation_metric,
+    "sliced_wasserstein": _sliced_wasserstein_metric,
+}
+assert tuple(METRIC_FUNCTIONS) == METRICS
+
+
 def evaluate(volume: Any, exemplars: Any, *, views: Any = None,
              settings: MetricSettings | None = None) -> dict[str, Any]:
     """Compare each view's exemplar with all the volume's slices orthogonal to that view.
@@ -751,33 +816,14 @@ def evaluate(volume: Any, exemplars: Any, *, views: Any = None,
     joint = _joint_bins(channels, s.joint_bins)
     per_view: dict[str, dict[str, float]] = {}
     details: dict[str, dict[str, Any]] = {}
-    kw = _orientation_kwargs(s)
     for view, e in per_view_exemplars.items():
         slices = view_slices(v, view)
-        grey_e, grey_s = _grey(e), _grey(slices)
-        ranges = _channel_ranges(e)
-        (glo, ghi), = _channel_ranges(grey_e[..., None])
-        grey_kl = kl_divergence(_histogram(grey_e, s.bins, glo, ghi),
-                                _histogram(grey_s, s.bins, glo, ghi), eps=s.eps)
-        channel_kl = [kl_divergence(_histogram(e[..., c], s.bins, lo, hi),
-                                    _histogram(slices[..., c], s.bins, lo, hi), eps=s.eps)
-                      for c, (lo, hi) in enumerate(ranges)]
-        if channels == 1:
-            hist_kl = grey_kl
-        else:
-            hist_kl = kl_divergence(_joint_histogram(e, ranges, joint),
-                                    _joint_histogram(slices, ranges, joint), eps=s.eps)
-        lag = effective_max_lag(s.max_lag, e.shape, slices.shape[1:])
-        difference = autocorrelation(grey_e, lag) - autocorrelation(grey_s, lag)
-        ac = float(np.sqrt((difference**2).sum()))
-        okl = kl_divergence(orientation_histogram(grey_e, **kw),
-                            orientation_histogram(grey_s, **kw), eps=s.eps)
-        sw, patch = _sliced_wasserstein(e, slices, s)
-        per_view[view] = {"histogram_kl": hist_kl, "autocorrelation_l2": ac,
-                          "orientation_kl": okl, "sliced_wasserstein": sw}
-        details[view] = {"histogram_kl_grey": grey_kl, "histogram_kl_channels": channel_kl,
-                         "max_lag": lag, "patch": patch,
-                         "exemplar_shape": list(e.shape), "slices": int(slices.shape[0])}
+        pair = ViewPair(e, slices, _grey(e), _grey(slices), joint)
+        per_view[view], details[view] = {}, {}
+        for name, metric in METRIC_FUNCTIONS.items():
+            per_view[view][name], extra = metric(pair, s)
+            details[view].update(extra)
+        details[view].update({"exemplar_shape": list(e.shape), "slices": int(slices.shape[0])})
     mean = {name: float(np.mean([per_view[view][name] for view in per_view])) for name in METRICS}
     derived = {
         "channels": int(channels),

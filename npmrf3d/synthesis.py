@@ -12,16 +12,16 @@ import numpy as np
 
 from . import _validation as check
 from ._kernels import _jit
-from .config import VARIANTS, SynthesisConfig, SynthesisResult
-from .exemplar import load_exemplar, make_labels
+from .config import DEFAULT_SIZE, VARIANTS, SynthesisConfig, SynthesisMethod, SynthesisResult
+from .exemplar import make_labels, resolve_exemplars
 from .heuristics import DECISIONS, get_heuristic
 from .neighborhood import VIEWS, colour_classes
 from .parzen import PRUNE, adaptive_floor, build_view_models
-from .pyramid import INHERIT, UPSAMPLING, LevelState, level_shape, random_state, upsample
+from .pyramid import INHERIT, UPSAMPLING, Levels, LevelState, random_state, run_pyramid, upsample
 from .relax import RELAXATIONS
 from .relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
 
-__all__ = ["synthesize", "make_config"]
+__all__ = ["METHOD", "make_config", "npmrf_method", "run", "synthesize"]
 
 ProgressCallback = Callable[[int, int, int, float], None]
 
@@ -30,10 +30,14 @@ ProgressCallback = Callable[[int, int, int, float], None]
 DEFAULT_UPSAMPLE = {"icm": "1/8", "anneal": "8/8"}
 
 
+_C = SynthesisConfig  # every default below is a field default of the configuration
+
+
 def make_config(
-    *, size=32, window=7, levels=3, heuristic="ML_H2b", relaxation="icm", views=VIEWS,
-    upsample=None, inherit="resynth", xi=-3.0, stop=0.95, max_sweeps=30, sampler="heat-bath",
-    schedule="geometric", t0=1.0, t_end=0.05, proposals=10, proposal="exemplar", variant="default",
+    *, size=DEFAULT_SIZE, window=_C.window, levels=_C.levels, heuristic=_C.heuristic,
+    relaxation=_C.relaxation, views=_C.views, upsample=None, inherit=_C.inherit, xi=_C.xi,
+    stop=_C.stop, max_sweeps=_C.max_sweeps, sampler=_C.sampler, schedule=_C.schedule, t0=_C.t0,
+    t_end=_C.t_end, proposals=_C.proposals, proposal=_C.proposal, variant=_C.variant,
     bandwidth=None, centre_bandwidth=None, adaptive=None, decision=None, tau=None,
     histogram_weight=None, outlier=None, grey_levels=None, palette=None, toroidal_exemplar=False,
     seed=None,
@@ -98,35 +102,13 @@ def make_config(
     )
 
 
-def resolve_exemplars(exemplar, exemplars: dict | None, views: tuple[str, ...], config) -> dict[str, np.ndarray]:
-    """One float32 (H, W, C) exemplar per constrained view, validated against the window."""
-    exemplars = dict(exemplars or {})
-    unknown = set(exemplars) - set(views)
-    if unknown:
-        check.fail(f"exemplars given for views that are not constrained: {', '.join(sorted(unknown))}; "
-                   f"constrained views are {', '.join(views)}")
-    out, cache = {}, {}
-    for v in views:
-        source = exemplars.get(v, exemplar)
-        key = id(source) if not isinstance(source, (str, Path)) else str(source)
-        if key not in cache:
-            cache[key] = load_exemplar(source, name=f"exemplar for view {v}" if v in exemplars else "exemplar")
-        out[v] = cache[key]
-    channels = {a.shape[2] for a in out.values()}
-    if len(channels) > 1:
-        check.fail(f"all exemplars must have the same number of channels; got {sorted(channels)}")
-    for v, a in out.items():
-        check.exemplar_fits(a, window=config.window, levels=config.levels,
-                            toroidal=config.toroidal_exemplar,
-                            name="exemplar" if len(out) == 1 or v not in exemplars else f"exemplar for view {v}")
-    return out
-
-
 def synthesize(
-    exemplar=None, *, size=32, window=7, levels=3, heuristic="ML_H2b", relaxation="icm",
-    views=VIEWS, exemplars: dict | None = None, upsample=None, inherit="resynth", xi=-3.0,
-    stop=0.95, max_sweeps=30, sampler="heat-bath", schedule="geometric", t0=1.0, t_end=0.05,
-    proposals=10, proposal="exemplar", variant="default", bandwidth=None, centre_bandwidth=None,
+    exemplar=None, *, size=DEFAULT_SIZE, window=_C.window, levels=_C.levels,
+    heuristic=_C.heuristic, relaxation=_C.relaxation, views=_C.views,
+    exemplars: dict | None = None, upsample=None, inherit=_C.inherit, xi=_C.xi, stop=_C.stop,
+    max_sweeps=_C.max_sweeps, sampler=_C.sampler, schedule=_C.schedule, t0=_C.t0,
+    t_end=_C.t_end, proposals=_C.proposals, proposal=_C.proposal, variant=_C.variant,
+    bandwidth=None, centre_bandwidth=None,
     adaptive=None, decision=None, tau=None, histogram_weight=None, outlier=None, grey_levels=None,
     palette=None, toroidal_exemplar=False, rng=None, progress: ProgressCallback | None = None,
     checkpoint: str | Path | None = None,
@@ -221,14 +203,74 @@ def synthesize(
         palette=palette, toroidal_exemplar=toroidal_exemplar, seed=seed,
     )
     generator = check.rng(rng)
-    per_view = resolve_exemplars(exemplar, exemplars, config.views, config)
+    per_view = resolve_exemplars(exemplar, exemplars, config.views, window=config.window,
+                                 levels=config.levels, toroidal=config.toroidal_exemplar)
     return run(config, per_view, generator, progress=progress, checkpoint=checkpoint, t_start=t_start)
+
+
+class _NpmrfLevels(Levels):
+    """The NP-MRF sampler's side of :func:`npmrf3d.pyramid.run_pyramid` (SPEC.md sections 2-5)."""
+
+    def __init__(self, config: SynthesisConfig, label_images: dict, labels: np.ndarray,
+                 label_freq: np.ndarray):
+        self.config, self.label_images, self.labels, self.label_freq = config, label_images, labels, label_freq
+        self.size, self.levels = config.size, config.levels
+        self.key = _config_key(config)
+        self.fingerprint = {"labels": labels}
+        self.heuristic = get_heuristic(config.heuristic)
+        relaxation = RELAXATIONS[config.relaxation]
+        self.relax_level = relaxation.run
+        self.options = config.relaxation_options
+        self.models = self.info = self.classes = None
+
+    def prepare(self, level, shape):
+        self.models, self.info = build_view_models(
+            self.label_images, self.labels, window=self.config.window, level=level,
+            rule=self.config.rule, toroidal=self.config.toroidal_exemplar)
+        self.classes = colour_classes(shape, self.config.window)
+
+    def initial(self, shape, rng):
+        return random_state(shape, self.labels, self.label_freq, rng)
+
+    def upsample(self, state, rng):
+        return upsample(state, self.config.upsample, self.labels, self.label_freq, rng)
+
+    def start(self, level, state):
+        if self.config.relaxation == "anneal":
+            return self.options.proposals, self.options.t0
+        return self.options.max_sweeps, float(state.temps.sum(dtype=np.float64))
+
+    def relax(self, level, state, rng, on_step):
+        config, rule = self.config, self.config.rule
+        specific = dataclasses.asdict(self.options)
+        if config.relaxation == "icm":
+            specific.update(decision=DECISIONS[rule.decision], tau=rule.tau)
+        history, stats = self.relax_level(
+            state.volume, state.labels_volume, state.temps, state.inherited, self.models,
+            self.classes, heuristic=self.heuristic.code, resynth=config.inherit == "resynth",
+            adaptive=rule.adaptive, min_two_h2=adaptive_floor(self.info), prune=PRUNE,
+            histogram_weight=rule.histogram_weight, outlier=rule.outlier,
+            exemplar_freq=self.label_freq, rng=rng, on_sweep=on_step, **specific,
+        )
+        shape = state.labels_volume.shape
+        return state, history, {**stats, "shape": list(shape), "classes": len(self.classes),
+                                "views": self.info}
+
+    def to_arrays(self, state):
+        return {"volume": state.volume, "labels_volume": state.labels_volume, "temps": state.temps,
+                "inherited": state.inherited}
+
+    def from_arrays(self, arrays):
+        return LevelState(arrays["volume"], arrays["labels_volume"], arrays["temps"], arrays["inherited"])
 
 
 def run(config: SynthesisConfig, per_view: dict[str, np.ndarray], rng: np.random.Generator, *,
         progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
         t_start: float | None = None) -> SynthesisResult:
-    """Run a validated configuration on validated exemplars (the body of :func:`synthesize`)."""
+    """Run a validated configuration on validated exemplars (the body of :func:`synthesize`).
+
+    This is the ``npmrf`` entry of :data:`npmrf3d.methods.METHODS`.
+    """
     t_start = time.perf_counter() if t_start is None else t_start
     distinct = {id(a): a for a in per_view.values()}
     labels, images = make_labels(list(distinct.values()), grey_levels=config.grey_levels,
@@ -237,93 +279,33 @@ def run(config: SynthesisConfig, per_view: dict[str, np.ndarray], rng: np.random
     label_images = {v: image_of[id(a)] for v, a in per_view.items()}
     label_freq = np.bincount(np.concatenate([im.ravel() for im in images]), minlength=len(labels))
     label_freq = label_freq / label_freq.sum()
-    rule = config.rule
-    heuristic = get_heuristic(config.heuristic)
-    timings = {"setup": time.perf_counter() - t_start}
-    history: list[list[float]] = []
-    stats: dict = {"threads": _jit.thread_count(), "levels": {}}
-    state: LevelState | None = None
-    first_level = config.levels - 1
-    resumed = _load_checkpoint(checkpoint, config, labels)
-    if resumed is not None:
-        state, done_level, rng_state, history, timings, stats = resumed
-        rng.bit_generator.state = rng_state
-        first_level = done_level - 1
-    for level in range(first_level, -1, -1):
-        t0 = time.perf_counter()
-        shape = level_shape(config.size, level)
-        if state is None:
-            state = random_state(shape, labels, label_freq, rng)
-        else:
-            state = upsample(state, config.upsample, labels, label_freq, rng)
-        models, info = build_view_models(label_images, labels, window=config.window, level=level,
-                                         rule=rule, toroidal=config.toroidal_exemplar)
-        classes = colour_classes(shape, config.window)
-
-        specific, most_sweeps, start_temperature = _relaxation_options(config, state)
-
-        def on_sweep(sweep, temperature, level=level, most_sweeps=most_sweeps):
-            if progress is not None:
-                progress(level, sweep, most_sweeps, temperature)
-
-        if progress is not None:
-            progress(level, 0, most_sweeps, start_temperature)
-        level_history, level_stats = RELAXATIONS[config.relaxation](
-            state.volume, state.labels_volume, state.temps, state.inherited, models, classes,
-            heuristic=heuristic.code, resynth=config.inherit == "resynth",
-            adaptive=rule.adaptive, min_two_h2=adaptive_floor(info), prune=PRUNE,
-            histogram_weight=rule.histogram_weight, outlier=rule.outlier, exemplar_freq=label_freq,
-            rng=rng, on_sweep=on_sweep, **specific,
-        )
-        history.append(level_history)
-        timings[f"level_{level}"] = time.perf_counter() - t0
-        stats["levels"][f"level_{level}"] = {**level_stats, "shape": list(shape),
-                                              "classes": len(classes), "views": info}
-        if checkpoint is not None:
-            _save_checkpoint(checkpoint, config, labels, state, level, rng, history, timings, stats)
-    timings["total"] = time.perf_counter() - t_start
-    return SynthesisResult(volume=state.volume, history=history, config=config, timings=timings,
-                           labels=labels, stats=stats)
-
-
-def _relaxation_options(config: SynthesisConfig, state: LevelState) -> tuple[dict, int, float]:
-    """(keyword arguments of the chosen relaxation, sweeps at most, temperature at the start)."""
-    if config.relaxation == "anneal":
-        options = {"sampler": config.sampler, "schedule": config.schedule, "t0": config.t0,
-                   "t_end": config.t_end, "proposals": config.proposals, "proposal": config.proposal}
-        return options, config.proposals, config.t0
-    rule = config.rule
-    options = {"decision": DECISIONS[rule.decision], "tau": rule.tau, "xi": config.xi,
-               "stop": config.stop, "max_sweeps": config.max_sweeps}
-    return options, config.max_sweeps, float(state.temps.sum(dtype=np.float64))
+    levels = _NpmrfLevels(config, label_images, labels, label_freq)
+    out = run_pyramid(levels, rng, progress=progress, checkpoint=checkpoint,
+                      timings={"setup": time.perf_counter() - t_start},
+                      stats={"threads": _jit.thread_count()}, t_start=t_start)
+    return SynthesisResult(volume=out.state.volume, history=out.history, config=config,
+                           timings=out.timings, labels=labels, stats=out.stats)
 
 
 def _config_key(config: SynthesisConfig) -> str:
     return json.dumps(config.to_dict(), sort_keys=True, default=str)
 
 
-def _save_checkpoint(path, config, labels, state, level, rng, history, timings, stats) -> None:
-    from .io import save_checkpoint
+def npmrf_method(per_view: dict[str, np.ndarray], config: SynthesisConfig, rng: np.random.Generator, *,
+                 progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
+                 t_start: float | None = None) -> SynthesisResult:
+    """The NP-MRF sampler in the common method signature (:data:`npmrf3d.methods.METHODS`).
 
-    save_checkpoint(
-        path, config=_config_key(config), labels=labels, volume=state.volume,
-        labels_volume=state.labels_volume, temps=state.temps, inherited=state.inherited,
-        level=level, rng_state=json.dumps(rng.bit_generator.state),
-        history=json.dumps(history), timings=json.dumps(timings), stats=json.dumps(stats, default=str),
-    )
+    ``t_start`` (optional, every method accepts it): ``time.perf_counter()`` when the caller
+    started, so that ``timings["setup"]`` includes loading the exemplars.
+    """
+    return run(config, per_view, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
 
 
-def _load_checkpoint(path, config, labels):
-    """State after the last finished level, or None when there is nothing (matching) to resume."""
-    if path is None or not Path(path).exists():
-        return None
-    from .io import load_checkpoint
-
-    data = load_checkpoint(path)
-    if str(data["config"]) != _config_key(config) or not np.array_equal(data["labels"], labels):
-        check.fail(f"checkpoint '{path}' was written by a different configuration or exemplar; "
-                   f"delete it or choose another checkpoint path")
-    state = LevelState(data["volume"], data["labels_volume"], data["temps"], data["inherited"])
-    return (state, int(data["level"]), json.loads(str(data["rng_state"])),
-            json.loads(str(data["history"])), json.loads(str(data["timings"])),
-            json.loads(str(data["stats"])))
+#: The registry entry of the NP-MRF sampler.
+METHOD = SynthesisMethod(
+    name="npmrf", run=npmrf_method, make_config=make_config, config_class=SynthesisConfig,
+    synthesize=synthesize,
+    fit=lambda c: {"window": c.window, "levels": c.levels, "toroidal": c.toroidal_exemplar},
+    description="the NP-MRF sampler (ICM or annealing; SPEC.md sections 2-5)",
+)

@@ -12,6 +12,6 @@ except ImportError:  # running from a source checkout that is not installed
 
 def main(name: str) -> None:
     """Run study ``name`` with the command-line options of this process and exit."""
-    from npmrf3d.studies.cli import study_main
+    from npmrf3d.cli.study import study_main
 
     sys.exit(study_main(name))

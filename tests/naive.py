@@ -243,3 +243,82 @@ def naive_sample_probabilities(score, tau: float) -> np.ndarray:
     """exp(score / tau) / Z."""
     z = np.asarray(score, dtype=np.float64) / tau
     return np.exp(z - logsumexp(z))
+
+
+# --------------------------------------------------------------------------- NP_K (SPEC.md section 6)
+
+
+def naive_kopf_patches(exemplar: np.ndarray, window: int) -> np.ndarray:
+    """Every window fully inside the exemplar, row-major over top-left corners, (row, col, c)."""
+    h, w, _ = exemplar.shape
+    out = []
+    for pr in range(h - window + 1):
+        for pc in range(w - window + 1):
+            out.append(exemplar[pr:pr + window, pc:pc + window].reshape(-1))
+    return np.array(out, dtype=np.float64)
+
+
+def naive_kopf_neighbourhood(volume: np.ndarray, view: str, site, window: int) -> np.ndarray:
+    """The window of ``view`` anchored (top-left) at ``site``, toroidal, flattened (row, col, c)."""
+    ra, ca = NAIVE_VIEW_AXES[view]
+    n = volume.shape
+    out = []
+    for a in range(window):
+        for b in range(window):
+            s = list(site)
+            s[ra] = (s[ra] + a) % n[ra]
+            s[ca] = (s[ca] + b) % n[ca]
+            out.extend(volume[s[0], s[1], s[2]])
+    return np.array(out, dtype=np.float64)
+
+
+def naive_bin(x: float, lo: float, scale: float, bins: int) -> int:
+    return min(max(int((float(x) - lo) * scale), 0), bins - 1)
+
+
+def naive_kopf_update(volume, assign, omega, views, exemplars, window, order, *, hist_weight=0.0,
+                 lo=None, scale=None, bins=16, target_hist=None, constraint=None, tau=None):
+    """Equation (4) of the paper evaluated literally, voxel by voxel in ``order``.
+
+    For voxel v: every view i and every site u of that view whose window contains v (found by
+    scanning all sites and all window offsets) contributes the exemplar texel of its patch at
+    v's position, with weight omega_u / (1 + w * sum_c max(0, H_s,c(b) - H_e,c(b)))
+    / (1 + tau_v ||e - t_v||); the histograms H_s are recounted from the volume every time.
+    ``assign[i]`` holds patch indices (row-major over top-left corners).
+    """
+    vol = volume.astype(np.float64).copy()
+    n1, n2, n3, channels = vol.shape
+    out32 = volume.copy()
+    for flat in order:
+        v = np.unravel_index(flat, (n1, n2, n3))
+        num = np.zeros(channels)
+        den = 0.0
+        for vi, view in enumerate(views):
+            ra, ca = NAIVE_VIEW_AXES[view]
+            ex = exemplars[vi]
+            pw = ex.shape[1] - window + 1
+            for u in zip(*np.nonzero(assign[vi] >= 0)):
+                for a in range(window):
+                    for b in range(window):
+                        pos = list(u)
+                        pos[ra] = (pos[ra] + a) % vol.shape[ra]
+                        pos[ca] = (pos[ca] + b) % vol.shape[ca]
+                        if tuple(pos) != tuple(v):
+                            continue
+                        p = int(assign[vi][u])
+                        e = ex[p // pw + a, p % pw + b].astype(np.float64)
+                        w = float(omega[vi][u])
+                        if hist_weight > 0:
+                            excess = 0.0
+                            for c in range(channels):
+                                b_c = naive_bin(e[c], lo[c], scale[c], bins)
+                                count = sum(naive_bin(x, lo[c], scale[c], bins) == b_c
+                                            for x in out32[..., c].ravel())
+                                excess += max(0.0, count - (n1 * n2 * n3) * target_hist[c, b_c])
+                            w /= 1.0 + hist_weight * excess
+                        if constraint is not None:
+                            w /= 1.0 + tau[v] * np.linalg.norm(e - constraint[v])
+                        num += w * e
+                        den += w
+        out32[v] = (num / den).astype(np.float32)
+    return out32

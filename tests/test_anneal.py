@@ -36,6 +36,7 @@ VIEWS3 = ("front", "right", "top")
 # --------------------------------------------------------------------------- Metropolis rule
 
 
+@pytest.mark.kernels
 @pytest.mark.parametrize("temperature", [0.0, 1e-6, 0.5, 1e9])
 @pytest.mark.parametrize("delta", [0.0, 1e-12, 3.0])
 def test_a_proposal_that_does_not_lower_the_objective_is_always_accepted(delta, temperature):
@@ -43,6 +44,7 @@ def test_a_proposal_that_does_not_lower_the_objective_is_always_accepted(delta, 
         assert metropolis_accept(delta, temperature, u)
 
 
+@pytest.mark.kernels
 @pytest.mark.parametrize("delta", [-1e-9, -0.5, -50.0])
 def test_at_zero_temperature_a_worse_value_is_never_accepted(delta):
     for u in (0.0, 1e-300, 0.5):
@@ -64,6 +66,7 @@ def test_acceptance_rate_is_exp_delta_over_t_and_near_one_when_hot():
 # --------------------------------------------------------------------------- heat-bath draw
 
 
+@pytest.mark.kernels
 def test_heat_bath_draw_matches_the_normalised_distribution():
     rng = np.random.default_rng(1)
     score = rng.normal(0.0, 2.0, size=6)
@@ -79,6 +82,7 @@ def test_heat_bath_draw_matches_the_normalised_distribution():
             np.searchsorted(np.cumsum(expected), u, side="right"))
 
 
+@pytest.mark.kernels
 def test_heat_bath_at_zero_temperature_is_the_argmax():
     score = np.array([0.1, 3.0, -2.0, 3.0 - 1e-9])
     assert sample_index(score.copy(), 0.0, 0.99) == 1
@@ -113,6 +117,7 @@ def _tiny_level(channels, heuristic="ML_H2b", shape=(8, 8, 8), window=3, seed=0)
     return rng, labels, freq, rule, models, info, lab, volume
 
 
+@pytest.mark.kernels
 @pytest.mark.parametrize("channels", [1, 3, 4])
 @pytest.mark.parametrize("sampler", [METROPOLIS, HEAT_BATH])
 @pytest.mark.parametrize("heuristic", ["ML_H2a", "ML_H2b"])
@@ -157,6 +162,7 @@ def test_anneal_class_update_equals_a_literal_per_site_loop(channels, sampler, h
     np.testing.assert_array_equal(lab[others], before[others])
 
 
+@pytest.mark.kernels
 @pytest.mark.parametrize("channels", [1, 3, 4])
 @pytest.mark.parametrize("outlier", [0.0, 0.01])
 def test_lcpdf_at_two_labels_equals_the_full_lcpdf(channels, outlier):
@@ -173,6 +179,7 @@ def test_lcpdf_at_two_labels_equals_the_full_lcpdf(channels, outlier):
         np.testing.assert_allclose(out, full[:, query], rtol=1e-9, atol=1e-9)
 
 
+@pytest.mark.kernels
 @pytest.mark.parametrize("sampler", [METROPOLIS, HEAT_BATH])
 def test_small_class_serial_kernels_equal_the_parallel_ones(sampler):
     """Classes below PARALLEL_MIN_SITES run serially: the same code, the same result."""
@@ -203,6 +210,7 @@ def test_small_class_serial_kernels_equal_the_parallel_ones(sampler):
             np.testing.assert_array_equal(x, y)
 
 
+@pytest.mark.kernels
 def test_greedy_at_zero_temperature_never_lowers_a_site_objective():
     rng, labels, freq, rule, models, info, lab, volume = _tiny_level(1)
     temps = np.zeros(lab.shape, dtype=np.float32)

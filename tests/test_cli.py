@@ -16,7 +16,7 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from npmrf3d import cli, io
+from npmrf3d import cli, io, runs
 from npmrf3d.errors import ParameterError
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
@@ -55,7 +55,7 @@ def assert_user_error(code: int, out: str, err: str, out_dir: pathlib.Path) -> s
 
 def snapshot(folder: pathlib.Path) -> dict[str, tuple[int, bytes]]:
     return {name: ((folder / name).stat().st_mtime_ns, (folder / name).read_bytes())
-            for name in io.RUN_FILES}
+            for name in runs.RUN_FILES}
 
 
 # --------------------------------------------------------------------------- help and info
@@ -111,7 +111,7 @@ def test_anneal_run_writes_a_colour_run(capsys, tmp_path):
 
 
 def test_synth_suggests_a_palette_for_many_colours(capsys, tmp_path, monkeypatch):
-    monkeypatch.setattr(cli, "MANY_VALUES", 50)
+    monkeypatch.setattr(cli.synth, "MANY_VALUES", 50)
     code, _, err = run_cli(capsys, "synth", "bundled:ihc64", "--size", "8", "--levels", "1",
                            "--window", "3", "--max-sweeps", "1", "--grey-levels", "4",
                            "--out", str(tmp_path / "a"))
@@ -145,7 +145,7 @@ def test_tiny_run_writes_a_complete_run_folder(tmp_path, exemplar, capsys):
     code, out, err = run_cli(capsys, "synth", str(exemplar), *TINY, "--seed", "3",
                              "--out", str(out_dir))
     assert code == 0, err
-    assert sorted(p.name for p in out_dir.iterdir()) == sorted(io.RUN_FILES)
+    assert sorted(p.name for p in out_dir.iterdir()) == sorted(runs.RUN_FILES)
     volume = np.load(out_dir / "volume.npy")
     assert volume.shape == (8, 8, 8, 1) and volume.dtype == np.float32
     record = json.loads((out_dir / "run.json").read_text(encoding="utf-8"))
@@ -223,7 +223,7 @@ def test_parameter_error_from_writing_is_one_line(tmp_path, exemplar, capsys, mo
     def refuse(*args, **kwargs):
         raise ParameterError("disk says no\nsecond line")
 
-    monkeypatch.setattr(io, "write_run", refuse)
+    monkeypatch.setattr(cli._common, "write_run", refuse)
     out_dir = tmp_path / "run"
     code, out, err = run_cli(capsys, "synth", str(exemplar), *TINY, "--out", str(out_dir),
                              "--quiet")
@@ -344,7 +344,7 @@ def test_python_m_synth_end_to_end(tmp_path, exemplar):
                      "--out", "result", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     out_dir = tmp_path / "result"
-    assert sorted(p.name for p in out_dir.iterdir()) == sorted(io.RUN_FILES)
+    assert sorted(p.name for p in out_dir.iterdir()) == sorted(runs.RUN_FILES)
     assert np.load(out_dir / "volume.npy").shape == (16, 16, 16, 1)
     assert "level 1 (8^3)" in proc.stderr and "level 0 (16^3)" in proc.stderr
     assert "Traceback" not in proc.stderr

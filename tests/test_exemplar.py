@@ -9,10 +9,8 @@ from npmrf3d import data
 from npmrf3d.exemplar import decimation_phases, extract_patches, load_exemplar, make_labels
 from tests import naive
 
-
-@pytest.fixture
-def rng():
-    return np.random.default_rng(2024)
+#: Seed of the shared ``rng`` fixture (tests/conftest.py).
+RNG_SEED = 2024
 
 
 # --------------------------------------------------------------------------- load_exemplar

@@ -12,6 +12,8 @@ from npmrf3d import heuristics
 from npmrf3d.errors import ParameterError
 from tests import naive
 
+pytestmark = pytest.mark.kernels
+
 NAMES = ("ML_H1a", "ML_H1b", "ML_H2a", "ML_H2b")
 
 

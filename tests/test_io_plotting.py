@@ -9,15 +9,10 @@ import numpy as np
 import pytest
 import tifffile
 
-from npmrf3d import data, io, plotting
+from npmrf3d import data, io, plotting, runs
 from npmrf3d.errors import ParameterError
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-
-
-@pytest.fixture
-def rng() -> np.random.Generator:
-    return np.random.default_rng(0)
 
 
 def random_volume(rng: np.random.Generator, channels: int) -> np.ndarray:
@@ -126,7 +121,7 @@ def test_read_array_unknown_extension(tmp_path):
 def make_run(out_dir, rng, *, channels=1, record=None, overwrite=False):
     volume = random_volume(rng, channels)
     exemplar = volume[:, :, 0]
-    return io.write_run(
+    return runs.write_run(
         out_dir,
         volume=volume,
         exemplars={"front": exemplar, "right": exemplar, "top": exemplar},
@@ -138,7 +133,7 @@ def make_run(out_dir, rng, *, channels=1, record=None, overwrite=False):
 
 def test_write_run_writes_all_files(tmp_path, rng):
     out = make_run(tmp_path / "nested" / "run", rng)
-    assert sorted(p.name for p in out.iterdir()) == sorted(io.RUN_FILES)
+    assert sorted(p.name for p in out.iterdir()) == sorted(runs.RUN_FILES)
     assert json.loads((out / "run.json").read_text()) == {"seed": 0, "shape": [4, 5, 6, 1]}
     assert (out / "preview.png").read_bytes().startswith(PNG_SIGNATURE)
     np.testing.assert_array_equal(io.read_volume(out / "volume.tif"), np.load(out / "volume.npy"))
@@ -148,11 +143,11 @@ def test_write_run_writes_all_files(tmp_path, rng):
 
 def test_write_run_refuses_an_existing_run(tmp_path, rng):
     out = make_run(tmp_path / "run", rng, record={"attempt": 1})
-    before = {name: (out / name).read_bytes() for name in io.RUN_FILES}
+    before = {name: (out / name).read_bytes() for name in runs.RUN_FILES}
 
     with pytest.raises(ParameterError, match=r"already holds a run \(volume\.npy, .*run\.json\)"):
         make_run(out, rng, record={"attempt": 2})
-    assert {name: (out / name).read_bytes() for name in io.RUN_FILES} == before
+    assert {name: (out / name).read_bytes() for name in runs.RUN_FILES} == before
 
     make_run(out, rng, record={"attempt": 3}, overwrite=True)
     assert json.loads((out / "run.json").read_text()) == {"attempt": 3}
@@ -177,7 +172,7 @@ def test_write_run_failure_while_writing_leaves_nothing(tmp_path, rng, monkeypat
     def broken_save(fig, path):
         raise OSError("disk full")
 
-    monkeypatch.setattr(plotting, "save_figure", broken_save)
+    monkeypatch.setattr(runs, "save_figure", broken_save)
     with pytest.raises(OSError, match="disk full"):
         make_run(tmp_path / "run", rng)
     assert list(tmp_path.iterdir()) == []

@@ -24,6 +24,8 @@ from npmrf3d.config import DecisionRule
 from npmrf3d.exemplar import decimation_phases, make_labels
 from tests import naive
 
+pytestmark = pytest.mark.kernels
+
 VIEWS3 = ("front", "right", "top")
 #: Largest neighbour-exponent spread for which ``prune=np.inf`` is safe: beyond ~745 a patch
 #: weight underflows to 0.0 and the kernel corrupts its ``nonzero`` buffer (see

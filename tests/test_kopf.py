@@ -24,91 +24,13 @@ from npmrf3d.baselines import kopf as K
 from npmrf3d.config import SynthesisResult
 from npmrf3d.errors import ParameterError
 from npmrf3d.metrics import histogram_kl
+from tests.naive import NAIVE_VIEW_AXES, naive_bin, naive_kopf_neighbourhood, naive_kopf_patches, naive_kopf_update
+
+#: Seed of the shared ``rng`` fixture (tests/conftest.py).
+RNG_SEED = 1234
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
-#: view -> (volume axis of the exemplar row, volume axis of the exemplar column), restated
-#: from the table in npmrf3d.neighborhood.
-NAIVE_VIEW_AXES = {"front": (0, 1), "right": (1, 2), "top": (0, 2)}
 VIEWS3 = ("front", "right", "top")
-
-
-# --------------------------------------------------------------------------- naive twins
-
-
-def naive_patches(exemplar: np.ndarray, window: int) -> np.ndarray:
-    """Every window fully inside the exemplar, row-major over top-left corners, (row, col, c)."""
-    h, w, _ = exemplar.shape
-    out = []
-    for pr in range(h - window + 1):
-        for pc in range(w - window + 1):
-            out.append(exemplar[pr:pr + window, pc:pc + window].reshape(-1))
-    return np.array(out, dtype=np.float64)
-
-
-def naive_neighbourhood(volume: np.ndarray, view: str, site, window: int) -> np.ndarray:
-    """The window of ``view`` anchored (top-left) at ``site``, toroidal, flattened (row, col, c)."""
-    ra, ca = NAIVE_VIEW_AXES[view]
-    n = volume.shape
-    out = []
-    for a in range(window):
-        for b in range(window):
-            s = list(site)
-            s[ra] = (s[ra] + a) % n[ra]
-            s[ca] = (s[ca] + b) % n[ca]
-            out.extend(volume[s[0], s[1], s[2]])
-    return np.array(out, dtype=np.float64)
-
-
-def naive_bin(x: float, lo: float, scale: float, bins: int) -> int:
-    return min(max(int((float(x) - lo) * scale), 0), bins - 1)
-
-
-def naive_update(volume, assign, omega, views, exemplars, window, order, *, hist_weight=0.0,
-                 lo=None, scale=None, bins=16, target_hist=None, constraint=None, tau=None):
-    """Equation (4) of the paper evaluated literally, voxel by voxel in ``order``.
-
-    For voxel v: every view i and every site u of that view whose window contains v (found by
-    scanning all sites and all window offsets) contributes the exemplar texel of its patch at
-    v's position, with weight omega_u / (1 + w * sum_c max(0, H_s,c(b) - H_e,c(b)))
-    / (1 + tau_v ||e - t_v||); the histograms H_s are recounted from the volume every time.
-    ``assign[i]`` holds patch indices (row-major over top-left corners).
-    """
-    vol = volume.astype(np.float64).copy()
-    n1, n2, n3, channels = vol.shape
-    out32 = volume.copy()
-    for flat in order:
-        v = np.unravel_index(flat, (n1, n2, n3))
-        num = np.zeros(channels)
-        den = 0.0
-        for vi, view in enumerate(views):
-            ra, ca = NAIVE_VIEW_AXES[view]
-            ex = exemplars[vi]
-            pw = ex.shape[1] - window + 1
-            for u in zip(*np.nonzero(assign[vi] >= 0)):
-                for a in range(window):
-                    for b in range(window):
-                        pos = list(u)
-                        pos[ra] = (pos[ra] + a) % vol.shape[ra]
-                        pos[ca] = (pos[ca] + b) % vol.shape[ca]
-                        if tuple(pos) != tuple(v):
-                            continue
-                        p = int(assign[vi][u])
-                        e = ex[p // pw + a, p % pw + b].astype(np.float64)
-                        w = float(omega[vi][u])
-                        if hist_weight > 0:
-                            excess = 0.0
-                            for c in range(channels):
-                                b_c = naive_bin(e[c], lo[c], scale[c], bins)
-                                count = sum(naive_bin(x, lo[c], scale[c], bins) == b_c
-                                            for x in out32[..., c].ravel())
-                                excess += max(0.0, count - (n1 * n2 * n3) * target_hist[c, b_c])
-                            w /= 1.0 + hist_weight * excess
-                        if constraint is not None:
-                            w /= 1.0 + tau[v] * np.linalg.norm(e - constraint[v])
-                        num += w * e
-                        den += w
-        out32[v] = (num / den).astype(np.float32)
-    return out32
 
 
 def stripes(period: int = 4, size: int = 32, vertical: bool = True) -> np.ndarray:
@@ -131,15 +53,10 @@ def stripe_error(image: np.ndarray, period: int) -> float:
 # --------------------------------------------------------------------------- search
 
 
-@pytest.fixture
-def rng():
-    return np.random.default_rng(1234)
-
-
 @pytest.mark.parametrize("channels", [1, 3])
 def test_patches_and_neighbourhoods_match_naive(rng, channels):
     ex = rng.random((9, 11, channels), dtype=np.float32)
-    np.testing.assert_array_equal(K.exemplar_patches(ex, 3), naive_patches(ex, 3).astype(np.float32))
+    np.testing.assert_array_equal(K.exemplar_patches(ex, 3), naive_kopf_patches(ex, 3).astype(np.float32))
     vol = rng.random((6, 5, 4, channels), dtype=np.float32)
     for view in VIEWS3:
         got = K.volume_neighbourhoods(vol, view, 4, 2)
@@ -151,7 +68,7 @@ def test_patches_and_neighbourhoods_match_naive(rng, channels):
                 for c in range(0, vol.shape[ca], 2):
                     site = [0, 0, 0]
                     site[na], site[ra], site[ca] = n, r, c
-                    expected.append(naive_neighbourhood(vol, view, site, 4))
+                    expected.append(naive_kopf_neighbourhood(vol, view, site, 4))
         np.testing.assert_array_equal(got, np.array(expected, dtype=np.float32))
 
 
@@ -187,7 +104,7 @@ def test_exact_search_equals_brute_force(rng, channels, variance):
     index = K.PatchIndex(ex, 3, variance)
     queries = rng.random((200, 9 * channels), dtype=np.float32)
     got, dist = index.query(queries, eps=0.0)
-    patches = naive_patches(ex, 3)
+    patches = naive_kopf_patches(ex, 3)
     projected = (patches - patches.mean(axis=0)) @ index.basis.astype(np.float64)
     qp = (queries - patches.mean(axis=0)) @ index.basis.astype(np.float64)
     for t in range(len(queries)):
@@ -212,6 +129,7 @@ def test_approximate_search_is_within_one_plus_eps(rng):
         assert d[got[t]] <= (1 + eps) * d.min() * (1 + 1e-5) + 1e-6
 
 
+@pytest.mark.kernels
 def test_search_view_assigns_the_sparse_grid(rng):
     ex = rng.random((12, 12, 1), dtype=np.float32)
     index = K.PatchIndex(ex, 3, 1.0)
@@ -225,8 +143,8 @@ def test_search_view_assigns_the_sparse_grid(rng):
         assert np.all(sites[:, ra] % 2 == 0) and np.all(sites[:, ca] % 2 == 0)
         total = 0.0
         for site in sites:
-            s = naive_neighbourhood(vol, view, site, 3)
-            d = np.sqrt(((naive_patches(ex, 3) - s) ** 2).sum(axis=1))
+            s = naive_kopf_neighbourhood(vol, view, site, 3)
+            d = np.sqrt(((naive_kopf_patches(ex, 3) - s) ** 2).sum(axis=1))
             p = assign[tuple(site)]
             assert np.isclose(d[p], d.min(), rtol=1e-5)
             np.testing.assert_allclose(omega[tuple(site)], d[p] ** (0.8 - 2), rtol=1e-4)
@@ -276,16 +194,18 @@ def _kernel_update(volume, assign, omega, views, indices, window, grid, order, *
     return vol
 
 
+@pytest.mark.kernels
 @pytest.mark.parametrize("channels", [1, 3])
 @pytest.mark.parametrize("views", [VIEWS3, ("front", "top"), ("right",)])
 def test_irls_update_is_equation_4(rng, channels, views):
     exemplars, indices, assign, omega, volume = _tiny_problem(rng, channels, views)
     order = rng.permutation(volume[..., 0].size)
     got = _kernel_update(volume, assign, omega, views, indices, 3, 2, order)
-    expected = naive_update(volume, assign, omega, views, exemplars, 3, order)
+    expected = naive_kopf_update(volume, assign, omega, views, exemplars, 3, order)
     np.testing.assert_allclose(got, expected, rtol=1e-5, atol=1e-6)
 
 
+@pytest.mark.kernels
 @pytest.mark.parametrize("channels", [1, 3])
 def test_histogram_and_constraint_reweighting_are_equations_5_and_6(rng, channels):
     views = ("front", "right")
@@ -299,7 +219,7 @@ def test_histogram_and_constraint_reweighting_are_equations_5_and_6(rng, channel
     kw = dict(hist_weight=7.0, lo=lo, scale=scale, bins=bins, target_hist=target,
               constraint=constraint, tau=tau)
     got = _kernel_update(volume, assign, omega, views, indices, 2, 2, order, **kw)
-    expected = naive_update(volume, assign, omega, views, exemplars, 2, order, **kw)
+    expected = naive_kopf_update(volume, assign, omega, views, exemplars, 2, order, **kw)
     np.testing.assert_allclose(got, expected, rtol=1e-5, atol=1e-6)
 
 
@@ -333,10 +253,11 @@ def test_histogram_reweighting_moves_a_skewed_volume_towards_the_exemplar(rng):
     assert mean["plain"] < mean["fractions"] < mean["paper"] < float(ex.mean())
 
 
+@pytest.mark.kernels
 def test_mean_shift_returns_the_mode_of_the_dominant_cluster(rng):
     """Two clusters of texels: mean-shift returns the mean of the heavier one (a fixed point: the
     weighted mean of the points within h of it); the plain average lies in between."""
-    from npmrf3d.baselines import _kopf_kernels as kk
+    from npmrf3d._kernels import kopf as kk
 
     for channels in (1, 3):
         dark = rng.normal(0.1, 0.01, size=(7, channels))

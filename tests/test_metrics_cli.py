@@ -12,7 +12,7 @@ import pytest
 from scipy import ndimage
 
 from npmrf3d import cli, io, metrics
-from npmrf3d._cli_metrics import OUT_FILES
+from npmrf3d.cli.metrics import OUT_FILES
 
 SIDE, DEPTH = 24, 12
 

@@ -10,6 +10,7 @@ import logging
 import numpy as np
 import pytest
 
+import npmrf3d.exemplar
 from npmrf3d import cli
 from npmrf3d.errors import ParameterError
 from npmrf3d.studies import STUDIES, Method, Scale, Study, get_study, run_study
@@ -112,7 +113,7 @@ def test_study_exemplars_load():
 
 
 def test_etr_terrains_only_at_run_time(monkeypatch, tmp_path):
-    monkeypatch.setattr(catalog, "ETR_DIR", tmp_path / "missing")
+    monkeypatch.setattr(npmrf3d.exemplar, "ETR_DIR", tmp_path / "missing")
     with pytest.raises(ParameterError, match="extremetuxracer-data.*not bundled"):
         catalog.load_exemplar("etr:snow")
     assert catalog.etr_available(tmp_path / "missing") == []
@@ -121,7 +122,7 @@ def test_etr_terrains_only_at_run_time(monkeypatch, tmp_path):
     import imageio.v3 as iio
 
     iio.imwrite(folder / "snow.png", np.full((64, 64, 3), 200, np.uint8))
-    monkeypatch.setattr(catalog, "ETR_DIR", folder)
+    monkeypatch.setattr(npmrf3d.exemplar, "ETR_DIR", folder)
     assert catalog.etr_available() == ["etr:snow"]
     assert catalog.load_exemplar("etr:snow").shape == (64, 64, 3)
     with pytest.raises(ParameterError, match="no terrain photograph 'ice'"):
@@ -288,7 +289,7 @@ def test_cli_study_and_errors(tmp_path, capsys, blobs):
 
 
 def test_study_script_entry_point(tmp_path):
-    from npmrf3d.studies.cli import study_main
+    from npmrf3d.cli.study import study_main
 
     assert study_main("views", ["--quick", "--out", str(tmp_path), "--scheduler", "serial",
                                 "--quiet"]) == 0

@@ -131,29 +131,6 @@ def test_structureless_control_fails_the_checkerboard_check():
     assert lag_correlation(control, "front", 4) < 0.3
 
 
-@pytest.mark.parametrize("relaxation", [dict(), dict(relaxation="anneal", proposals=2)])
-def test_resume_from_checkpoint_gives_the_uninterrupted_result(tmp_path, relaxation):
-    path = tmp_path / "run.npz"
-    full = npmrf3d.synthesize(None, size=16, window=5, levels=2, rng=5, **relaxation).volume
-
-    class Stop(Exception):
-        pass
-
-    def interrupt(level, sweep, max_sweeps, temperature):
-        if level == 0 and sweep == 1:
-            raise Stop
-
-    with pytest.raises(Stop):
-        npmrf3d.synthesize(None, size=16, window=5, levels=2, rng=5, progress=interrupt,
-                           checkpoint=path, **relaxation)
-    assert path.exists()
-    resumed = npmrf3d.synthesize(None, size=16, window=5, levels=2, rng=5, checkpoint=path,
-                                 **relaxation)
-    np.testing.assert_array_equal(full, resumed.volume)
-    with pytest.raises(npmrf3d.ParameterError, match="different configuration"):
-        npmrf3d.synthesize(None, size=16, window=3, levels=2, rng=5, checkpoint=path)
-
-
 @pytest.mark.slow
 def test_default_on_bundled_exemplar_beats_structureless_control_and_is_not_flat():
     """Fixed seed, 32^3: the default variant's slices carry the exemplar's autocorrelation

@@ -28,21 +28,21 @@ the seed only, not on the number of threads.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
 from .._kernels.relax import (
     HEAT_BATH,
     METROPOLIS,
-    PARALLEL_MIN_SITES,
     ViewModels,
     anneal_update_class,
     anneal_update_class_serial,
 )
-from .icm import histogram_penalty
+from ._sweep import label_counts, sweep
 
-__all__ = ["SAMPLERS", "SCHEDULES", "PROPOSALS", "geometric_schedule", "linear_schedule",
-           "relax_anneal"]
+__all__ = ["AnnealOptions", "SAMPLERS", "SCHEDULES", "PROPOSALS", "geometric_schedule",
+           "linear_schedule", "relax_anneal"]
 
 
 def geometric_schedule(t0: float, t_end: float, steps: int) -> np.ndarray:
@@ -80,6 +80,29 @@ SCHEDULES: dict[str, Callable[[float, float, int], np.ndarray]] = {
 SAMPLERS = {"metropolis": METROPOLIS, "heat-bath": HEAT_BATH}
 #: Where Metropolis proposals come from.
 PROPOSALS = ("exemplar", "labels")
+
+
+@dataclass(frozen=True)
+class AnnealOptions:
+    """Options of simulated annealing (the one place their defaults are written).
+
+    Attributes
+    ----------
+    sampler : name in :data:`SAMPLERS`
+    schedule : name in :data:`SCHEDULES`
+    t0, t_end : float
+        First and last temperature of each level.
+    proposals : int >= 1
+        Proposals (sweeps) per voxel per level.
+    proposal : name in :data:`PROPOSALS`
+    """
+
+    sampler: str = "heat-bath"
+    schedule: str = "geometric"
+    t0: float = 1.0
+    t_end: float = 0.05
+    proposals: int = 10
+    proposal: str = "exemplar"
 
 
 def relax_anneal(
@@ -123,42 +146,34 @@ def relax_anneal(
     cumulative = np.cumsum(exemplar_freq)
     cumulative /= cumulative[-1]
     code = SAMPLERS[sampler]
-    counts = np.bincount(labels_volume.ravel(), minlength=n_labels).astype(np.int64)
-    penalty = np.zeros(n_labels)
+    counts = label_counts(labels_volume, n_labels)
     history = [float(temperatures[0])]
     acceptance: list[float] = []
     updates = changed = 0
-    for sweep, temperature in enumerate(temperatures, start=1):
-        sweep_updates = sweep_changed = 0
-        for c in rng.permutation(len(classes)):
-            sites = classes[c]
-            if proposal == "exemplar":
-                candidates = np.searchsorted(cumulative, rng.random(len(sites)), side="right")
-                candidates = np.minimum(candidates, n_labels - 1).astype(np.int64)
-            else:
-                candidates = rng.integers(0, n_labels, size=len(sites), dtype=np.int64)
-            uniforms = rng.random(len(sites))
-            if histogram_weight:
-                penalty = histogram_penalty(counts, exemplar_freq, histogram_weight)
-            old = np.empty(len(sites), dtype=np.int64)
-            new = np.empty(len(sites), dtype=np.int64)
-            parallel = len(sites) >= PARALLEL_MIN_SITES
-            update = anneal_update_class if parallel else anneal_update_class_serial
-            update(volume, labels_volume, temps, inherited, sites, candidates, uniforms, models,
-                   heuristic, code, float(temperature), resynth, adaptive, min_two_h2, prune,
-                   penalty, outlier, old, new)
-            visited = old != -2
-            moved = visited & (old != new)
-            sweep_updates += int(visited.sum())
-            sweep_changed += int(moved.sum())
-            if histogram_weight and moved.any():
-                counts -= np.bincount(old[moved & (old >= 0)], minlength=n_labels)
-                counts += np.bincount(new[moved], minlength=n_labels)
+
+    def draw(sites):
+        if proposal == "exemplar":
+            candidates = np.searchsorted(cumulative, rng.random(len(sites)), side="right")
+            candidates = np.minimum(candidates, n_labels - 1).astype(np.int64)
+        else:
+            candidates = rng.integers(0, n_labels, size=len(sites), dtype=np.int64)
+        return candidates, rng.random(len(sites))
+
+    for step, temperature in enumerate(temperatures, start=1):
+        def update(sites, drawn, penalty, parallel, old, new, temperature=float(temperature)):
+            kernel = anneal_update_class if parallel else anneal_update_class_serial
+            kernel(volume, labels_volume, temps, inherited, sites, drawn[0], drawn[1], models,
+                   heuristic, code, temperature, resynth, adaptive, min_two_h2, prune, penalty,
+                   outlier, old, new)
+
+        sweep_updates, sweep_changed = sweep(classes, rng, draw=draw, update=update, counts=counts,
+                                             exemplar_freq=exemplar_freq,
+                                             histogram_weight=histogram_weight)
         updates += sweep_updates
         changed += sweep_changed
         acceptance.append(sweep_changed / max(sweep_updates, 1))
         history.append(float(temperature))
         if on_sweep is not None:
-            on_sweep(sweep, float(temperature))
+            on_sweep(step, float(temperature))
     return history, {"sweeps": int(proposals), "updates": updates, "evaluations": updates * n_views,
                      "changed": changed, "acceptance": acceptance}

@@ -10,28 +10,33 @@ the number of threads.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
-from .._kernels.relax import (
-    PARALLEL_MIN_SITES,
-    ViewModels,
-    icm_update_class,
-    icm_update_class_serial,
-)
+from .._kernels.relax import ViewModels, icm_update_class, icm_update_class_serial
+from ._sweep import histogram_penalty, label_counts, sweep
+
+__all__ = ["IcmOptions", "histogram_penalty", "relax_icm"]
 
 
-def histogram_penalty(counts: np.ndarray, exemplar_freq: np.ndarray, weight: float) -> np.ndarray:
-    """``-weight * max(0, log(q_k / e_k))`` with pseudo-counts, ``q`` the volume's label share.
+@dataclass(frozen=True)
+class IcmOptions:
+    """Options of ICM with per-voxel temperatures (the one place their defaults are written).
 
-    Labels the volume over-uses relative to the exemplar are penalised; others are untouched.
+    Attributes
+    ----------
+    xi : float < 0
+        Cooling step.
+    stop : float in (0, 1]
+        Stop a level once the global temperature fell by this fraction (1: down to 0).
+    max_sweeps : int >= 1
+        Hard limit of sweeps per level.
     """
-    if weight == 0.0:
-        return np.zeros(len(exemplar_freq))
-    total = max(int(counts.sum()), 1)
-    delta = 1.0 / total
-    ratio = (counts / total + delta) / (exemplar_freq + delta)
-    return -weight * np.maximum(0.0, np.log(ratio))
+
+    xi: float = -3.0
+    stop: float = 0.95
+    max_sweeps: int = 30
 
 
 def relax_icm(
@@ -74,29 +79,20 @@ def relax_icm(
     initial = float(temps.sum(dtype=np.float64))
     history = [initial]
     target = (1.0 - stop) * initial
-    counts = np.bincount(labels_volume[labels_volume >= 0].ravel(), minlength=len(exemplar_freq))
-    counts = counts.astype(np.int64)
-    penalty = np.zeros(len(exemplar_freq))
+    counts = label_counts(labels_volume, len(exemplar_freq))
     updates = 0
     sweeps = 0
+
+    def update(sites, drawn, penalty, parallel, old, new):
+        kernel = icm_update_class if parallel else icm_update_class_serial
+        kernel(volume, labels_volume, temps, inherited, sites, drawn[0], models, heuristic,
+               decision, tau, xi, resynth, adaptive, min_two_h2, prune, penalty, outlier, old, new)
+
     while sweeps < max_sweeps and history[-1] > target:
-        for c in rng.permutation(len(classes)):
-            sites = classes[c]
-            uniforms = rng.random(len(sites))
-            if histogram_weight:  # counts change with every class; without the term it stays 0
-                penalty = histogram_penalty(counts, exemplar_freq, histogram_weight)
-            old = np.empty(len(sites), dtype=np.int64)
-            new = np.empty(len(sites), dtype=np.int64)
-            parallel = len(sites) >= PARALLEL_MIN_SITES
-            update = icm_update_class if parallel else icm_update_class_serial
-            update(volume, labels_volume, temps, inherited, sites, uniforms, models, heuristic,
-                   decision, tau, xi, resynth, adaptive, min_two_h2, prune, penalty, outlier,
-                   old, new)
-            visited = old != -2
-            updates += int(visited.sum())
-            if histogram_weight:
-                counts -= np.bincount(old[visited & (old >= 0)], minlength=len(counts))
-                counts += np.bincount(new[visited & (new >= 0)], minlength=len(counts))
+        visited, _ = sweep(classes, rng, draw=lambda sites: (rng.random(len(sites)),),
+                           update=update, counts=counts, exemplar_freq=exemplar_freq,
+                           histogram_weight=histogram_weight)
+        updates += visited
         sweeps += 1
         history.append(float(temps.sum(dtype=np.float64)))
         if on_sweep is not None:

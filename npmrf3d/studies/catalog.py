@@ -27,6 +27,7 @@ import pathlib
 import numpy as np
 
 from npmrf3d.errors import ParameterError
+from npmrf3d.exemplar import ETR_DIR, etr_available, named_exemplar  # noqa: F401 (re-exported)
 
 from .grid import Method, Scale, Study
 
@@ -57,61 +58,9 @@ COLOUR_EXEMPLARS: tuple[str, ...] = ("ihc64", "hubble", "wood", "tabby_fur", "re
 #: Layered / anisotropic exemplars whose layers run along the image rows (two versus three views).
 LAYERED_EXEMPLARS: tuple[str, ...] = ("stripes", "wood", "tabby_fur", "phase_bands", "brick")
 
-#: Where Debian's extremetuxracer-data package puts its terrain photographs (GPL-2+).
-ETR_DIR = pathlib.Path("/usr/share/games/etr/terrains")
-_ETR_PREFIX = "etr:"
-_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".gif", ".tif", ".tiff", ".npy")
-
-
-def etr_available(folder: pathlib.Path | None = None) -> list[str]:
-    """Names ``etr:<stem>`` of the installed Extreme Tux Racer terrain photographs (may be empty)."""
-    folder = ETR_DIR if folder is None else pathlib.Path(folder)
-    if not folder.is_dir():
-        return []
-    return sorted(f"{_ETR_PREFIX}{p.stem}" for p in folder.iterdir()
-                  if p.suffix.lower() in _IMAGE_SUFFIXES)
-
-
-def load_exemplar(name: str, crop: int | None = None) -> np.ndarray:
-    """A study exemplar as float32 ``(H, W, C)``; ``crop`` keeps the top-left ``crop x crop``.
-
-    Raises
-    ------
-    ParameterError
-        Unknown name, missing file, or an ``etr:`` name without the Debian package installed.
-
-    Examples
-    --------
-    >>> load_exemplar("gravel64", crop=16).shape
-    (16, 16, 1)
-    """
-    import npmrf3d
-    from npmrf3d import data
-
-    if name in data.available():
-        image = npmrf3d.load_exemplar(data.path(name))
-    elif name.startswith(_ETR_PREFIX):
-        stem = name[len(_ETR_PREFIX):]
-        if not ETR_DIR.is_dir():
-            raise ParameterError(
-                f"exemplar {name!r} is an Extreme Tux Racer terrain photograph, read at run time "
-                f"from {ETR_DIR}, which does not exist: install Debian's extremetuxracer-data "
-                f"package (GPL-2+, so it is not bundled with npmrf3d) or choose another exemplar")
-        files = [p for p in sorted(ETR_DIR.iterdir())
-                 if p.stem == stem and p.suffix.lower() in _IMAGE_SUFFIXES]
-        if not files:
-            raise ParameterError(f"no terrain photograph {stem!r} in {ETR_DIR}; installed: "
-                                 f"{', '.join(etr_available()) or 'none'}")
-        image = npmrf3d.load_exemplar(files[0])
-    elif pathlib.Path(name).suffix.lower() in _IMAGE_SUFFIXES:
-        image = npmrf3d.load_exemplar(name)
-    else:
-        raise ParameterError(
-            f"unknown exemplar {name!r}: use a bundled name ({', '.join(data.available())}), "
-            f"'etr:NAME' for an installed Extreme Tux Racer terrain, or an image file path")
-    if crop is not None:
-        image = np.ascontiguousarray(image[:crop, :crop])
-    return image
+#: Study exemplar names resolve in the model layer (:mod:`npmrf3d.exemplar`); kept here under
+#: their old names.
+load_exemplar = named_exemplar
 
 
 # --------------------------------------------------------------------------- the studies

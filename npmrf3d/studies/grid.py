@@ -8,6 +8,8 @@ list of methods. Nothing is code: :mod:`npmrf3d.studies.catalog` only declares v
 
 Parameters reach the algorithms like this:
 
+Registered methods (:data:`npmrf3d.methods.METHODS`) are called through their ``synthesize``:
+
 * ``npmrf`` methods call :func:`npmrf3d.synthesize` with ``study.common``, then
   ``scale.common``, then the method's own ``params`` (later ones win) plus ``size``,
   ``levels`` and ``rng=seed``; keyword arguments are passed through unchanged, so settings of
@@ -39,11 +41,17 @@ from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 from npmrf3d.errors import ParameterError
+from npmrf3d.methods import ALIASES, METHODS
+from npmrf3d.neighborhood import VIEWS
 
 __all__ = ["ALGORITHMS", "MODES", "Method", "RunSpec", "Scale", "Study", "run_id"]
 
-#: What a method can be (see the module docstring).
-ALGORITHMS = ("npmrf", "kopf", "control", "real")
+#: The study-only algorithms: they make no volume from an exemplar, so they are not methods of
+#: :data:`npmrf3d.methods.METHODS`.
+STUDY_ONLY = ("control", "real")
+#: What a method can be: every registered method (see :data:`npmrf3d.methods.METHODS`), then
+#: the study-only ones.
+ALGORITHMS = (*METHODS, *STUDY_ONLY)
 #: The two variants every study declares.
 MODES = ("quick", "full")
 
@@ -64,7 +72,7 @@ class Method:
     ----------
     name : str
         Short label used in run ids, tables and figures (letters, digits, ``-``, ``_``, ``.``).
-    algorithm : {"npmrf", "kopf", "control", "real"}
+    algorithm : a name of :data:`npmrf3d.methods.METHODS` (or an alias), "control" or "real"
     params : tuple of (name, value) pairs
         Keyword arguments for the algorithm (a dict is accepted and frozen).
     """
@@ -75,6 +83,8 @@ class Method:
 
     def __post_init__(self):
         object.__setattr__(self, "params", _params(self.params))
+        if self.algorithm in ALIASES:
+            object.__setattr__(self, "algorithm", ALIASES[self.algorithm])
         if self.algorithm not in ALGORITHMS:
             raise ParameterError(f"method {self.name!r}: algorithm must be one of "
                                  f"{', '.join(ALGORITHMS)}; got {self.algorithm!r}")
@@ -144,15 +154,13 @@ class RunSpec:
     def kwargs(self) -> dict[str, Any]:
         """Keyword arguments for the algorithm (without the exemplar and progress)."""
         out = dict(self.params)
-        if self.algorithm in ("npmrf", "kopf"):
+        if self.algorithm in METHODS:
             out.update(size=self.size, levels=self.levels, rng=self.seed)
         return out
 
     @property
     def views(self) -> tuple[str, ...]:
         """Constrained views of this run (the ``views`` parameter, default all three)."""
-        from npmrf3d.neighborhood import VIEWS
-
         value = dict(self.params).get("views", VIEWS)
         if isinstance(value, str):
             value = [v.strip() for v in value.split(",") if v.strip()]

@@ -27,7 +27,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from npmrf3d import metrics
 from npmrf3d.errors import ParameterError
+from npmrf3d.exemplar import exemplar_slice
+from npmrf3d._files import read_volume
 
 __all__ = [
     "GREY_BINS",
@@ -53,25 +56,7 @@ MAX_LAG = 32
 def load_reference(path) -> np.ndarray:
     """The real volume as float32 ``(N1, N2, N3, C)`` (``.npy`` or ``.tif``, see
     :func:`npmrf3d.io.read_volume`)."""
-    from npmrf3d.io import read_volume
-
     return read_volume(path)
-
-
-def exemplar_slice(volume: np.ndarray, axis: int = 0, index: int | None = None) -> np.ndarray:
-    """The slice across ``axis`` at ``index`` (default: the middle) as an ``(H, W, C)`` image.
-
-    >>> v = np.arange(24, dtype=np.float32).reshape(2, 3, 4, 1)
-    >>> exemplar_slice(v, 2, 0)[..., 0].tolist()
-    [[0.0, 4.0, 8.0], [12.0, 16.0, 20.0]]
-    """
-    if axis not in (0, 1, 2):
-        raise ParameterError(f"slice axis must be 0, 1 or 2; got {axis!r}")
-    n = volume.shape[axis]
-    index = n // 2 if index is None else int(index)
-    if not 0 <= index < n:
-        raise ParameterError(f"slice index must be in [0, {n - 1}] for axis {axis}; got {index}")
-    return np.ascontiguousarray(np.take(volume, index, axis=axis))
 
 
 def reference_slices(volume: np.ndarray) -> dict[str, np.ndarray]:
@@ -187,8 +172,6 @@ def compare(volume: np.ndarray, real: np.ndarray, exemplar: np.ndarray, *,
         ``two_point_l2_mean``, ``fractions``, ``fractions_real``, ``fraction_l1``, ``phases``
         (list or None), ``max_lag`` and ``slice_metrics`` (see the module docstring).
     """
-    from .runner import evaluate_metrics
-
     phases = phases_of(exemplar)
     if max_lag is None:
         max_lag = max(1, min(MAX_LAG, min(volume.shape[:3]) // 2, min(real.shape[:3]) // 2))
@@ -208,5 +191,6 @@ def compare(volume: np.ndarray, real: np.ndarray, exemplar: np.ndarray, *,
     out["fractions"] = mine_f.tolist()
     out["fractions_real"] = real_f.tolist()
     out["fraction_l1"] = float(np.abs(mine_f - real_f).sum())
-    out["slice_metrics"] = evaluate_metrics(volume, reference_slices(real))
+    slices = reference_slices(real)
+    out["slice_metrics"] = metrics.evaluate(volume, slices, views=list(slices))
     return out

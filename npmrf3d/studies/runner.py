@@ -27,28 +27,32 @@ Behaviour
 
 from __future__ import annotations
 
-import csv
 import dataclasses
-import json
 import logging
 import math
 import os
 import pathlib
 import socket
-import sys
 import time
 import traceback
 from collections.abc import Callable, Sequence
 from datetime import datetime, timezone
-from typing import Any
 
 import numpy as np
 
 from npmrf3d._kernels import _jit
 from npmrf3d.errors import ParameterError
-from npmrf3d.metrics import METRICS
+from npmrf3d.exemplar import exemplar_slice, named_exemplar
+from npmrf3d.methods import METHODS
+from npmrf3d.runs import run_record, write_run
+from npmrf3d import io, metrics
+from npmrf3d.metrics import METRICS, largest_value_share
 
+from . import groundtruth
+from .figures import make_figures
 from .grid import RunSpec, Study
+from .table import BASE_COLUMNS, is_finished, load_row, make_row, write_csv
+from .table import read_results  # noqa: F401 (re-exported: runner.read_results)
 
 __all__ = [
     "StudyOutcome",
@@ -61,26 +65,16 @@ __all__ = [
     "structureless",
 ]
 
-#: The files that mark a finished run.
-FINISHED_FILES = ("run.json", "metrics.json")
 #: The metrics of the studies (the paper's three first), as :data:`npmrf3d.metrics.METRICS`.
 HEADLINE_METRICS = METRICS
-#: Leading columns of results.csv; metric columns follow, ``error`` comes last.
-BASE_COLUMNS = ("study", "run_id", "exemplar", "method", "algorithm", "seed", "size", "levels",
-                "status", "seconds", "wall_seconds", "threads", "largest_value_share")
-
 
 # --------------------------------------------------------------------------- metrics
-
 
 def evaluate_metrics(volume: np.ndarray, exemplars: dict[str, np.ndarray],
                      views: Sequence[str] | None = None) -> dict:
     """:func:`npmrf3d.metrics.evaluate` of ``volume`` against the exemplars of ``views``."""
-    from npmrf3d import metrics
-
     views = tuple(exemplars) if views is None else tuple(views)
     return metrics.evaluate(volume, {v: exemplars[v] for v in views}, views=list(views))
-
 
 def structureless(exemplar: np.ndarray, size: int, rng) -> np.ndarray:
     """The structureless control: ``size^3`` voxels drawn independently from the exemplar's
@@ -94,47 +88,14 @@ def structureless(exemplar: np.ndarray, size: int, rng) -> np.ndarray:
     picks = generator.integers(0, len(flat), size=size ** 3)
     return flat[picks].reshape(size, size, size, flat.shape[1])
 
-
 # --------------------------------------------------------------------------- one run
-
-
-def is_finished(run_dir: pathlib.Path) -> bool:
-    """True when ``run_dir`` holds a complete run (``run.json`` and ``metrics.json``)."""
-    return all((pathlib.Path(run_dir) / name).is_file() for name in FINISHED_FILES)
-
-
-def _config_dict(result) -> Any:
-    config = getattr(result, "config", None)
-    if config is None:
-        return None
-    if hasattr(config, "to_dict"):
-        return config.to_dict()
-    from npmrf3d.io import to_jsonable
-
-    try:
-        return to_jsonable(config)
-    except TypeError:
-        return repr(config)
-
 
 def _synthesise(spec: RunSpec, exemplar: np.ndarray, real: np.ndarray | None):
     """(volume, per-view exemplars, result or None) for one run."""
     views = spec.views
     per_view = {v: exemplar for v in views}
-    kwargs = spec.kwargs()
-    if spec.algorithm == "npmrf":
-        import npmrf3d
-
-        result = npmrf3d.synthesize(exemplar, **kwargs)
-        return result.volume, per_view, result
-    if spec.algorithm == "kopf":
-        try:
-            from npmrf3d.baselines.kopf import kopf_synthesize
-        except ImportError as exc:
-            raise RuntimeError(
-                f"the NP_K baseline (npmrf3d.baselines.kopf.kopf_synthesize) is not available "
-                f"in this installation: {exc}") from exc
-        result = kopf_synthesize(exemplar, **kwargs)
+    if spec.algorithm in METHODS:
+        result = METHODS[spec.algorithm].synthesize(exemplar, **spec.kwargs())
         return result.volume, per_view, result
     if spec.algorithm == "control":
         return structureless(exemplar, spec.size, spec.seed), per_view, None
@@ -143,7 +104,8 @@ def _synthesise(spec: RunSpec, exemplar: np.ndarray, real: np.ndarray | None):
             raise ParameterError("method 'real' needs a reference volume (ground-truth study)")
         n = spec.size
         return np.ascontiguousarray(real[:n, :n, :n]), per_view, None
-    raise ParameterError(f"unknown algorithm {spec.algorithm!r}")
+    raise ParameterError(f"unknown algorithm {spec.algorithm!r}: registered methods are "
+                         f"{', '.join(METHODS)}; study-only: control, real")
 
 
 def execute_run(spec: RunSpec, study_dir: str, threads: int | None = None) -> dict:
@@ -162,8 +124,6 @@ def execute_run(spec: RunSpec, study_dir: str, threads: int | None = None) -> di
     dict
         The run's row of ``results.csv`` (``status`` ``done`` or ``failed``).
     """
-    from npmrf3d import io
-
     run_dir = pathlib.Path(study_dir) / spec.run_id
     t_start = time.perf_counter()
     try:
@@ -171,63 +131,40 @@ def execute_run(spec: RunSpec, study_dir: str, threads: int | None = None) -> di
         (run_dir / "error.json").unlink(missing_ok=True)
         real = None
         if spec.reference is not None:
-            from . import groundtruth
-
             real = groundtruth.load_reference(spec.reference)
-            exemplar = groundtruth.exemplar_slice(real, spec.slice_axis, spec.slice_index)
+            exemplar = exemplar_slice(real, spec.slice_axis, spec.slice_index)
         else:
-            from .catalog import load_exemplar
-
-            exemplar = load_exemplar(spec.exemplar, spec.crop)
+            exemplar = named_exemplar(spec.exemplar, spec.crop)
         volume, per_view, result = _synthesise(spec, exemplar, real)
         if real is not None:
-            from . import groundtruth
-
             truth = groundtruth.compare(volume, real, exemplar)
             scores = truth.pop("slice_metrics")
         else:
             truth, scores = None, evaluate_metrics(volume, per_view, spec.views)
-        from npmrf3d.metrics import largest_value_share
-
         measured = {"metrics": scores, "largest_value_share": largest_value_share(volume)}
         if truth is not None:
             measured["groundtruth"] = truth
         wall = time.perf_counter() - t_start
         timings = dict(getattr(result, "timings", None) or {"total": wall})
-        record = {
-            "command": "study",
-            "study": spec.study,
-            "run_id": spec.run_id,
-            "spec": spec.to_dict(),
-            "seed": spec.seed,
-            "config": _config_dict(result),
-            "exemplars": {v: spec.exemplar for v in per_view},
-            "versions": io.package_versions(),
-            "threads": used_threads,
-            "host": socket.gethostname(),
-            "pid": os.getpid(),
-            "timings": timings,
-            "wall_seconds": wall,
-            "history": getattr(result, "history", None),
-            "stats": getattr(result, "stats", None),
-            "labels": None if result is None or getattr(result, "labels", None) is None
+        record = run_record(
+            "study", result, method=spec.algorithm if spec.algorithm in METHODS else None, exemplars={v: spec.exemplar for v in per_view}, threads=used_threads,
+            study=spec.study, run_id=spec.run_id, spec=spec.to_dict(), seed=spec.seed,
+            host=socket.gethostname(), pid=os.getpid(), wall_seconds=wall,
+            labels=None if result is None or getattr(result, "labels", None) is None
             else int(len(result.labels)),
-            "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        }
+        )
+        record["timings"] = timings
         title = f"{spec.study}: {spec.method} on {spec.exemplar}, seed {spec.seed}"
         (run_dir / "metrics.json").unlink(missing_ok=True)  # finished = both files, written last
-        io.write_run(run_dir, volume=volume, exemplars=per_view, record=record, overwrite=True,
+        write_run(run_dir, volume=volume, exemplars=per_view, record=record, overwrite=True,
                      title=title)
         io.write_json(run_dir / "metrics.json", measured)
         return make_row(spec, "done", record, measured)
     except Exception as exc:  # a failed run is recorded, the others go on
         return record_failure(spec, study_dir, exc, time.perf_counter() - t_start)
 
-
 def record_failure(spec: RunSpec, study_dir, exc: BaseException, wall: float = math.nan) -> dict:
     """Write ``error.json`` for a failed run and return its row."""
-    from npmrf3d import io
-
     message = f"{type(exc).__name__}: {exc}".strip()
     error = {
         "run_id": spec.run_id,
@@ -246,69 +183,24 @@ def record_failure(spec: RunSpec, study_dir, exc: BaseException, wall: float = m
         pass
     return make_row(spec, "failed", {"wall_seconds": wall}, None, error=message)
 
-
-def make_row(spec: RunSpec, status: str, record: dict | None, measured: dict | None, *,
-             error: str = "") -> dict:
-    """The ``results.csv`` row of a run (metric columns ``mean_<metric>``, ``<view>_<metric>``)."""
-    record = record or {}
-    timings = record.get("timings") or {}
-    row: dict[str, Any] = {
-        "study": spec.study, "run_id": spec.run_id, "exemplar": spec.exemplar,
-        "method": spec.method, "algorithm": spec.algorithm, "seed": spec.seed,
-        "size": spec.size, "levels": spec.levels, "status": status,
-        "seconds": timings.get("total", math.nan), "wall_seconds": record.get("wall_seconds", math.nan),
-        "threads": record.get("threads", ""),
-        "largest_value_share": (measured or {}).get("largest_value_share", math.nan),
-    }
-    if measured:
-        scores = measured.get("metrics") or {}
-        for name, value in (scores.get("mean") or {}).items():
-            row[f"mean_{name}"] = value
-        for view, values in (scores.get("per_view") or {}).items():
-            for name, value in values.items():
-                row[f"{view}_{name}"] = value
-        truth = measured.get("groundtruth")
-        if truth:
-            for axis, value in truth["two_point_l2"].items():
-                row[f"two_point_l2_{axis}"] = value
-            row["two_point_l2"] = truth["two_point_l2_mean"]
-            row["fraction_l1"] = truth["fraction_l1"]
-    row["error"] = error
-    return row
-
-
-def _load_row(spec: RunSpec, run_dir: pathlib.Path) -> dict:
-    record = json.loads((run_dir / "run.json").read_text(encoding="utf-8"))
-    measured = json.loads((run_dir / "metrics.json").read_text(encoding="utf-8"))
-    return make_row(spec, "skipped", record, measured)
-
-
 # --------------------------------------------------------------------------- schedulers
 
+class _Progress:
+    """Counts finished runs and hands each to the caller's ``progress(row, done, total)``
+    (``row = None`` when the runs start); the library draws no bar itself."""
 
-class _ProgressBar:
-    """tqdm over runs on stderr, opened at the first finished run (after the scheduler line)."""
-
-    def __init__(self, name: str, total: int, enabled: bool):
-        self.name, self.total, self.enabled, self.bar = name, total, enabled, None
+    def __init__(self, callback, total: int):
+        self.callback = callback if callable(callback) else None
+        self.total, self.done = total, 0
 
     def start(self) -> None:
-        if self.enabled and self.bar is None:
-            from tqdm import tqdm
-
-            self.bar = tqdm(total=self.total, desc=self.name, unit="run", file=sys.stderr,
-                            dynamic_ncols=True)
+        if self.callback is not None:
+            self.callback(None, 0, self.total)
 
     def __call__(self, row: dict) -> None:
-        self.start()
-        if self.bar is not None:
-            self.bar.update(1)
-            if row["status"] == "failed":
-                self.bar.write(f"run {row['run_id']} failed: {row['error']}", file=sys.stderr)
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
+        self.done += 1
+        if self.callback is not None:
+            self.callback(row, self.done, self.total)
 
 
 def plan_workers(workers: int | None, threads: int | None, cores: int | None = None) -> tuple[int, int]:
@@ -336,7 +228,6 @@ def plan_workers(workers: int | None, threads: int | None, cores: int | None = N
                              f"cores of this machine; use fewer --workers or --threads")
     return workers, threads
 
-
 def _start_local_cluster(workers: int, threads: int):
     from distributed import LocalCluster
 
@@ -346,14 +237,12 @@ def _start_local_cluster(workers: int, threads: int):
     return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                         dashboard_address=":0", silence_logs=logging.WARNING, env=env)
 
-
 def _dashboard(client) -> str:
     try:
         import bokeh  # noqa: F401
     except ImportError:
         return f"{client.dashboard_link} (not served: install bokeh to see it)"
     return str(client.dashboard_link)
-
 
 def _run_dask(pending, study_dir, scheduler, workers, threads, echo, bar):
     from distributed import Client, as_completed
@@ -391,7 +280,6 @@ def _run_dask(pending, study_dir, scheduler, workers, threads, echo, bar):
             cluster.close()
     return rows, {"scheduler": where, "workers": workers, "threads": task_threads}
 
-
 def _run_serial(pending, study_dir, threads, echo, bar):
     echo("serial: one run after the other in this process")
     bar.start()
@@ -401,9 +289,7 @@ def _run_serial(pending, study_dir, threads, echo, bar):
         bar(rows[spec.run_id])
     return rows, {"scheduler": "serial", "workers": 1, "threads": threads}
 
-
 # --------------------------------------------------------------------------- a study
-
 
 @dataclasses.dataclass
 class StudyOutcome:
@@ -415,42 +301,11 @@ class StudyOutcome:
     wall_seconds: float
     figures: list[pathlib.Path]
 
-
-def _write_csv(path: pathlib.Path, rows: list[dict], head: Sequence[str] = ()) -> pathlib.Path:
-    from npmrf3d.io import atomic_write
-
-    columns = list(head)
-    for row in rows:
-        columns += [k for k in row if k not in columns and k != "error"]
-    if any("error" in row for row in rows):
-        columns.append("error")
-
-    def write(tmp):
-        with open(tmp, "w", newline="", encoding="utf-8") as handle:
-            writer = csv.DictWriter(handle, fieldnames=columns, restval="")
-            writer.writeheader()
-            for row in rows:
-                writer.writerow({k: _csv_value(v) for k, v in row.items()})
-
-    return atomic_write(path, write)
-
-
-def _csv_value(value):
-    if isinstance(value, float):
-        return "" if math.isnan(value) else repr(value)
-    return value
-
-
-def read_results(path) -> list[dict]:
-    """Rows of a ``results.csv`` (numbers stay strings)."""
-    with open(path, newline="", encoding="utf-8") as handle:
-        return list(csv.DictReader(handle))
-
-
 def run_study(study: Study, *, mode: str = "quick", out="study-results", scheduler: str | None = None,
               workers: int | None = None, threads: int | None = None, seeds=None, exemplars=None,
               sizes=None, levels: int | None = None, volume=None, slice_axis: int = 0,
-              slice_index: int | None = None, progress: bool = True,
+              slice_index: int | None = None,
+              progress: Callable[[dict | None, int, int], None] | bool | None = None,
               echo: Callable[[str], None] | None = None) -> StudyOutcome:
     """Run (or resume) a study and write its runs, ``results.csv``, figures and ``study.json``.
 
@@ -472,8 +327,11 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
         The real volume of the ground-truth study.
     slice_axis, slice_index : int
         Which slice of ``volume`` is the exemplar (default: the middle one across axis 0).
-    progress : bool
-        A tqdm bar over the runs on stderr.
+    progress : callable, optional
+        Called as ``progress(row, done, total)`` after every finished run (its
+        ``results.csv`` row) and once as ``progress(None, 0, total)`` when the runs start;
+        ``npmrf3d study`` draws its bar with it. A bool (the former "draw a bar" switch) is
+        accepted and ignored: the library draws nothing.
     echo : callable or None
         Where the one-line messages go (None: nowhere).
 
@@ -481,14 +339,10 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
     -------
     StudyOutcome
     """
-    from npmrf3d import io
-
     echo = echo or (lambda message: None)
     t_start = time.perf_counter()
     reference = None
     if volume is not None:
-        from . import groundtruth
-
         reference = str(pathlib.Path(volume).absolute())
         shape = groundtruth.load_reference(reference).shape
         base_sizes = sizes if sizes is not None else study.scale(mode).sizes
@@ -511,7 +365,7 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
         run_dir = study_dir / spec.run_id
         if is_finished(run_dir):
             try:
-                rows[spec.run_id] = _load_row(spec, run_dir)
+                rows[spec.run_id] = load_row(spec, run_dir)
                 continue
             except (OSError, ValueError, KeyError):  # unreadable: run it again
                 pass
@@ -521,21 +375,15 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
 
     info = {"scheduler": "none (nothing to run)", "workers": 0, "threads": threads}
     if pending:
-        progress_bar = _ProgressBar(study.name, len(pending), enabled=progress)
-        try:
-            if scheduler == "serial":
-                new, info = _run_serial(pending, study_dir, threads, echo, progress_bar)
-            else:
-                new, info = _run_dask(pending, study_dir, scheduler, workers, threads, echo,
-                                      progress_bar)
-        finally:
-            progress_bar.close()
+        reporter = _Progress(progress, len(pending))
+        if scheduler == "serial":
+            new, info = _run_serial(pending, study_dir, threads, echo, reporter)
+        else:
+            new, info = _run_dask(pending, study_dir, scheduler, workers, threads, echo, reporter)
         rows.update(new)
 
     ordered = [rows[s.run_id] for s in specs]
-    _write_csv(study_dir / "results.csv", ordered, BASE_COLUMNS)
-    from .report import make_figures
-
+    write_csv(study_dir / "results.csv", ordered, BASE_COLUMNS)
     figures = make_figures(study, study_dir, specs, ordered)
     counts = {status: sum(r["status"] == status for r in ordered) for status in ("done", "skipped", "failed")}
     wall = time.perf_counter() - t_start

@@ -16,12 +16,17 @@ from datetime import datetime, timezone
 from typing import Any
 
 import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 
-from . import _validation as check
-from . import io
-from .cli import BUNDLED_PREFIX, PROG, _check_out, _exemplar_source, say
-from .errors import ParameterError
-from .neighborhood import VIEWS
+from .. import _validation as check
+from .. import io, metrics
+from ..errors import ParameterError
+from ..exemplar import BUNDLED_PREFIX, exemplar_source, load_exemplar
+from ..metrics import METRICS
+from ..plotting import save_figure
+from ..neighborhood import VIEWS
+from ._common import PROG, check_out, say
 
 __all__ = ["OUT_FILES", "register"]
 
@@ -116,8 +121,6 @@ def _read_volume(text: str) -> tuple[np.ndarray, str]:
 
 def _read_exemplars(args: argparse.Namespace, views: tuple[str, ...]
                     ) -> tuple[dict[str, np.ndarray], dict[str, str]]:
-    from .exemplar import load_exemplar
-
     extra = [v for v in VIEWS if getattr(args, f"exemplar_{v}") is not None and v not in views]
     if extra:
         raise ParameterError(
@@ -129,7 +132,7 @@ def _read_exemplars(args: argparse.Namespace, views: tuple[str, ...]
     cache: dict[str, np.ndarray] = {}
     for view in views:
         own = getattr(args, f"exemplar_{view}")
-        path, name = _exemplar_source(own if own is not None else args.exemplar)
+        path, name = exemplar_source(own if own is not None else args.exemplar)
         if name not in cache:
             label = f"exemplar for view {view}" if own is not None else "exemplar"
             cache[name] = load_exemplar(path, name=label)
@@ -141,8 +144,6 @@ def _read_exemplars(args: argparse.Namespace, views: tuple[str, ...]
 
 
 def _table(result: dict[str, Any]) -> str:
-    from .metrics import METRICS
-
     rows = [*result["per_view"].items(), ("mean", result["mean"])]
     width = max(len(name) for name, _ in rows)
     head = f"{'view':<{width}}  " + "  ".join(f"{m:>{max(len(m), 10)}}" for m in METRICS)
@@ -154,9 +155,6 @@ def _table(result: dict[str, Any]) -> str:
 
 
 def _figure(histograms: dict[str, dict[str, Any]], result: dict[str, Any], title: str):
-    from matplotlib.figure import Figure
-    from matplotlib.lines import Line2D
-
     views = list(histograms)
     fig = Figure(figsize=(4.2 * len(views), 6.6))  # fixed margins: a layout engine is slow
     axes = fig.subplots(2, len(views), squeeze=False,
@@ -196,8 +194,6 @@ def _figure(histograms: dict[str, dict[str, Any]], result: dict[str, Any], title
 
 def _write(out: pathlib.Path, fig, record: dict[str, Any]) -> None:
     """Write the two files atomically; on failure remove what this call created."""
-    from .plotting import save_figure
-
     missing = []
     folder = out.absolute()
     while not folder.exists():
@@ -219,13 +215,11 @@ def _write(out: pathlib.Path, fig, record: dict[str, Any]) -> None:
 
 def run(args: argparse.Namespace, argv: list[str]) -> int:
     """Handler of ``npmrf3d metrics``; returns the exit code (errors raise ParameterError)."""
-    from . import metrics
-
     views = check.views(args.views, VIEWS)
     if args.out is not None and not args.out.strip():
         raise ParameterError("--out must name a folder; got an empty string")
     out = pathlib.Path(args.out) if args.out is not None else pathlib.Path(args.volume).parent
-    _check_out(out, args.overwrite, files=OUT_FILES, what="metrics")
+    check_out(out, args.overwrite, files=OUT_FILES, what="metrics")
     volume, stored = _read_volume(args.volume)
     exemplars, sources = _read_exemplars(args, views)
     result = metrics.evaluate(volume, exemplars, views=views)

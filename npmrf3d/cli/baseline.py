@@ -1,6 +1,8 @@
 """Command line of the baselines: ``npmrf3d baseline kopf [EXEMPLAR] ...`` (NP_K).
 
-Registered by :mod:`npmrf3d.cli` through ``register(commands, formatter_class)``. Same
+Registered by :data:`npmrf3d.cli.main.COMMANDS`. Every option's default is the field default of
+:class:`npmrf3d.baselines.kopf.KopfConfig`; the sub-command runs the ``kopf`` entry of
+:data:`npmrf3d.methods.METHODS`. Same
 conventions as ``npmrf3d synth``: every option shows its default in ``--help``; a tqdm bar per
 level on stderr (``--quiet`` turns it off); the run folder holds ``volume.npy``, ``volume.tif``,
 ``preview.png`` and ``run.json``; user mistakes are one line on stderr with exit code 2, raised
@@ -13,8 +15,13 @@ import argparse
 import time
 
 from .. import data, io
+from ..baselines.kopf import DEFAULT_ITERATIONS, METHOD, UPSAMPLING, KopfConfig
+from ..config import DEFAULT_SIZE
 from ..errors import ParameterError
+from ..exemplar import BUNDLED_PREFIX
 from ..neighborhood import VIEWS
+from ..runs import RUN_FILES
+from ._common import choices, default, parse_size, prepare_run, run_method, write_result
 
 __all__ = ["register"]
 
@@ -22,12 +29,11 @@ __all__ = ["register"]
 _OPTION_NAMES = ("histogram_bins", "histogram_weight", "mean_shift", "constraint_weight",
                  "iterations", "variance", "grid", "eps", "window", "levels")
 
+def _d(name: str):
+    return default(KopfConfig, name)
 
 def register(commands, formatter_class) -> None:
     """Add ``baseline`` with its nested sub-command ``kopf`` to the ``npmrf3d`` parser."""
-    from ..cli import BUNDLED_PREFIX
-    from .kopf import DEFAULT_HISTOGRAM_WEIGHT, DEFAULT_MEAN_SHIFT, UPSAMPLING
-
     baseline = commands.add_parser(
         "baseline",
         help="synthesise with a baseline method the NP-MRF sampler is compared with (kopf)",
@@ -42,7 +48,7 @@ def register(commands, formatter_class) -> None:
             "NP_K (Kopf et al. 2007): minimise the robust distance between the volume's\n"
             "axis-orthogonal 2D neighbourhoods and their nearest exemplar neighbourhoods\n"
             "(PCA + approximate kd-tree search on a sparse grid, IRLS averaging, histogram\n"
-            f"matching), coarse to fine. Writes {', '.join(io.RUN_FILES)} into the output folder.\n\n"
+            f"matching), coarse to fine. Writes {', '.join(RUN_FILES)} into the output folder.\n\n"
             "examples:\n"
             "  npmrf3d baseline kopf                                # bundled exemplar, 32^3\n"
             "  npmrf3d baseline kopf bundled:ihc --size 128 --out ihc-kopf\n"
@@ -57,42 +63,42 @@ def register(commands, formatter_class) -> None:
              f"({', '.join(data.available())})",
     )
     shape = kopf.add_argument_group("volume and pyramid")
-    shape.add_argument("--size", default="32", metavar="N",
+    shape.add_argument("--size", default=str(DEFAULT_SIZE), metavar="N",
                        help="output size in voxels: N for an N^3 cube or N1,N2,N3; each divisible "
                             "by 2**(levels-1) and by grid at every level")
-    shape.add_argument("--window", type=int, default=8, metavar="W",
+    shape.add_argument("--window", type=int, default=_d("window"), metavar="W",
                        help="side of the square 2D neighbourhoods, an integer >= 2 (the paper: 8)")
-    shape.add_argument("--levels", type=int, default=3, metavar="L",
+    shape.add_argument("--levels", type=int, default=_d("levels"), metavar="L",
                        help="resolution levels, coarse to fine, 1 to 8 (the paper: 3)")
-    shape.add_argument("--iterations", default="5", metavar="N[,N...]",
+    shape.add_argument("--iterations", default=str(DEFAULT_ITERATIONS), metavar="N[,N...]",
                        help="search + optimisation iterations per level: one number, or one per "
                             "level (coarsest first)")
-    shape.add_argument("--upsample", default="trilinear", metavar="{" + ",".join(UPSAMPLING) + "}",
+    shape.add_argument("--upsample", default=_d("upsample"), metavar=choices(UPSAMPLING),
                        help="initialisation of a finer level: trilinear interpolation (the paper), "
                             "or the project's pyramid (8/8 copies the parent into all children, 1/8 "
                             "into one and draws the others from the exemplar)")
     method = kopf.add_argument_group("energy and search")
-    method.add_argument("--r", type=float, default=0.8, metavar="R",
+    method.add_argument("--r", type=float, default=_d("r"), metavar="R",
                         help="exponent of the robust energy ||s - e||^r, in (0, 2]")
-    method.add_argument("--eps", type=float, default=2.0, metavar="E",
+    method.add_argument("--eps", type=float, default=_d("eps"), metavar="E",
                         help="error bound of the approximate nearest-neighbour search "
                              "(cKDTree eps), >= 0; 0 = exact in the PCA space")
-    method.add_argument("--variance", type=float, default=0.95, metavar="F",
+    method.add_argument("--variance", type=float, default=_d("variance"), metavar="F",
                         help="fraction of the neighbourhood variance kept by the PCA, in (0, 1]")
-    method.add_argument("--grid", type=int, default=2, metavar="M",
+    method.add_argument("--grid", type=int, default=_d("grid"), metavar="M",
                         help="spacing of the sparse grid of searched neighbourhoods (1 = all)")
-    method.add_argument("--histogram-bins", type=int, default=16, metavar="B",
+    method.add_argument("--histogram-bins", type=int, default=_d("histogram_bins"), metavar="B",
                         help="bins of each channel's histogram, >= 2")
-    method.add_argument("--histogram-weight", type=float, default=DEFAULT_HISTOGRAM_WEIGHT, metavar="W",
+    method.add_argument("--histogram-weight", type=float, default=_d("histogram_weight"), metavar="W",
                         help="strength of the histogram re-weighting, >= 0 (0 = off, 1 = the "
                              "paper's formula with histograms as voxel counts)")
-    method.add_argument("--mean-shift", default=",".join(str(h) for h in DEFAULT_MEAN_SHIFT),
+    method.add_argument("--mean-shift", default=",".join(str(h) for h in _d("mean_shift")),
                         metavar="H0,H1",
                         help="mean-shift bandwidths at the start and end of each level, as multiples "
                              "of the exemplar's standard deviation; one number for a fixed "
                              "bandwidth, 'none' for the plain weighted average")
     views = kopf.add_argument_group("views, exemplars and constraints")
-    views.add_argument("--views", default=",".join(VIEWS), metavar="V[,V...]",
+    views.add_argument("--views", default=",".join(_d("views")), metavar="V[,V...]",
                        help=f"comma-separated views in the energy, 1 to 3 distinct names of "
                             f"{', '.join(VIEWS)}")
     for view in VIEWS:
@@ -105,17 +111,20 @@ def register(commands, formatter_class) -> None:
     views.add_argument("--constraint-weight", default=None, metavar="W|PATH",
                        help="constraint weights: a number >= 0 or a .npy/.tif volume (N1, N2, N3) "
                             "(default: none = 1 everywhere when --constraint is given)")
-    run = kopf.add_argument_group("run")
-    run.add_argument("--seed", type=int, default=0, metavar="S",
+    run_group = kopf.add_argument_group("run")
+    run_group.add_argument("--seed", type=int, default=0, metavar="S",
                      help="random seed, a non-negative integer; the result depends on it only")
-    run.add_argument("--out", default="npmrf3d-kopf-out", metavar="DIR",
+    run_group.add_argument("--out", default="npmrf3d-kopf-out", metavar="DIR",
                      help="output folder for the run files; created if missing")
-    run.add_argument("--overwrite", action="store_true",
+    run_group.add_argument("--overwrite", action="store_true",
                      help="replace the files of a previous run in --out instead of refusing")
-    run.add_argument("--quiet", action="store_true",
+    run_group.add_argument("--quiet", action="store_true",
                      help="print nothing but errors (no progress bars, no summary)")
+    run_group.add_argument("--checkpoint", default=None, metavar="PATH",
+                     help="a .npz file written after each level; if it exists and matches this "
+                          "run, synthesis resumes after its last finished level (default: none = "
+                          "no checkpoint)")
     kopf.set_defaults(handler=_kopf)
-
 
 def _parse_iterations(text: str):
     parts = [p.strip() for p in str(text).split(",")]
@@ -124,7 +133,6 @@ def _parse_iterations(text: str):
     except ValueError:
         raise ParameterError(f"--iterations must be an integer or comma-separated integers; got {text!r}") from None
     return numbers[0] if len(numbers) == 1 else tuple(numbers)
-
 
 def _parse_mean_shift(text: str):
     if str(text).strip().lower() in ("none", "off", ""):
@@ -140,7 +148,6 @@ def _parse_mean_shift(text: str):
                              f"got {text!r}")
     return numbers[0] if len(numbers) == 1 else tuple(numbers)
 
-
 def _constraint_weight(text: str | None):
     if text is None:
         return None
@@ -154,13 +161,11 @@ def _constraint_weight(text: str | None):
                              f"got shape {weights.shape}")
     return weights[..., 0]
 
-
 def _option_message(message: str) -> str:
     for name in _OPTION_NAMES:
         if message.startswith(f"{name} must "):
             return "--" + name.replace("_", "-") + message[len(name):]
     return message
-
 
 def _kopf(args: argparse.Namespace, argv: list[str]) -> int:
     try:
@@ -168,47 +173,24 @@ def _kopf(args: argparse.Namespace, argv: list[str]) -> int:
     except ParameterError as exc:
         raise ParameterError(_option_message(str(exc))) from None
 
-
 def _run(args: argparse.Namespace, argv: list[str]) -> int:
-    import numpy as np
-
-    from ..cli import _output_folder, _parse_size, _Progress, _view_sources, _write_result
-    from ..synthesis import resolve_exemplars
-    from .kopf import _constraint_arrays, make_kopf_config, run_kopf
-
     t_start = time.perf_counter()
     constraint = io.read_volume(args.constraint) if args.constraint is not None else None
     weight = _constraint_weight(args.constraint_weight)
-    config = make_kopf_config(
-        size=_parse_size(args.size), window=args.window, levels=args.levels,
+    config = METHOD.make_config(
+        size=parse_size(args.size), window=args.window, levels=args.levels,
         views=args.views, iterations=_parse_iterations(args.iterations), r=args.r, eps=args.eps,
         variance=args.variance, grid=args.grid, histogram_bins=args.histogram_bins,
         histogram_weight=args.histogram_weight, mean_shift=_parse_mean_shift(args.mean_shift),
         upsample=args.upsample, constrained=constraint is not None, seed=args.seed,
     )
-    out = _output_folder(args)
-    exemplar, per_view_sources, source_names = _view_sources(args)
-    per_view = resolve_exemplars(exemplar, per_view_sources, config.views, _config_fit(config))
-    sources = source_names(config.views)
-    channels = next(iter(per_view.values())).shape[2]
-    target, tau = _constraint_arrays(constraint, weight, config.size, channels)
-
-    progress = _Progress(config.size, enabled=not args.quiet, unit="iter", symbol="E")
-    try:
-        result = run_kopf(config, per_view, np.random.default_rng(config.seed), constraint=target,
-                          constraint_weight=tau, progress=progress, t_start=t_start)
-    finally:
-        progress.close()
+    out, checkpoint, per_view, sources = prepare_run(args, METHOD, config)
+    result = run_method(args, METHOD, config, per_view, checkpoint=checkpoint, t_start=t_start,
+                        unit="iter", symbol="E", constraint=constraint, constraint_weight=weight)
 
     title = (f"NP_K (Kopf et al. 2007), window {config.window}, {config.levels} levels, "
              f"seed {config.seed}")
-    _write_result(out, args, argv, "baseline kopf", result, per_view, sources, title,
-                  constraint=args.constraint, constraint_weight=args.constraint_weight)
+    write_result(out, args, argv, "baseline kopf", result, per_view, sources, title,
+                 method=METHOD.name, constraint=args.constraint,
+                 constraint_weight=args.constraint_weight)
     return 0
-
-
-def _config_fit(config):
-    """What :func:`npmrf3d.synthesis.resolve_exemplars` checks the exemplars against."""
-    import types
-
-    return types.SimpleNamespace(window=config.window, levels=config.levels, toroidal_exemplar=False)

@@ -1,0 +1,243 @@
+"""What every sub-command shares: the help formatter, output folders, exemplar arguments,
+progress bars, the run folder writer and the one-line error.
+
+The library reports through return values, progress callbacks and exceptions; this package is
+the one place that prints and draws bars (STYLE.md practice 14).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import pathlib
+import sys
+
+import numpy as np
+from tqdm import tqdm
+
+from ..errors import ParameterError
+from ..exemplar import exemplar_source, resolve_exemplars
+from ..neighborhood import VIEWS
+from ..pyramid import level_shape
+from ..runs import RUN_FILES, run_record, write_run
+
+PROG = "npmrf3d"
+
+
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
+    """Shows every default and keeps the hand-formatted description and examples.
+
+    A help string that already says ``(default: ...)`` in words keeps it as written.
+    """
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        return text if "(default:" in text else super()._get_help_string(action)
+
+
+def default(config_class: type, name: str):
+    """The default of field ``name`` of a config dataclass (where the CLI takes its defaults).
+
+    >>> from npmrf3d.config import SynthesisConfig
+    >>> default(SynthesisConfig, "window")
+    7
+    """
+    for f in dataclasses.fields(config_class):
+        if f.name == name:
+            if f.default is not dataclasses.MISSING:
+                return f.default
+            if f.default_factory is not dataclasses.MISSING:
+                return f.default_factory()
+    raise KeyError(f"{config_class.__name__} has no field {name!r} with a default")
+
+
+def choices(names) -> str:
+    """A ``{a,b,c}`` metavar from the names of a registry."""
+    return "{" + ",".join(names) + "}"
+
+
+def say(text: str, *, error: bool = False) -> None:
+    """Write one line of command-line output (stdout, or stderr for diagnostics)."""
+    print(text, file=sys.stderr if error else sys.stdout)
+
+
+def error(message: str, option_names=()) -> int:
+    """Print ``npmrf3d: error: <message>`` on one line (library names turned into options)."""
+    line = " ".join(part.strip() for part in str(message).splitlines() if part.strip())
+    for name in option_names:
+        if line.startswith(f"{name} must "):
+            line = "--" + name.replace("_", "-") + line[len(name):]
+    print(f"{PROG}: error: {line or 'invalid input'}", file=sys.stderr)
+    return 2
+
+
+def parse_size(text: str) -> int | tuple[int, ...]:
+    """``N`` or ``N1,N2,N3`` as an int or a tuple."""
+    parts = [p.strip() for p in str(text).split(",")]
+    try:
+        numbers = [int(p) for p in parts]
+    except ValueError:
+        raise ParameterError(
+            f"size must be an integer N or three comma-separated integers N1,N2,N3; got {text!r}"
+        ) from None
+    return numbers[0] if len(numbers) == 1 else tuple(numbers)
+
+
+def check_out(out: pathlib.Path, overwrite: bool, files: tuple[str, ...] = RUN_FILES,
+              what: str = "a run") -> None:
+    """The output folder must be usable (checked before the work; the writers check again).
+
+    It may exist if it holds none of ``files`` (or ``overwrite`` is set) and is writable, or
+    be creatable under its nearest existing ancestor. ``what`` names ``files`` in the message.
+    """
+    if out.exists():
+        if not out.is_dir():
+            raise ParameterError(f"output folder '{out}' exists and is not a folder")
+        previous = [name for name in files if (out / name).exists()]
+        if previous and not overwrite:
+            raise ParameterError(
+                f"output folder '{out}' already holds {what} ({', '.join(previous)}); "
+                "pass --overwrite or choose another --out"
+            )
+        if not os.access(out, os.W_OK | os.X_OK):
+            raise ParameterError(f"output folder '{out}' is not writable")
+        return
+    ancestor = out.absolute().parent
+    while not ancestor.exists():
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise ParameterError(f"output folder '{out}' cannot be created: '{ancestor}' is not a folder")
+    if not os.access(ancestor, os.W_OK | os.X_OK):
+        raise ParameterError(f"output folder '{out}' cannot be created: '{ancestor}' is not writable")
+
+
+def output_folder(args: argparse.Namespace) -> pathlib.Path:
+    """The checked ``--out`` folder of a command that writes a run folder."""
+    if not args.out.strip():
+        raise ParameterError("--out must name a folder; got an empty string")
+    out = pathlib.Path(args.out)
+    check_out(out, args.overwrite)
+    return out
+
+
+def check_checkpoint(path: pathlib.Path | None) -> None:
+    """A ``--checkpoint`` must be a file (or not exist yet) in an existing folder."""
+    if path is None:
+        return
+    if path.exists() and not path.is_file():
+        raise ParameterError(f"checkpoint '{path}' exists and is not a file")
+    if not path.absolute().parent.is_dir():
+        raise ParameterError(f"folder of checkpoint '{path}' does not exist")
+
+
+def view_sources(args: argparse.Namespace):
+    """(EXEMPLAR file, {view: --exemplar-VIEW file}, views -> {view: name for run.json})."""
+    exemplar, exemplar_name = exemplar_source(args.exemplar)
+    per_view_sources, names = {}, {}
+    for view in VIEWS:
+        source, name = exemplar_source(getattr(args, f"exemplar_{view}"))
+        if source is not None:
+            per_view_sources[view], names[view] = source, name
+    return exemplar, per_view_sources, lambda views: {v: names.get(v, exemplar_name) for v in views}
+
+
+def prepare_run(args: argparse.Namespace, method, config):
+    """Checks and inputs shared by every command that runs a method of the registry, in the
+    order that keeps user errors ahead of any work: the ``--out`` folder, the ``--checkpoint``,
+    the exemplars. Returns (out, checkpoint, per-view exemplars, per-view names for run.json)."""
+    out = output_folder(args)
+    checkpoint = pathlib.Path(args.checkpoint) if getattr(args, "checkpoint", None) is not None else None
+    check_checkpoint(checkpoint)
+    exemplar, per_view_sources, source_names = view_sources(args)
+    per_view = resolve_exemplars(exemplar, per_view_sources, config.views, **method.fit(config))
+    return out, checkpoint, per_view, source_names(config.views)
+
+
+def run_method(args: argparse.Namespace, method, config, per_view: dict, *, checkpoint=None,
+               t_start: float | None = None, unit: str = "sweep", symbol: str = "T", **inputs):
+    """``method.run`` seeded by ``config.seed`` with a bar per level (none with ``--quiet``)."""
+    progress = LevelProgress(config.size, enabled=not args.quiet, unit=unit, symbol=symbol)
+    try:
+        return method.run(per_view, config, np.random.default_rng(config.seed), progress=progress,
+                          checkpoint=checkpoint, t_start=t_start, **inputs)
+    finally:
+        progress.close()
+
+
+def write_result(out: pathlib.Path, args: argparse.Namespace, argv: list[str], command: str,
+                 result, per_view: dict, sources: dict, title: str, *, method: str | None = None,
+                 **extra) -> None:
+    """Write the run folder (volume, TIFF, preview, run.json with ``extra``) and say so."""
+    record = run_record(command, result, exemplars=sources, method=method, argv=[PROG, *argv],
+                        **extra)
+    write_run(out, volume=result.volume, exemplars=per_view, record=record,
+              overwrite=args.overwrite, title=title)
+    if not args.quiet:
+        shape = "x".join(str(n) for n in result.volume.shape)
+        labels = f"{len(result.labels)} labels, " if len(result.labels) else ""
+        say(f"wrote {out}{os.sep}: {', '.join(RUN_FILES)}")
+        say(f"volume {shape} (N1xN2xN3xC), {labels}{result.timings['total']:.1f} s")
+
+
+class LevelProgress:
+    """One tqdm bar per level on stderr: steps (``unit``) done, a level quantity as postfix.
+
+    Called as ``progress(level, step, steps, value)`` with ``step = 0`` at the start of each
+    level (:func:`npmrf3d.pyramid.run_pyramid`): sweeps and the global temperature ``T`` for
+    synth, iterations and the energy ``E`` for NP_K.
+    """
+
+    def __init__(self, size: tuple[int, int, int], enabled: bool, unit: str = "sweep",
+                 symbol: str = "T"):
+        self.size = size
+        self.enabled = enabled
+        self.unit = unit
+        self.symbol = symbol
+        self.bar = None
+
+    def __call__(self, level: int, sweep: int, max_sweeps: int, temperature: float) -> None:
+        if not self.enabled:
+            return
+        if sweep == 0 or self.bar is None:
+            self.close()
+            shape = level_shape(self.size, level)
+            side = f"{shape[0]}^3" if len(set(shape)) == 1 else "x".join(map(str, shape))
+            self.bar = tqdm(total=max_sweeps, desc=f"level {level} ({side})", unit=self.unit,
+                            file=sys.stderr, leave=True, dynamic_ncols=True)
+        self.bar.set_postfix({self.symbol: f"{temperature:.4g}"}, refresh=False)
+        if sweep > self.bar.n:
+            self.bar.update(sweep - self.bar.n)
+        else:
+            self.bar.refresh()
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.total = self.bar.n
+            self.bar.refresh()
+            self.bar.close()
+            self.bar = None
+
+
+class RunsProgress:
+    """tqdm over a study's runs on stderr; ``run_study(progress=...)`` calls it as
+    ``progress(row, done, total)`` (``row = None`` once the runs start)."""
+
+    def __init__(self, name: str, enabled: bool):
+        self.name, self.enabled, self.bar = name, enabled, None
+
+    def __call__(self, row: dict | None, done: int, total: int) -> None:
+        if not self.enabled:
+            return
+        if self.bar is None:
+            self.bar = tqdm(total=total, desc=self.name, unit="run", file=sys.stderr,
+                            dynamic_ncols=True)
+        if row is not None:
+            self.bar.update(1)
+            if row["status"] == "failed":
+                self.bar.write(f"run {row['run_id']} failed: {row['error']}", file=sys.stderr)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None

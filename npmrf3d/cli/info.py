@@ -1,0 +1,58 @@
+"""``npmrf3d info``: what this installation has and what the machine offers."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+
+from .. import __version__, data, io
+from .._kernels import _jit
+from ..config import VARIANTS
+from ..exemplar import BUNDLED_PREFIX
+from ..heuristics import HEURISTICS
+from ..methods import METHODS
+from ._common import say
+
+__all__ = ["register", "run"]
+
+
+def register(commands, formatter_class) -> None:
+    """Add the ``info`` sub-command."""
+    parser = commands.add_parser(
+        "info",
+        help="print versions, threads, bundled exemplars, methods, heuristics and variants",
+        description="Print the version, package versions, numba threads, CPU count, bundled "
+                    "exemplars, registered methods, heuristics and decision-rule variants.",
+        formatter_class=formatter_class,
+    )
+    parser.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace, argv: list[str]) -> int:
+    """``npmrf3d info``: versions, threads, exemplars, methods, heuristics and variants."""
+    versions = io.package_versions()
+    say(f"npmrf3d {__version__}")
+    say(f"platform: {versions['platform']}")
+    say(f"CPU count: {os.cpu_count()}")
+    say(f"numba threads: {_jit.thread_count()}")
+    say("packages:")
+    for name, value in versions.items():
+        if name not in ("platform", "cpu_count"):
+            say(f"  {name:<11} {value}")
+    say("bundled exemplars:")
+    for name in data.available():
+        mark = "  (default)" if name == data.DEFAULT_EXEMPLAR else ""
+        say(f"  {BUNDLED_PREFIX}{name}{mark}")
+    say("methods:")
+    for name, method in METHODS.items():
+        say(f"  {name:<6} {method.description}")
+    say("heuristics:")
+    for h in HEURISTICS.values():
+        kind = "objective" if h.objective else "no objective"
+        say(f"  {h.name}  {h.description} ({kind})")
+    say("variants:")
+    for name, rule in VARIANTS.items():
+        fields = ", ".join(f"{k}={v}" for k, v in dataclasses.asdict(rule).items())
+        say(f"  {name:<8} {fields}")
+    return 0

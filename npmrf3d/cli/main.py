@@ -1,0 +1,65 @@
+"""The ``npmrf3d`` parser and entry point.
+
+Every user mistake (bad option values, unreadable exemplars, an output folder that already
+holds a run) is reported as one line ``npmrf3d: error: <message>`` on stderr with exit code 2,
+before any synthesis work starts and without leaving files behind. Argparse usage errors also
+exit with 2 (with argparse's own message); Ctrl-C exits with 130.
+
+Sub-commands are the modules of :data:`COMMANDS`, a static list: each has
+``register(commands, formatter_class)``, which adds its parser and sets ``handler=fn`` with
+``fn(args, argv) -> exit code``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+from .. import __version__
+from ..errors import ParameterError
+from . import baseline, info, metrics, study, synth
+from ._common import PROG, HelpFormatter, error
+
+__all__ = ["COMMANDS", "build_parser", "main"]
+
+#: The sub-command modules, in the order ``--help`` lists them (``study`` adds ``report``).
+COMMANDS = (synth, info, metrics, study, baseline)
+#: Library parameter names that messages should call by their option names.
+OPTION_NAMES = synth.OPTION_NAMES
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``npmrf3d`` argument parser with every sub-command of :data:`COMMANDS`."""
+    parser = argparse.ArgumentParser(
+        prog=PROG,
+        description="3D solid textures from one 2D exemplar with a non-parametric Markov random field.",
+        epilog="Run 'npmrf3d synth --help' for the synthesis options.",
+        formatter_class=HelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for module in COMMANDS:
+        module.register(commands, HelpFormatter)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line; return the exit code (0 ok, 2 user error, 130 interrupted)."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, --version and usage errors (argparse printed them)
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+    try:
+        return args.handler(args, argv)
+    except ParameterError as exc:
+        return error(str(exc), OPTION_NAMES)
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:  # e.g. 'npmrf3d info | head': stop quietly, as other tools do
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 1

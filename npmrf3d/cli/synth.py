@@ -1,0 +1,275 @@
+"""``npmrf3d synth``: make a solid texture with the NP-MRF sampler and write a run folder.
+
+Every option's default is the field default of :class:`npmrf3d.config.SynthesisConfig` (whose
+relaxation fields come from :class:`npmrf3d.relax.IcmOptions` and
+:class:`npmrf3d.relax.AnnealOptions`), and every choice list comes from its registry, so the
+API, the configuration and the command line cannot disagree (``tests/test_defaults.py``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from .. import data
+from ..config import DEFAULT_SIZE, VARIANTS, SynthesisConfig
+from ..exemplar import BUNDLED_PREFIX
+from ..heuristics import DECISIONS, HEURISTICS
+from ..neighborhood import VIEWS
+from ..pyramid import INHERIT, UPSAMPLING
+from ..relax import RELAXATIONS
+from ..relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
+from ..runs import RUN_FILES
+from ..synthesis import METHOD
+from ._common import PROG, choices, default, parse_size, prepare_run, run_method, say, write_result
+
+__all__ = ["register", "run"]
+
+#: Parameters whose library name differs from the option; messages name the option instead.
+OPTION_NAMES = ("max_sweeps", "centre_bandwidth", "histogram_weight", "grey_levels", "t_end")
+_DEFAULT_RULE = VARIANTS["default"]
+
+
+def _d(name: str):
+    return default(SynthesisConfig, name)
+
+
+def _rule_help(text: str, field: str) -> str:
+    value = getattr(_DEFAULT_RULE, field)
+    return f"{text} (default: None = the variant's value; the 'default' variant uses {value})"
+
+
+def register(commands, formatter_class) -> None:
+    """Add the ``synth`` sub-command."""
+    synth = commands.add_parser(
+        "synth",
+        help="synthesise a solid texture from an exemplar and write a run folder",
+        description=(
+            "Synthesise a solid texture whose slices look like the exemplar and write\n"
+            f"{', '.join(RUN_FILES)} into the output folder.\n\n"
+            "examples:\n"
+            "  npmrf3d synth                                  # bundled exemplar, 32^3\n"
+            "  npmrf3d synth wood.png --size 64 --out wood    # your own image\n"
+            "  npmrf3d synth --size 8 --levels 1 --window 3   # a tiny, quick run"
+        ),
+        formatter_class=formatter_class,
+    )
+    default_name = f"{BUNDLED_PREFIX}{data.DEFAULT_EXEMPLAR}"
+    synth.add_argument(
+        "exemplar", nargs="?", default=default_name, metavar="EXEMPLAR",
+        help="2D exemplar image (.png, .jpg, .bmp, .gif, .tif or .npy) used for every constrained "
+             f"view; omitted = the bundled default exemplar, or '{BUNDLED_PREFIX}NAME' for a bundled "
+             f"one ({', '.join(data.available())})",
+    )
+    shape = synth.add_argument_group("volume and pyramid")
+    shape.add_argument(
+        "--size", default=str(DEFAULT_SIZE), metavar="N",
+        help="output size in voxels: N for an N^3 cube or N1,N2,N3; each divisible by 2**(levels-1)",
+    )
+    shape.add_argument(
+        "--window", type=int, default=_d("window"), metavar="W",
+        help="side of each view's square neighbourhood, an odd integer from 3 to 15",
+    )
+    shape.add_argument(
+        "--levels", type=int, default=_d("levels"), metavar="L",
+        help="number of pyramid levels (the paper's scales), an integer from 1 to 8",
+    )
+    shape.add_argument(
+        "--upsample", default=None, metavar=choices(UPSAMPLING),
+        help="how a level initialises the next finer one: 1/8 keeps only the inherited voxel and "
+             "draws the other 7 at random, 8/8 copies the parent into all 8 "
+             "(default: none = the paper's choice, 1/8 for icm and 8/8 for anneal)",
+    )
+    shape.add_argument(
+        "--inherit", default=_d("inherit"), metavar=choices(INHERIT),
+        help="whether voxels inherited from the coarser level may still change (resynth) or stay "
+             "fixed (fixed)",
+    )
+
+    method = synth.add_argument_group("sampler")
+    method.add_argument(
+        "--heuristic", default=_d("heuristic"), metavar=choices(HEURISTICS),
+        help="how the three per-view densities make one voxel value: ML_H1a least probable per-view "
+             "argmax, ML_H1b average of per-view argmaxes, ML_H2a argmax of the minimum, ML_H2b "
+             "argmax of the product",
+    )
+    method.add_argument(
+        "--relaxation", default=_d("relaxation"), metavar=choices(RELAXATIONS),
+        help="relaxation algorithm: icm (iterated conditional modes with per-voxel temperatures; "
+             "options --xi --stop --max-sweeps) or anneal (simulated annealing with one global "
+             "temperature; options --sampler --schedule --t0 --t-end --proposals --proposal; "
+             "needs ML_H2a or ML_H2b)",
+    )
+    method.add_argument(
+        "--xi", type=float, default=_d("xi"), metavar="X",
+        help="icm: cooling step, a negative number (more negative cools faster)",
+    )
+    method.add_argument(
+        "--stop", type=float, default=_d("stop"), metavar="F",
+        help="icm: stop a level once the global temperature fell by this fraction, in (0, 1] "
+             "(1 = down to 0)",
+    )
+    method.add_argument(
+        "--max-sweeps", type=int, default=_d("max_sweeps"), metavar="N",
+        help="icm: hard limit of sweeps per level, a positive integer",
+    )
+    method.add_argument(
+        "--sampler", default=_d("sampler"), metavar=choices(SAMPLERS),
+        help="anneal: heat-bath (this project's addition and the default, chosen by measurement: "
+             "draw the new value from the tempered objective over all labels) or metropolis (the "
+             "paper: one proposal per voxel and sweep, accepted by the Metropolis rule; needs many "
+             "more proposals)",
+    )
+    method.add_argument(
+        "--schedule", default=_d("schedule"), metavar=choices(SCHEDULES),
+        help="anneal: how the global temperature falls from --t0 to --t-end within each level",
+    )
+    method.add_argument(
+        "--t0", type=float, default=_d("t0"), metavar="T",
+        help="anneal: temperature of the first sweep of each level, a positive number",
+    )
+    method.add_argument(
+        "--t-end", type=float, default=_d("t_end"), metavar="T",
+        help="anneal: temperature of the last sweep of each level, in (0, t0] (0 allowed for the "
+             "linear schedule)",
+    )
+    method.add_argument(
+        "--proposals", type=int, default=_d("proposals"), metavar="P",
+        help="anneal: proposals (sweeps) per voxel per level, a positive integer",
+    )
+    method.add_argument(
+        "--proposal", default=_d("proposal"), metavar=choices(PROPOSALS),
+        help="anneal, metropolis: draw candidates from the exemplar's values (the paper) or "
+             "uniformly from the label set",
+    )
+    method.add_argument(
+        "--variant", default=_d("variant"), metavar=choices(sorted(VARIANTS)),
+        help="preset of the decision rule: literal = the paper word for word (collapses to a flat "
+             "volume), default = the variant chosen by measurement (see docs/quality.md)",
+    )
+    method.add_argument(
+        "--bandwidth", type=float, default=None, metavar="B",
+        help=_rule_help("neighbour bandwidth as a factor of h_opt, a positive number", "bandwidth"),
+    )
+    method.add_argument(
+        "--centre-bandwidth", type=float, default=None, metavar="B",
+        help=_rule_help("centre-value bandwidth as a factor of h_opt, a positive number",
+                        "centre_bandwidth"),
+    )
+    method.add_argument(
+        "--adaptive", type=float, default=None, metavar="A",
+        help=_rule_help("if > 0, set the neighbour bandwidth per voxel and view to 2h^2 = A * "
+                        "(best patch distance); 0 = off", "adaptive"),
+    )
+    method.add_argument(
+        "--decision", default=None, metavar=choices(DECISIONS),
+        help=_rule_help("how a voxel picks its label: argmax (the paper's ICM) or sample from "
+                        "exp(score / tau)", "decision"),
+    )
+    method.add_argument(
+        "--tau", type=float, default=None, metavar="T",
+        help=_rule_help("temperature of the sample decision, a positive number", "tau"),
+    )
+    method.add_argument(
+        "--histogram-weight", type=float, default=None, metavar="W",
+        help=_rule_help("weight of the penalty on labels the volume over-uses relative to the "
+                        "exemplar, >= 0 (0 = off)", "histogram_weight"),
+    )
+    method.add_argument(
+        "--outlier", type=float, default=None, metavar="A",
+        help=_rule_help("weight of a uniform term mixed into each view's density before "
+                        "ML_H2a/ML_H2b combine the views, in [0, 1) (0 = off, the paper)", "outlier"),
+    )
+
+    views = synth.add_argument_group("views and exemplars")
+    views.add_argument(
+        "--views", default=",".join(_d("views")), metavar="V[,V...]",
+        help=f"comma-separated constrained views, 1 to 3 distinct names of {', '.join(VIEWS)}",
+    )
+    for view in VIEWS:
+        views.add_argument(
+            f"--exemplar-{view}", default=None, metavar="PATH",
+            help=f"a different exemplar file (or {BUNDLED_PREFIX}NAME) for the {view} view "
+                 f"(default: none = EXEMPLAR)",
+        )
+    views.add_argument(
+        "--grey-levels", type=int, default=None, metavar="K",
+        help="re-quantise every exemplar channel to K evenly spaced levels, 2 to 65536 "
+             "(default: none = keep the exemplar's values)",
+    )
+    views.add_argument(
+        "--palette", type=int, default=None, metavar="K",
+        help="reduce the exemplar to at most K colours by k-means, 2 to 65536 "
+             "(default: none = keep every colour)",
+    )
+    views.add_argument(
+        "--toroidal-exemplar", action="store_true",
+        help="let exemplar patches wrap around the exemplar's borders (for tileable exemplars)",
+    )
+
+    run_group = synth.add_argument_group("run")
+    run_group.add_argument(
+        "--seed", type=int, default=0, metavar="S",
+        help="random seed, a non-negative integer; the result depends on it only",
+    )
+    run_group.add_argument(
+        "--out", default="npmrf3d-out", metavar="DIR",
+        help="output folder for the run files; created if missing",
+    )
+    run_group.add_argument(
+        "--overwrite", action="store_true",
+        help="replace the files of a previous run in --out instead of refusing",
+    )
+    run_group.add_argument(
+        "--quiet", action="store_true",
+        help="print nothing but errors (no progress bars, no summary)",
+    )
+    run_group.add_argument(
+        "--checkpoint", default=None, metavar="PATH",
+        help="a .npz file written after each level; if it exists and matches this run, synthesis "
+             "resumes after its last finished level (default: none = no checkpoint)",
+    )
+
+    synth.set_defaults(handler=run)
+
+
+#: Above this many distinct exemplar values, synth suggests --palette (the label stage scales
+#: with the number of labels; a colour photograph easily has thousands).
+MANY_VALUES = 1024
+
+
+def _note_many_values(per_view: dict) -> None:
+    arrays = {id(a): a for a in per_view.values()}.values()
+    values = np.unique(np.concatenate([a.reshape(-1, a.shape[2]) for a in arrays]), axis=0)
+    if len(values) > MANY_VALUES:
+        say(f"{PROG}: note: the exemplar has {len(values)} distinct values, each a label; run "
+              f"time grows with the label count: --palette 64 (colour) or --grey-levels 64 "
+              f"is usually as good and much faster", error=True)
+
+
+def run(args: argparse.Namespace, argv: list[str]) -> int:
+    """``npmrf3d synth``: validate everything, then run the ``npmrf`` method and write the folder."""
+    t_start = time.perf_counter()
+    config = METHOD.make_config(
+        size=parse_size(args.size), window=args.window, levels=args.levels,
+        heuristic=args.heuristic, relaxation=args.relaxation, views=args.views,
+        upsample=args.upsample, inherit=args.inherit, xi=args.xi, stop=args.stop,
+        max_sweeps=args.max_sweeps, sampler=args.sampler, schedule=args.schedule, t0=args.t0,
+        t_end=args.t_end, proposals=args.proposals, proposal=args.proposal, variant=args.variant, bandwidth=args.bandwidth,
+        centre_bandwidth=args.centre_bandwidth, adaptive=args.adaptive, decision=args.decision,
+        tau=args.tau, histogram_weight=args.histogram_weight, outlier=args.outlier,
+        grey_levels=args.grey_levels,
+        palette=args.palette, toroidal_exemplar=args.toroidal_exemplar, seed=args.seed,
+    )
+    out, checkpoint, per_view, sources = prepare_run(args, METHOD, config)
+    if not args.quiet and config.palette is None and config.grey_levels is None:
+        _note_many_values(per_view)
+    result = run_method(args, METHOD, config, per_view, checkpoint=checkpoint, t_start=t_start)
+
+    title = (f"npmrf3d {config.heuristic}, variant {config.variant}, window {config.window}, "
+             f"{config.levels} levels, seed {config.seed}")
+    write_result(out, args, argv, "synth", result, per_view, sources, title,
+                 method=METHOD.name, labels=int(len(result.labels)))
+    return 0

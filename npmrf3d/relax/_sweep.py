@@ -1,0 +1,68 @@
+"""The sweep body that ICM and annealing share: visit the colour classes in a random order.
+
+For each class (in an order drawn from the run's Generator): draw what the class needs from the
+Generator (before any parallel loop, so the volume does not depend on the thread count), work
+out the histogram penalty from the current label counts, update the class with the serial or
+the parallel kernel (by class size), then count the visited and changed voxels and keep the
+label counts up to date.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from .._kernels.relax import PARALLEL_MIN_SITES
+
+__all__ = ["histogram_penalty", "label_counts", "sweep"]
+
+#: ``update(sites, drawn, penalty, parallel, old, new)``: update one class in place; ``old`` and
+#: ``new`` receive each site's label before and after (``old = -2``: site not visited).
+ClassUpdate = Callable[[np.ndarray, tuple, np.ndarray, bool, np.ndarray, np.ndarray], None]
+
+
+def histogram_penalty(counts: np.ndarray, exemplar_freq: np.ndarray, weight: float) -> np.ndarray:
+    """``-weight * max(0, log(q_k / e_k))`` with pseudo-counts, ``q`` the volume's label share.
+
+    Labels the volume over-uses relative to the exemplar are penalised; others are untouched.
+    """
+    if weight == 0.0:
+        return np.zeros(len(exemplar_freq))
+    total = max(int(counts.sum()), 1)
+    delta = 1.0 / total
+    ratio = (counts / total + delta) / (exemplar_freq + delta)
+    return -weight * np.maximum(0.0, np.log(ratio))
+
+
+def label_counts(labels_volume: np.ndarray, n_labels: int) -> np.ndarray:
+    """int64 count of every label in the volume (voxels without a label, -1, are left out)."""
+    return np.bincount(labels_volume[labels_volume >= 0].ravel(), minlength=n_labels).astype(np.int64)
+
+
+def sweep(classes: list[np.ndarray], rng: np.random.Generator, *, draw: Callable[[np.ndarray], tuple],
+          update: ClassUpdate, counts: np.ndarray, exemplar_freq: np.ndarray,
+          histogram_weight: float) -> tuple[int, int]:
+    """One sweep over every class; returns (visited voxels, voxels whose label changed).
+
+    ``counts`` (label counts of the volume) is updated in place when ``histogram_weight`` is
+    not 0 (without the penalty nobody reads it).
+    """
+    penalty = np.zeros(len(exemplar_freq))
+    visited_total = changed_total = 0
+    for c in rng.permutation(len(classes)):
+        sites = classes[c]
+        drawn = draw(sites)
+        if histogram_weight:  # counts change with every class; without the term it stays 0
+            penalty = histogram_penalty(counts, exemplar_freq, histogram_weight)
+        old = np.empty(len(sites), dtype=np.int64)
+        new = np.empty(len(sites), dtype=np.int64)
+        update(sites, drawn, penalty, len(sites) >= PARALLEL_MIN_SITES, old, new)
+        visited = old != -2
+        moved = visited & (old != new)
+        visited_total += int(visited.sum())
+        changed_total += int(moved.sum())
+        if histogram_weight and moved.any():
+            counts -= np.bincount(old[moved & (old >= 0)], minlength=len(counts))
+            counts += np.bincount(new[moved & (new >= 0)], minlength=len(counts))
+    return visited_total, changed_total

@@ -1,0 +1,125 @@
+"""The numbers of a study: ``results.csv`` rows, finished-run detection, CSV files.
+
+Used by the runner (which writes the rows), the figures (which write the numbers behind each
+picture) and the report (which reads ``results.csv`` back), so none of those imports another.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import pathlib
+from collections.abc import Sequence
+from typing import Any
+
+from npmrf3d._files import atomic_write
+
+from .grid import RunSpec
+
+__all__ = ["BASE_COLUMNS", "FINISHED_FILES", "as_float", "is_finished", "metric_columns", "unique", "load_row", "make_row", "read_results",
+           "write_csv"]
+
+#: The files that mark a finished run.
+FINISHED_FILES = ("run.json", "metrics.json")
+#: Leading columns of results.csv; metric columns follow, ``error`` comes last.
+BASE_COLUMNS = ("study", "run_id", "exemplar", "method", "algorithm", "seed", "size", "levels",
+                "status", "seconds", "wall_seconds", "threads", "largest_value_share")
+
+
+def is_finished(run_dir: pathlib.Path) -> bool:
+    """True when ``run_dir`` holds a complete run (``run.json`` and ``metrics.json``)."""
+    return all((pathlib.Path(run_dir) / name).is_file() for name in FINISHED_FILES)
+
+
+def make_row(spec: RunSpec, status: str, record: dict | None, measured: dict | None, *,
+             error: str = "") -> dict:
+    """The ``results.csv`` row of a run (metric columns ``mean_<metric>``, ``<view>_<metric>``)."""
+    record = record or {}
+    timings = record.get("timings") or {}
+    row: dict[str, Any] = {
+        "study": spec.study, "run_id": spec.run_id, "exemplar": spec.exemplar,
+        "method": spec.method, "algorithm": spec.algorithm, "seed": spec.seed,
+        "size": spec.size, "levels": spec.levels, "status": status,
+        "seconds": timings.get("total", math.nan), "wall_seconds": record.get("wall_seconds", math.nan),
+        "threads": record.get("threads", ""),
+        "largest_value_share": (measured or {}).get("largest_value_share", math.nan),
+    }
+    if measured:
+        scores = measured.get("metrics") or {}
+        for name, value in (scores.get("mean") or {}).items():
+            row[f"mean_{name}"] = value
+        for view, values in (scores.get("per_view") or {}).items():
+            for name, value in values.items():
+                row[f"{view}_{name}"] = value
+        truth = measured.get("groundtruth")
+        if truth:
+            for axis, value in truth["two_point_l2"].items():
+                row[f"two_point_l2_{axis}"] = value
+            row["two_point_l2"] = truth["two_point_l2_mean"]
+            row["fraction_l1"] = truth["fraction_l1"]
+    row["error"] = error
+    return row
+
+
+def load_row(spec: RunSpec, run_dir: pathlib.Path) -> dict:
+    record = json.loads((run_dir / "run.json").read_text(encoding="utf-8"))
+    measured = json.loads((run_dir / "metrics.json").read_text(encoding="utf-8"))
+    return make_row(spec, "skipped", record, measured)
+
+
+def write_csv(path: pathlib.Path, rows: list[dict], head: Sequence[str] = ()) -> pathlib.Path:
+    columns = list(head)
+    for row in rows:
+        columns += [k for k in row if k not in columns and k != "error"]
+    if any("error" in row for row in rows):
+        columns.append("error")
+
+    def write(tmp):
+        with open(tmp, "w", newline="", encoding="utf-8") as handle:
+            writer = csv.DictWriter(handle, fieldnames=columns, restval="")
+            writer.writeheader()
+            for row in rows:
+                writer.writerow({k: _csv_value(v) for k, v in row.items()})
+
+    return atomic_write(path, write)
+
+
+def _csv_value(value):
+    if isinstance(value, float):
+        return "" if math.isnan(value) else repr(value)
+    return value
+
+
+def read_results(path) -> list[dict]:
+    """Rows of a ``results.csv`` (numbers stay strings)."""
+    with open(path, newline="", encoding="utf-8") as handle:
+        return list(csv.DictReader(handle))
+
+
+def as_float(value) -> float:
+    """``float(value)``, NaN for an empty or non-numeric CSV cell."""
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def metric_columns(rows: list[dict]) -> list[str]:
+    """The metric columns of ``results.csv`` rows: every ``mean_*``, then the ground-truth ones."""
+    names = []
+    for row in rows:
+        for key in row:
+            if key.startswith("mean_") and key not in names:
+                names.append(key)
+    extra = [k for k in ("two_point_l2", "fraction_l1") if any(k in r for r in rows)]
+    return names + extra
+
+
+def unique(values) -> list:
+    """The distinct values in first-seen order."""
+    out = []
+    for v in values:
+        if v not in out:
+            out.append(v)
+    return out

@@ -1,0 +1,132 @@
+"""The layering that README's "Architecture" section describes, checked on the source.
+
+* no import cycles among the package's modules (module-level and function-level imports);
+* the package's own modules are imported at module top, never inside a function;
+* only ``npmrf3d/_kernels/`` imports numba;
+* every library module stays under ~400 lines or says at its top why not.
+"""
+
+from __future__ import annotations
+
+import ast
+import pathlib
+
+import npmrf3d
+
+PACKAGE = pathlib.Path(npmrf3d.__file__).parent
+
+
+def _modules() -> dict[str, pathlib.Path]:
+    out = {}
+    for f in PACKAGE.rglob("*.py"):
+        parts = list(f.relative_to(PACKAGE.parent).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join(parts)] = f
+    return out
+
+
+def _imports(name: str, path: pathlib.Path, modules) -> list[tuple[str, ast.AST]]:
+    """(imported package module, node) for every import of the package's own modules."""
+    base = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            mod = node.module or ""
+            if node.level:
+                b = base
+                for _ in range(node.level - 1):
+                    b = b.rpartition(".")[0]
+                mod = b + ("." + mod if mod else "")
+            subs = [f"{mod}.{a.name}" for a in node.names]
+            targets = [t for t in subs if t in modules] or [mod]
+        else:
+            continue
+        for t in targets:
+            while t and t not in modules:
+                t = t.rpartition(".")[0]
+            if t and t != name:
+                found.append((t, node))
+    return found
+
+
+def _graph():
+    modules = _modules()
+    return {m: {t for t, _ in _imports(m, p, modules)} for m, p in modules.items()}
+
+
+def _cycles(graph) -> list[list[str]]:
+    index, low, stack, on, out, counter = {}, {}, [], set(), [], [0]
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                out.append(sorted(component))
+
+    for v in graph:
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_no_import_cycles():
+    assert _cycles(_graph()) == []
+
+
+def test_own_modules_are_imported_at_module_top():
+    modules = _modules()
+    inside = []
+    for name, path in modules.items():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        in_functions = {n.lineno for fn in ast.walk(tree)
+                        if isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef))
+                        for n in ast.walk(fn) if isinstance(n, (ast.Import, ast.ImportFrom))}
+        for _, node in _imports(name, path, modules):
+            if node.lineno in in_functions:
+                inside.append(f"{path.relative_to(PACKAGE.parent)}:{node.lineno}")
+    assert inside == []
+
+
+def test_only_the_kernels_import_numba():
+    users = sorted(str(f.relative_to(PACKAGE)) for f in PACKAGE.rglob("*.py")
+                   if "import numba" in f.read_text(encoding="utf-8")
+                   or "from numba" in f.read_text(encoding="utf-8"))
+    assert users and all(u.startswith("_kernels/") for u in users)
+
+
+def test_long_modules_say_why():
+    long = []
+    for f in PACKAGE.rglob("*.py"):
+        text = f.read_text(encoding="utf-8")
+        if text.count("\n") > 420:
+            head = text[:1500].lower()
+            if "why" not in head and "over 400" not in head and "400 lines" not in head:
+                long.append(str(f.relative_to(PACKAGE)))
+    assert long == []
+
+
+def test_the_registry_is_what_the_studies_and_the_cli_offer():
+    from npmrf3d.cli.info import run  # noqa: F401 (the info command lists METHODS)
+    from npmrf3d.methods import METHODS
+    from npmrf3d.studies.grid import ALGORITHMS, STUDY_ONLY
+
+    assert ALGORITHMS == (*METHODS, *STUDY_ONLY)

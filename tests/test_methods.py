@@ -1,0 +1,61 @@
+"""What every registered method must do, run through the registry (:data:`npmrf3d.methods.METHODS`).
+
+A new method adds one entry to :data:`CASES` (small, fast options for it) and gets these tests:
+the common signature gives the public function's volume, a seed fixes the volume, and a run
+interrupted after its first level resumes from its checkpoint to the uninterrupted volume.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from npmrf3d.errors import ParameterError
+from npmrf3d.exemplar import resolve_exemplars
+from npmrf3d.methods import METHODS
+
+#: id -> (method name, keyword arguments of its public function): tiny runs of two levels.
+CASES = {
+    "npmrf-icm": ("npmrf", dict(size=16, window=5, levels=2)),
+    "npmrf-anneal": ("npmrf", dict(size=16, window=5, levels=2, relaxation="anneal", proposals=2)),
+    "kopf": ("kopf", dict(size=16, window=4, levels=2, iterations=2)),
+}
+
+
+def test_every_registered_method_has_a_case():
+    assert {name for name, _ in CASES.values()} == set(METHODS)
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_common_signature_equals_the_public_function(case, tiny_grey):
+    name, kwargs = CASES[case]
+    method = METHODS[name]
+    public = method.synthesize(tiny_grey, rng=3, **kwargs)
+    config = method.make_config(**kwargs, seed=3)
+    per_view = resolve_exemplars(tiny_grey, None, config.views, **method.fit(config))
+    common = method.run(per_view, config, np.random.default_rng(3))
+    np.testing.assert_array_equal(public.volume, common.volume)
+    assert common.config == public.config
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_resume_from_checkpoint_gives_the_uninterrupted_result(case, tmp_path, tiny_grey):
+    name, kwargs = CASES[case]
+    synthesize = METHODS[name].synthesize
+    path = tmp_path / "run.npz"
+    full = synthesize(tiny_grey, rng=5, **kwargs).volume
+
+    class Stop(Exception):
+        pass
+
+    def interrupt(level, step, steps, value):
+        if level == 0 and step == 1:
+            raise Stop
+
+    with pytest.raises(Stop):
+        synthesize(tiny_grey, rng=5, progress=interrupt, checkpoint=path, **kwargs)
+    assert path.exists()
+    resumed = synthesize(tiny_grey, rng=5, checkpoint=path, **kwargs)
+    np.testing.assert_array_equal(full, resumed.volume)
+    with pytest.raises(ParameterError, match="different configuration"):
+        synthesize(tiny_grey, rng=5, checkpoint=path, **{**kwargs, "window": 3})

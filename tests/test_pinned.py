@@ -1,0 +1,72 @@
+"""Pinned volumes: small runs of every method must stay bit-identical across refactoring.
+
+These hashes are *not* expected results in the scientific sense (nothing here says the volumes
+are good); they were computed once from the code as it stood before the architecture refactor
+of issue 10 (commit 501c217) and pin its behaviour, so that moving the level loop, the
+relaxations, the up-sampling and the method registry around cannot silently change any volume
+for a given seed and configuration. A deliberate change of an algorithm's output updates the
+hash in the same commit and says why in the message.
+
+The hashes are sha256 of the volume's float32 bytes (C order). They hold on one platform and
+numba/numpy version; a different CPU's libm could change the last bit of an ``exp``, in which
+case re-pin on that machine from the commit named above.
+"""
+
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+import pytest
+
+import npmrf3d
+from npmrf3d import data
+from tests.conftest import checkerboard as checker
+
+
+def _ihc():
+    return data.path("ihc64")
+
+
+PINNED = {
+    "npmrf_icm_default": (
+        lambda: npmrf3d.synthesize(checker(), size=16, window=5, levels=2, rng=7),
+        "d8188583ec25a2002eefc7b6788956cca79a1e5f2bc00d77cfafbe63f7876807"),
+    "npmrf_icm_literal": (
+        lambda: npmrf3d.synthesize(checker(), size=16, window=5, levels=2, variant="literal", rng=7),
+        "133d6b8c5539b2af7e2a5ce4b136d4504587e5ff6a9593dbd5154d452e95fbd3"),
+    "npmrf_icm_8of8_fixed": (
+        lambda: npmrf3d.synthesize(checker(), size=16, window=3, levels=2, upsample="8/8",
+                                   inherit="fixed", views="front,right", rng=5),
+        "95fb8f536f248435bf22829e9a7d5645c7fd1571e81cc6f523d6c8063351dd6e"),
+    "npmrf_anneal_heatbath": (
+        lambda: npmrf3d.synthesize(_ihc(), size=8, window=3, levels=2, relaxation="anneal",
+                                   palette=8, proposals=2, rng=7),
+        "2c7246a546b49389d73f481e20477dab577cdbe55f20d308a886e532842a0934"),
+    "npmrf_anneal_metropolis": (
+        lambda: npmrf3d.synthesize(_ihc(), size=8, window=3, levels=2, relaxation="anneal",
+                                   sampler="metropolis", palette=8, proposals=2, rng=7),
+        "e1004b2c16282c4594730026e7c923b506d69e0645c8c6b024449f0779e55d0b"),
+    "kopf_trilinear": (
+        lambda: npmrf3d.kopf_synthesize(_ihc(), size=16, window=4, levels=2, iterations=2, rng=7),
+        "e005262b17adbd0a68876264095345f327d57163dc5a1d08c0fa930e62881ce7"),
+    "kopf_8of8_plain": (
+        lambda: npmrf3d.kopf_synthesize(checker(), size=16, window=4, levels=2, iterations=(1, 2),
+                                        upsample="8/8", mean_shift=None, rng=3),
+        "2e9a1b64847bc1b2530c8fc4fb599c36e8d970a834f9fd5e3daf79e64f471070"),
+    "kopf_1of8": (
+        lambda: npmrf3d.kopf_synthesize(checker(), size=8, window=4, levels=2, iterations=1,
+                                        upsample="1/8", views="front,top", rng=3),
+        "4dc32e57b84bd363472d19c27b3792113f8b29f5230079ca5669747e7f93f7f4"),
+}
+
+
+def volume_hash(volume: np.ndarray) -> str:
+    """sha256 of the float32 bytes of ``volume`` in C order."""
+    return hashlib.sha256(np.ascontiguousarray(volume, dtype=np.float32).tobytes()).hexdigest()
+
+
+@pytest.mark.parametrize("name", sorted(PINNED))
+def test_pinned_volume_is_bit_identical(name):
+    make, expected = PINNED[name]
+    assert volume_hash(make().volume) == expected
