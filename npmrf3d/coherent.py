@@ -30,10 +30,11 @@ import numpy as np
 
 from . import _validation as check
 from .baselines import chen_wang
-from .config import SynthesisResult
+from .config import SynthesisMethod, SynthesisResult
+from .exemplar import resolve_exemplars
 from .neighborhood import VIEWS
 
-__all__ = ["CoherentConfig", "HEURISTIC_CODES", "coherent_synthesize", "make_coherent_config", "run"]
+__all__ = ["METHOD", "CoherentConfig", "HEURISTIC_CODES", "coherent_synthesize", "make_coherent_config", "run"]
 
 #: Heuristics that have an objective to rank candidates by (kernel codes of the solver).
 HEURISTIC_CODES = {"ML_H2b": 1, "ML_H2a": 2}
@@ -121,14 +122,24 @@ def coherent_synthesize(exemplar=None, *, exemplars: Mapping | None = None, rng=
     >>> res.volume.shape, sorted(np.unique(res.volume).tolist())
     ((8, 8, 8, 1), [0.0, 1.0])
     """
-    from .synthesis import resolve_exemplars  # noqa: the registry merge moves this to exemplar.py
-
     t_start = time.perf_counter()
     seed = rng if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) else None
     config = make_coherent_config(seed=seed, **options)
     generator = check.rng(rng)
-    import types
-    fit = types.SimpleNamespace(window=config.window[0], levels=config.levels, toroidal_exemplar=False)
-    per_view = resolve_exemplars(exemplar, exemplars, config.views, fit)
-    chen_wang._check_exemplar_levels(_chen_wang_config(config), per_view)
-    return run(config, per_view, generator, progress=progress, checkpoint=checkpoint, t_start=t_start)
+    per_view = resolve_exemplars(exemplar, exemplars, config.views, **chen_wang._fit(config))
+    return coherent_method(per_view, config, generator, progress=progress, checkpoint=checkpoint,
+                           t_start=t_start)
+
+
+def coherent_method(per_view_exemplars, config: CoherentConfig, rng: np.random.Generator, *,
+                    progress=None, checkpoint=None, t_start=None) -> SynthesisResult:
+    """The registered form of :func:`run` (exemplars first, as every method of the registry)."""
+    chen_wang._check_exemplar_levels(_chen_wang_config(config), per_view_exemplars)
+    return run(config, per_view_exemplars, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
+
+
+METHOD = SynthesisMethod(
+    name="coherent", run=coherent_method, make_config=make_coherent_config,
+    config_class=CoherentConfig, synthesize=coherent_synthesize, fit=chen_wang._fit,
+    description="the coherent NP-MRF sampler: NP-MRF likelihood over coherent candidates (issue 12)",
+)

@@ -16,8 +16,8 @@ methods (they make no volume from an exemplar); they stay in :mod:`npmrf3d.studi
 from __future__ import annotations
 
 from . import _validation as check
-from . import synthesis
-from .baselines import kopf
+from . import coherent, synthesis
+from .baselines import chen_wang, kopf
 from .config import SynthesisMethod
 
 __all__ = ["ALIASES", "METHODS", "get_method"]
@@ -26,12 +26,15 @@ __all__ = ["ALIASES", "METHODS", "get_method"]
 METHODS: dict[str, SynthesisMethod] = {
     m.name: m for m in (
         synthesis.METHOD,
+        coherent.METHOD,
         kopf.METHOD,
+        chen_wang.METHOD,
     )
 }
 
 #: Other spellings accepted for a registered name.
-ALIASES: dict[str, str] = {"np-mrf": "npmrf", "np_k": "kopf", "npk": "kopf"}
+ALIASES: dict[str, str] = {"np-mrf": "npmrf", "np_k": "kopf", "npk": "kopf", "chen_wang": "chen-wang",
+                           "cw": "chen-wang", "npmrf-coherent": "coherent"}
 
 
 def get_method(name: str) -> SynthesisMethod:

@@ -19,6 +19,8 @@ CASES = {
     "npmrf-icm": ("npmrf", dict(size=16, window=5, levels=2)),
     "npmrf-anneal": ("npmrf", dict(size=16, window=5, levels=2, relaxation="anneal", proposals=2)),
     "kopf": ("kopf", dict(size=16, window=4, levels=2, iterations=2)),
+    "chen-wang": ("chen-wang", dict(size=16, window=(4, 4), levels=2, iterations=(2, 2))),
+    "coherent": ("coherent", dict(size=16, window=(4, 4), levels=2, iterations=(2, 2))),
 }
 
 

@@ -49,7 +49,6 @@ from __future__ import annotations
 import json
 import math
 import time
-import types
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -60,7 +59,8 @@ from .. import _validation as check
 from .. import coherence as coh
 from .._kernels import _jit
 from .._kernels import coherence as _k
-from ..config import SynthesisResult
+from ..config import SynthesisMethod, SynthesisResult
+from ..exemplar import resolve_exemplars
 from ..neighborhood import VIEW_AXES, VIEWS
 from ..pyramid import level_shape
 
@@ -280,8 +280,6 @@ def chen_wang_synthesize(
     >>> res.volume.shape, sorted(np.unique(res.volume).tolist())
     ((8, 8, 8, 1), [0.0, 1.0])
     """
-    from ..synthesis import resolve_exemplars
-
     t_start = time.perf_counter()
     seed = rng if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) else None
     config = make_chen_wang_config(
@@ -291,8 +289,7 @@ def chen_wang_synthesize(
         coherence_exclude=coherence_exclude, random_candidates=random_candidates, batches=batches,
         solver=solver, balance_views=balance_views, seed=seed)
     generator = check.rng(rng)
-    fit = types.SimpleNamespace(window=config.window[0], levels=config.levels, toroidal_exemplar=False)
-    per_view = resolve_exemplars(exemplar, exemplars, config.views, fit)
+    per_view = resolve_exemplars(exemplar, exemplars, config.views, **_fit(config))
     _check_exemplar_levels(config, per_view)
     return run(config, per_view, generator, progress=progress, checkpoint=checkpoint, t_start=t_start)
 
@@ -500,3 +497,23 @@ def _load_checkpoint(path, key):
             json.loads(str(data["rng_state"])), json.loads(str(data["history"])),
             json.loads(str(data["timings"])), json.loads(str(data["stats"])),
             [int(w) for w in np.atleast_1d(data["widths"])])
+
+
+def _fit(config) -> dict:
+    """What every exemplar must fit: the coarsest window, the level count (then
+    :func:`_check_exemplar_levels` checks each level's window)."""
+    return {"window": max(config.window), "levels": config.levels, "toroidal": False}
+
+
+def chen_wang_method(per_view_exemplars, config: ChenWangConfig, rng: np.random.Generator, *,
+                     progress=None, checkpoint=None, t_start=None) -> SynthesisResult:
+    """The registered form of :func:`run` (exemplars first, as every method of the registry)."""
+    _check_exemplar_levels(config, per_view_exemplars)
+    return run(config, per_view_exemplars, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
+
+
+METHOD = SynthesisMethod(
+    name="chen-wang", run=chen_wang_method, make_config=make_chen_wang_config,
+    config_class=ChenWangConfig, synthesize=chen_wang_synthesize, fit=_fit,
+    description="Chen & Wang 2010: k-coherence search, discrete solver, position and index histograms",
+)
