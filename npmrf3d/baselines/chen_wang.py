@@ -16,7 +16,10 @@ and an optimisation phase; three things differ:
   ``H_i`` counting the sites matched with each exemplar centre, ``phi`` its even share.
 * **discrete solver** (section 4.2): every voxel *copies* one exemplar texel, colour and source:
   among the texels voted by all overlapping neighbourhoods of all views (a neighbourhood at ``u``
-  matched with centre ``e`` votes for ``e + (x - u)``), the one nearest to their weighted mean.
+  matched with centre ``e`` votes for ``e + (x - u)``), the one nearest to their weighted mean
+  (``solver="mean"``, the paper's practice) or, by default, a weighted medoid of the votes
+  (``solver="medoid"``: the paper's practice is mean-seeking and drifts to mid values, measured
+  in ``docs/chen_wang.md``).
   Votes carry the IRLS weight ``||s - e||^(r - 2)`` divided by the **position-histogram** factor
   ``1 + position_weight * max(0, H_p(texel) / theta - 1)`` (eq. 4), ``H_p`` counting the voxels
   that copy each exemplar pixel. The volume's colours are therefore exemplar colours.
@@ -42,6 +45,10 @@ Choices where the paper is silent (also in ``docs/chen_wang.md``)
   write only their own site or voxel and results do not depend on the thread count.
 * IRLS distances are the PCA-space distances of the match, floored at
   ``1e-3 * sigma * sqrt(d)``.
+* This project's additions (defaults chosen by measurement, 0 = the paper): ``position_boost``
+  (votes for under-used pixels weigh more) and ``random_candidates`` (hashed random valid
+  centres join each candidate set, so the index histogram can reach parts of the exemplar the
+  coherent candidates never propose -- sparse bright spots).
 """
 
 from __future__ import annotations
