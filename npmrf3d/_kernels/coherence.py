@@ -1,5 +1,8 @@
 """Compiled loops of the k-coherence machinery (Chen & Wang 2010; issue 11).
 
+Why one module of ~450 lines: the search and the solver share the vote and candidate helpers,
+and numba compiles a module's kernels together; splitting them would duplicate the helpers.
+
 Private: called by :mod:`npmrf3d.coherence` and :mod:`npmrf3d.baselines.chen_wang` with
 validated arrays only; nothing here raises a user-facing error. Three kernels:
 

@@ -1,5 +1,8 @@
 """Chen & Wang 2010: k-coherence search, discrete solver, position and index histograms.
 
+Why one module of ~500 lines: the configuration, its validation, the level loop and the
+checkpoint of one method, most of it the documented public signature.
+
 "High quality solid texture synthesis using position and index histogram matching" (The Visual
 Computer 26(4), 2010; issue 11). Like NP_K (:mod:`npmrf3d.baselines.kopf`) the volume minimises
 
@@ -64,6 +67,7 @@ import numpy as np
 
 from .. import _validation as check
 from .. import coherence as coh
+from .._files import load_checkpoint, save_checkpoint
 from .._kernels import _jit
 from .._kernels import coherence as _k
 from ..config import SynthesisMethod, SynthesisResult
@@ -481,8 +485,6 @@ def _config_key(config: ChenWangConfig, per_view) -> str:
 
 
 def _save_checkpoint(path, key, volume, src, level, rng, history, timings, stats, widths) -> None:
-    from ..io import save_checkpoint
-
     save_checkpoint(path, config=key, volume=volume, sources=src, level=level,
                     widths=np.asarray(widths, dtype=np.int64),
                     rng_state=json.dumps(rng.bit_generator.state), history=json.dumps(history),
@@ -493,8 +495,6 @@ def _load_checkpoint(path, key):
     """State after the last finished level, or None when there is nothing to resume."""
     if path is None or not Path(path).exists():
         return None
-    from ..io import load_checkpoint
-
     data = load_checkpoint(path)
     if str(data.get("config")) != key or "sources" not in data:
         check.fail(f"checkpoint '{path}' was written by a different configuration or exemplar; "
