@@ -226,6 +226,8 @@ def paper_main(argv: list[str]) -> int:
                         help=f"smoke run: 32^3 and the exemplars {', '.join(q.QUICK)}")
     parser.add_argument("--jobs", type=int, default=1, help="runs in parallel processes")
     parser.add_argument("--recompute", action="store_true", help="ignore the cached runs")
+    parser.add_argument("--remeasure", action="store_true",
+                        help="recompute the measures of the cached runs from their saved volumes")
     parser.add_argument("--no-figures", action="store_true")
     parser.add_argument("--out", default="figures/quality_paper")
     parser.add_argument("--cache-dir", default=str(Path.home() / ".cache/npmrf3d/quality_paper"))
@@ -275,6 +277,11 @@ def paper_main(argv: list[str]) -> int:
         print(line, flush=True)
         q.save_json(path, results)
 
+    if args.remeasure and not args.recompute:
+        keys = [q.run_key(m, n, s, size, q._effective_palette(m, q.BY_NAME[n].crops()[0],
+                                                               args.palette))
+                for m in methods for n in names for s in seeds]
+        q.remeasure(results, cache, [k for k in keys if k in results["runs"]], size, echo=echo)
     q.run_all(methods, names, seeds, size, args.levels, args.palette, results, cache,
               jobs=args.jobs, recompute=args.recompute, echo=echo)
     summary = q.summarise(results, methods, names, seeds, size, args.palette)
