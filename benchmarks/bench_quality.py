@@ -36,7 +36,8 @@ It needs ``apt-get install -y extremetuxracer-data`` for its held-out photograph
 (method, exemplar, seed, size) in ``figures/quality_paper/results.json`` (volumes in
 ``~/.cache/npmrf3d/quality_paper``): a re-run only computes the missing cells
 (``--recompute`` for all). Pictures: ``figures/quality_paper/<method>/<exemplar>.png`` and a
-contact sheet per method, ``figures/quality_paper/sheet_<method>.png``.
+contact sheet per method, ``figures/quality_paper/sheet_<method>.png``, and the methods side
+by side, ``figures/quality_paper/sheet_compare.png``.
 """
 
 from __future__ import annotations
@@ -178,31 +179,71 @@ def _draw_run(q, out: Path, method: str, name: str, volume: np.ndarray, run: dic
     save_figure(fig, out / method / f"{name}.png")
 
 
-def _contact_sheet(q, out: Path, method: str, items: list) -> None:
-    """Rows: exemplars; columns: crop A (exemplar), crop B (floor), front, right, top slices."""
-    from matplotlib.figure import Figure
+def _panel(ax, image, vmin, vmax, title) -> None:
     from npmrf3d.plotting import to_display
 
-    fig = Figure(figsize=(10, 2.1 * len(items)), layout="constrained")
-    axes = np.atleast_2d(fig.subplots(len(items), 5))
-    heads = ("exemplar (crop A)", "a crop B (floor)", "front k=mid", "right i=mid", "top j=mid")
-    for row, (name, volume, run) in zip(axes, items):
+    ax.imshow(to_display(image, vmin=vmin, vmax=vmax), cmap="gray", vmin=vmin, vmax=vmax,
+              interpolation="nearest")
+    ax.set_xticks([])
+    ax.set_yticks([])
+    ax.set_title(title, fontsize=8)
+
+
+def _contact_sheet(q, out: Path, method: str, items: list) -> None:
+    """Two exemplars a row, each: crop A (exemplar), a crop B (floor), front, right, top."""
+    from matplotlib.figure import Figure
+
+    rows = -(-len(items) // 2)
+    fig = Figure(figsize=(20, 2.2 * rows), layout="constrained")
+    axes = np.atleast_2d(fig.subplots(rows, 10))
+    for ax in axes.flat:
+        ax.set_axis_off()
+    for index, (name, volume, run) in enumerate(items):
         a, b = q.BY_NAME[name].crops()
         n = volume.shape[0]
         vmin, vmax = float(a.min()), float(a.max())
-        for ax, image, head in zip(row, (a, b[0], volume[:, :, n // 2], volume[n // 2],
-                                         volume[:, n // 2]), heads):
-            data = to_display(image, vmin=vmin, vmax=vmax)
-            ax.imshow(data, cmap="gray", vmin=vmin, vmax=vmax, interpolation="nearest")
-            ax.set_xticks([])
-            ax.set_yticks([])
-            ax.set_title(head, fontsize=8)
-        row[0].set_ylabel(f"{name}{' (held out)' if q.BY_NAME[name].held_out else ''}",
-                          fontsize=8)
-        row[2].set_title(f"front; ac {run['ratio']['ac']:.2f}, hkl {run['raw']['hist_kl']:.2f}",
-                         fontsize=8)
-    fig.suptitle(f"{method}: {n}^3, seed {items[0][2]['seed']}")
+        r = run["ratio"]
+        row = axes[index // 2, 5 * (index % 2): 5 * (index % 2) + 5]
+        held = " (held out)" if q.BY_NAME[name].held_out else ""
+        panels = ((a, f"{name}{held}"), (b[0], "a crop B (floor)"),
+                  (volume[:, :, n // 2], f"front; ac {r['ac']:.2f} sw {r['sw']:.2f}"),
+                  (volume[n // 2], f"right; hkl {run['raw']['hist_kl']:.2f}"),
+                  (volume[:, n // 2], f"top; okl {r['orient_kl']:.2f}"))
+        for ax, (image, title) in zip(row, panels):
+            ax.set_axis_on()
+            _panel(ax, image, vmin, vmax, title)
+    fig.suptitle(f"{method}: {n}^3 from 64 x 64 crops, seed {items[0][2]['seed']} "
+                 f"(ac, sw, okl: ratio to the structureless control; hkl: histogram KL)")
     save_figure(fig, out / f"sheet_{method}.png")
+
+
+def _compare_sheet(q, out: Path, by_method: dict) -> None:
+    """Rows: exemplars; columns: crop A, then each method's front and top centre slices."""
+    from matplotlib.figure import Figure
+
+    names = [n for n in q.BY_NAME if any(n in items for items in by_method.values())]
+    methods = list(by_method)
+    fig = Figure(figsize=(2 * (1 + 2 * len(methods)), 2.1 * len(names)), layout="constrained")
+    axes = np.atleast_2d(fig.subplots(len(names), 1 + 2 * len(methods)))
+    for ax in axes.flat:
+        ax.set_axis_off()
+    for row, name in zip(axes, names):
+        a, _ = q.BY_NAME[name].crops()
+        vmin, vmax = float(a.min()), float(a.max())
+        row[0].set_axis_on()
+        _panel(row[0], a, vmin, vmax, name + (" (held out)" if q.BY_NAME[name].held_out else ""))
+        for m, method in enumerate(methods):
+            if name not in by_method[method]:
+                continue
+            volume, run = by_method[method][name]
+            n = volume.shape[0]
+            for k, (image, view) in enumerate(((volume[:, :, n // 2], "front"),
+                                                (volume[:, n // 2], "top"))):
+                ax = row[1 + 2 * m + k]
+                ax.set_axis_on()
+                _panel(ax, image, vmin, vmax, f"{method} {view}"
+                       + (f" ac {run['ratio']['ac']:.2f}" if k == 0 else ""))
+    save_figure(fig, out / "sheet_compare.png")
 
 
 def paper_main(argv: list[str]) -> int:
@@ -290,6 +331,7 @@ def paper_main(argv: list[str]) -> int:
     q.save_json(path, results)
     print(q.format_summary(summary))
     if not args.no_figures:
+        by_method = {}
         for method in methods:
             items = []
             for name in names:
@@ -304,6 +346,9 @@ def paper_main(argv: list[str]) -> int:
                 items.append((name, volume, results["runs"][key]))
             if items:
                 _contact_sheet(q, out, method, items)
+                by_method[method] = {name: (volume, run) for name, volume, run in items}
+        if len(by_method) > 1:
+            _compare_sheet(q, out, by_method)
         print(f"pictures in {out}/<method>/ and {out}/sheet_<method>.png")
     return 0
 
