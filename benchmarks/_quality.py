@@ -384,7 +384,12 @@ def summarise(results: dict, methods, names, seeds, size, palette) -> dict:
                 values = [r["raw"].get(k, np.nan) for r in rows]
                 stats[f"{k}_raw_mean"], stats[f"{k}_raw_worst"] = float(np.mean(values)), float(np.max(values))
                 stats[f"{k}_raw_min"] = float(np.min(values))
-            stats["verdict"] = _verdict(results, method, rows, block["floor"]["ac"], size, palette)
+            # the floor over the same cells (a partial run is compared with its own exemplars)
+            floor_ac = float(np.mean([results["references"][f"{r['exemplar']}|seed{r['seed']}|"
+                                                            f"size{size}"]["floor"]["ratio"]["ac"]
+                                      for r in rows]))
+            stats["floor_ac_same_cells"] = floor_ac
+            stats["verdict"] = _verdict(results, method, rows, floor_ac, size, palette)
             block["methods"][method] = stats
         out[set_name] = block
     return out
@@ -427,6 +432,8 @@ def format_summary(summary: dict) -> str:
     lines = []
     for set_name, block in summary.items():
         lines.append(f"\n== {set_name} set: {', '.join(block['exemplars'])}")
+        lines.append("runs per method: " + ", ".join(f"{m} {st['count']}"
+                                                     for m, st in block["methods"].items()))
         lines.append("ac, okl (orientation KL), sw: ratios to the structureless control "
                      "(1 = no structure); hkl (histogram KL), top and spots: raw values")
         head = (f"{'':16s} {'ac mean':>8s} {'ac worst':>8s} {'okl mean':>8s} {'okl wrst':>8s} "

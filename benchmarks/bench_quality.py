@@ -269,6 +269,9 @@ def paper_main(argv: list[str]) -> int:
     parser.add_argument("--recompute", action="store_true", help="ignore the cached runs")
     parser.add_argument("--remeasure", action="store_true",
                         help="recompute the measures of the cached runs from their saved volumes")
+    parser.add_argument("--cached-only", action="store_true",
+                        help="compute nothing: summarise and draw the cached runs (a missing "
+                             "cell is left out of the summary, which says how many it holds)")
     parser.add_argument("--no-figures", action="store_true")
     parser.add_argument("--out", default="figures/quality_paper")
     parser.add_argument("--cache-dir", default=str(Path.home() / ".cache/npmrf3d/quality_paper"))
@@ -323,8 +326,9 @@ def paper_main(argv: list[str]) -> int:
                                                                args.palette))
                 for m in methods for n in names for s in seeds]
         q.remeasure(results, cache, [k for k in keys if k in results["runs"]], size, echo=echo)
-    q.run_all(methods, names, seeds, size, args.levels, args.palette, results, cache,
-              jobs=args.jobs, recompute=args.recompute, echo=echo)
+    if not args.cached_only:
+        q.run_all(methods, names, seeds, size, args.levels, args.palette, results, cache,
+                  jobs=args.jobs, recompute=args.recompute, echo=echo)
     summary = q.summarise(results, methods, names, seeds, size, args.palette)
     results["summary"] = {"size": size, "seeds": seeds, "levels": args.levels,
                           "palette": args.palette, "sets": summary}
