@@ -414,6 +414,12 @@ def _verdict(results, method, rows, floor_ac, size, palette) -> dict[str, str]:
                 wins += r["raw"]["orient_kl"] <= npk["raw"]["orient_kl"]
         v["orient_kl_le_npk_on_2/3"] = (_yes(wins * 3 >= 2 * total, f"{wins}/{total}") if total
                                         else "n/a (no npk runs)")
+    refs = [results["references"][f"{r['exemplar']}|seed{r['seed']}|size{size}"] for r in rows]
+    beats = [r["exemplar"] for r, ref in zip(rows, refs)
+             if r["ratio"]["ac"] < ref["blurred"]["ratio"]["ac"]
+             and r["ratio"]["sw"] < ref["blurred"]["ratio"]["sw"]]
+    v["beats_blurred_control_on_ac_and_sw (SPEC 7)"] = (
+        f"{len(beats)}/{len(rows)}" + (f" ({', '.join(beats)})" if beats else ""))
     sparse = [r for r in rows if BY_NAME[r["exemplar"]].kind == "sparse"]
     if sparse:
         shares = ", ".join(f"{r['exemplar']} bright {r['raw']['bright']:.4f} spots "
