@@ -22,6 +22,22 @@ Usage::
 
 The ``anneal`` suite runs on :data:`ANNEAL_EXEMPLARS` with a 64-colour palette (colour
 exemplars have thousands of distinct colours; the heat-bath sampler evaluates every label).
+
+The ``paper`` suite is the paper-scale benchmark of issues 11 and 12 (``benchmarks/_quality.py``
+describes the measures, the controls, the exemplar set and how to add a method)::
+
+    python benchmarks/bench_quality.py --suite paper --quick               # 32^3, 4 exemplars
+    python benchmarks/bench_quality.py --suite paper --methods npk,npmrf-default
+    python benchmarks/bench_quality.py --suite paper --methods npmrf-default --palette 64
+    python benchmarks/bench_quality.py --suite paper --seeds 7,8,9 --exemplars gravel,hubble
+
+It needs ``apt-get install -y extremetuxracer-data`` for its held-out photographs (the
+``etr_*`` exemplars; missing ones are skipped with a note). Results are cached per
+(method, exemplar, seed, size) in ``figures/quality_paper/results.json`` (volumes in
+``~/.cache/npmrf3d/quality_paper``): a re-run only computes the missing cells
+(``--recompute`` for all). Pictures: ``figures/quality_paper/<method>/<exemplar>.png`` and a
+contact sheet per method, ``figures/quality_paper/sheet_<method>.png``, and the methods side
+by side, ``figures/quality_paper/sheet_compare.png``.
 """
 
 from __future__ import annotations
@@ -84,12 +100,18 @@ def parse_overrides(items: list[str]) -> dict:
 
 
 def main(argv=None) -> int:
+    first = argparse.ArgumentParser(add_help=False)
+    first.add_argument("--suite")
+    known, rest = first.parse_known_args(argv)
+    if known.suite == "paper":  # its own options (--suite paper --help lists them)
+        return paper_main(rest)
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0],
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     parser.add_argument("--variant", action="append", help="variants to run (repeatable)")
-    parser.add_argument("--suite", choices=("variants", "anneal"), default="variants",
+    parser.add_argument("--suite", choices=("variants", "anneal", "paper"), default="variants",
                         help="variants: the --variant presets with --set overrides; anneal: "
-                             "the annealing samplers and proposal counts of ANNEAL_SUITE")
+                             "the annealing samplers and proposal counts of ANNEAL_SUITE; "
+                             "paper: the paper-scale benchmark (see --suite paper --help)")
     parser.add_argument("--set", action="append", default=[], help="override key=value of the rule")
     parser.add_argument("--size", type=int, default=32)
     parser.add_argument("--levels", type=int, default=2)
@@ -140,6 +162,198 @@ def main(argv=None) -> int:
         print(f"mean {variant:14s} ac {s['ac']:.3f} (floor {s['floor']:.3f}) kl {s['kl']:.3f} top {s['top']:.3f}")
     path = out / f"quality{'_anneal' if args.suite == 'anneal' else ''}{args.tag}.json"
     path.write_text(json.dumps({"records": records, "summary": summary}, indent=2))
+    return 0
+
+
+# --------------------------------------------------------------------------- the paper suite
+
+
+def _draw_run(q, out: Path, method: str, name: str, volume: np.ndarray, run: dict) -> None:
+    a, _ = q.BY_NAME[name].crops()
+    r = run["ratio"]
+    title = (f"{name} {method} seed {run['seed']}: ac {r['ac']:.2f} sw {r['sw']:.2f} "
+             f"orient {r['orient_kl']:.2f} (x control), hist KL {run['raw']['hist_kl']:.2f}"
+             + (f", palette {run['palette']}" if run["palette"] else ""))
+    fig = preview_figure(volume, {"front": a}, title=title)
+    (out / method).mkdir(parents=True, exist_ok=True)
+    save_figure(fig, out / method / f"{name}.png")
+
+
+def _panel(ax, image, vmin, vmax, title) -> None:
+    from npmrf3d.plotting import to_display
+
+    ax.imshow(to_display(image, vmin=vmin, vmax=vmax), cmap="gray", vmin=vmin, vmax=vmax,
+              interpolation="nearest")
+    ax.set_xticks([])
+    ax.set_yticks([])
+    ax.set_title(title, fontsize=8)
+
+
+def _contact_sheet(q, out: Path, method: str, items: list) -> None:
+    """Two exemplars a row, each: crop A (exemplar), a crop B (floor), front, right, top."""
+    from matplotlib.figure import Figure
+
+    rows = -(-len(items) // 2)
+    fig = Figure(figsize=(20, 2.2 * rows), layout="constrained")
+    axes = np.atleast_2d(fig.subplots(rows, 10))
+    for ax in axes.flat:
+        ax.set_axis_off()
+    for index, (name, volume, run) in enumerate(items):
+        a, b = q.BY_NAME[name].crops()
+        n = volume.shape[0]
+        vmin, vmax = float(a.min()), float(a.max())
+        r = run["ratio"]
+        row = axes[index // 2, 5 * (index % 2): 5 * (index % 2) + 5]
+        held = " (held out)" if q.BY_NAME[name].held_out else ""
+        panels = ((a, f"{name}{held}"), (b[0], "a crop B (floor)"),
+                  (volume[:, :, n // 2], f"front; ac {r['ac']:.2f} sw {r['sw']:.2f}"),
+                  (volume[n // 2], f"right; hkl {run['raw']['hist_kl']:.2f}"),
+                  (volume[:, n // 2], f"top; okl {r['orient_kl']:.2f}"))
+        for ax, (image, title) in zip(row, panels):
+            ax.set_axis_on()
+            _panel(ax, image, vmin, vmax, title)
+    fig.suptitle(f"{method}: {n}^3 from 64 x 64 crops, seed {items[0][2]['seed']} "
+                 f"(ac, sw, okl: ratio to the structureless control; hkl: histogram KL)")
+    save_figure(fig, out / f"sheet_{method}.png")
+
+
+def _compare_sheet(q, out: Path, by_method: dict) -> None:
+    """Rows: exemplars; columns: crop A, then each method's front and top centre slices."""
+    from matplotlib.figure import Figure
+
+    names = [n for n in q.BY_NAME if any(n in items for items in by_method.values())]
+    methods = list(by_method)
+    fig = Figure(figsize=(2 * (1 + 2 * len(methods)), 2.1 * len(names)), layout="constrained")
+    axes = np.atleast_2d(fig.subplots(len(names), 1 + 2 * len(methods)))
+    for ax in axes.flat:
+        ax.set_axis_off()
+    for row, name in zip(axes, names):
+        a, _ = q.BY_NAME[name].crops()
+        vmin, vmax = float(a.min()), float(a.max())
+        row[0].set_axis_on()
+        _panel(row[0], a, vmin, vmax, name + (" (held out)" if q.BY_NAME[name].held_out else ""))
+        for m, method in enumerate(methods):
+            if name not in by_method[method]:
+                continue
+            volume, run = by_method[method][name]
+            n = volume.shape[0]
+            for k, (image, view) in enumerate(((volume[:, :, n // 2], "front"),
+                                                (volume[:, n // 2], "top"))):
+                ax = row[1 + 2 * m + k]
+                ax.set_axis_on()
+                _panel(ax, image, vmin, vmax, f"{method} {view}"
+                       + (f" ac {run['ratio']['ac']:.2f}" if k == 0 else ""))
+    save_figure(fig, out / "sheet_compare.png")
+
+
+def paper_main(argv: list[str]) -> int:
+    import _quality as q
+    from _common import hardware
+
+    parser = argparse.ArgumentParser(prog="bench_quality.py --suite paper",
+                                     description=q.__doc__.split("\n")[0],
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument("--methods", default="npk,npmrf-default",
+                        help=f"comma-separated, from {', '.join(q.METHODS)}")
+    parser.add_argument("--exemplars", default=None,
+                        help=f"comma-separated (default all): {', '.join(q.BY_NAME)}")
+    parser.add_argument("--seeds", default="7", help="comma-separated seeds")
+    parser.add_argument("--size", type=int, default=64)
+    parser.add_argument("--levels", type=int, default=3)
+    parser.add_argument("--palette", type=int, default=None,
+                        help="colour exemplars: a palette of this many colours for the methods "
+                             "that take one (recorded with the run)")
+    parser.add_argument("--quick", action="store_true",
+                        help=f"smoke run: 32^3 and the exemplars {', '.join(q.QUICK)}")
+    parser.add_argument("--jobs", type=int, default=1, help="runs in parallel processes")
+    parser.add_argument("--recompute", action="store_true", help="ignore the cached runs")
+    parser.add_argument("--remeasure", action="store_true",
+                        help="recompute the measures of the cached runs from their saved volumes")
+    parser.add_argument("--cached-only", action="store_true",
+                        help="compute nothing: summarise and draw the cached runs (a missing "
+                             "cell is left out of the summary, which says how many it holds)")
+    parser.add_argument("--no-figures", action="store_true")
+    parser.add_argument("--out", default="figures/quality_paper")
+    parser.add_argument("--cache-dir", default=str(Path.home() / ".cache/npmrf3d/quality_paper"))
+    args = parser.parse_args(argv)
+    methods = [m for m in args.methods.split(",") if m]
+    unknown = [m for m in methods if m not in q.METHODS]
+    if unknown:
+        parser.error(f"unknown method(s) {', '.join(unknown)}; known: {', '.join(q.METHODS)}")
+    size = 32 if args.quick and args.size == 64 else args.size
+    names = (args.exemplars.split(",") if args.exemplars
+             else list(q.QUICK) if args.quick else list(q.BY_NAME))
+    unknown = [n for n in names if n not in q.BY_NAME]
+    if unknown:
+        parser.error(f"unknown exemplar(s) {', '.join(unknown)}; known: {', '.join(q.BY_NAME)}")
+    missing = [n for n in names if not q.BY_NAME[n].available()]
+    if missing:
+        print(f"note: skipping {', '.join(missing)}: {q.ETR_HINT}")
+        names = [n for n in names if n not in missing]
+    seeds = [int(s) for s in args.seeds.split(",")]
+    out, cache = Path(args.out), Path(args.cache_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    cache.mkdir(parents=True, exist_ok=True)
+    path = out / "results.json"
+    results = json.loads(path.read_text()) if path.is_file() else {}
+    results.setdefault("runs", {})
+    results.setdefault("references", {})
+    print(f"npmrf3d {q._version()}; {hardware()}")
+    print(f"{size}^3 from {q.CROP}x{q.CROP} crops, {args.levels} levels, seeds {seeds}; "
+          f"autocorrelation lags <= {q.MAX_LAG}; sliced Wasserstein {q.SW_PATCH}x{q.SW_PATCH} "
+          f"patches at scales {q.SW_SCALES}")
+    print("references (ratio to the structureless control): floor = crop B as the slices, "
+          "blurred = control smoothed to the exemplar's grain")
+    for name in names:
+        for seed in seeds:
+            key = f"{name}|seed{seed}|size{size}"
+            ref = results["references"].get(key)
+            if args.recompute or ref is None or ref.get("version") != q.REFERENCE_VERSION:
+                ref = results["references"][key] = q.references(q.BY_NAME[name], size, seed)
+            f, bl = ref["floor"], ref["blurred"]
+            print(f"  {name:18s} seed {seed}: floor ac {f['ratio']['ac']:.3f} sw "
+                  f"{f['ratio']['sw']:.3f} orient {f['ratio']['orient_kl']:.3f} hist_kl "
+                  f"{f['raw']['hist_kl']:.3f} | blurred ac {bl['ratio']['ac']:.3f} sw "
+                  f"{bl['ratio']['sw']:.3f} orient {bl['ratio']['orient_kl']:.3f}")
+    q.save_json(path, results)
+
+    def echo(line):
+        print(line, flush=True)
+        q.save_json(path, results)
+
+    if args.remeasure and not args.recompute:
+        keys = [q.run_key(m, n, s, size, q._effective_palette(m, q.BY_NAME[n].crops()[0],
+                                                               args.palette))
+                for m in methods for n in names for s in seeds]
+        q.remeasure(results, cache, [k for k in keys if k in results["runs"]], size, echo=echo)
+    if not args.cached_only:
+        q.run_all(methods, names, seeds, size, args.levels, args.palette, results, cache,
+                  jobs=args.jobs, recompute=args.recompute, echo=echo)
+    summary = q.summarise(results, methods, names, seeds, size, args.palette)
+    results["summary"] = {"size": size, "seeds": seeds, "levels": args.levels,
+                          "palette": args.palette, "sets": summary}
+    q.save_json(path, results)
+    print(q.format_summary(summary))
+    if not args.no_figures:
+        by_method = {}
+        for method in methods:
+            items = []
+            for name in names:
+                a, _ = q.BY_NAME[name].crops()
+                key = q.run_key(method, name, seeds[0], size,
+                                q._effective_palette(method, a, args.palette))
+                volume = q.load_volume(cache, key)
+                if volume is None:
+                    print(f"note: no cached volume for {key}; its picture is not drawn")
+                    continue
+                _draw_run(q, out, method, name, volume, results["runs"][key])
+                items.append((name, volume, results["runs"][key]))
+            if items:
+                _contact_sheet(q, out, method, items)
+                by_method[method] = {name: (volume, run) for name, volume, run in items}
+        if len(by_method) > 1:
+            _compare_sheet(q, out, by_method)
+        print(f"pictures in {out}/<method>/ and {out}/sheet_<method>.png")
     return 0
 
 

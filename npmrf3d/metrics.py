@@ -64,6 +64,7 @@ __all__ = [
     "orientation_histogram",
     "orientation_kl",
     "patch_sample",
+    "multiscale_sliced_wasserstein",
     "sliced_wasserstein",
     "structure_tensor",
     "two_point_correlation",
@@ -606,6 +607,54 @@ def _sliced_wasserstein(e: np.ndarray, slices: np.ndarray, s: MetricSettings) ->
     if s.centre_patches:
         a, b = (_centred(x, e.shape[-1]) for x in (a, b))
     return float(wasserstein_1d(a @ directions, b @ directions).mean()), p
+
+
+def _block_mean(images: np.ndarray, factor: int) -> np.ndarray:
+    """Mean of each non-overlapping ``factor x factor`` block of ``(S, H, W, C)`` images
+    (trailing rows and columns that do not fill a block are dropped)."""
+    if factor == 1:
+        return images
+    s, h, w, c = images.shape
+    h, w = h // factor * factor, w // factor * factor
+    x = images[:, :h, :w].reshape(s, h // factor, factor, w // factor, factor, c)
+    return x.mean(axis=(2, 4))
+
+
+def multiscale_sliced_wasserstein(exemplar: np.ndarray, volume: np.ndarray, view: str, *,
+                                  scales: tuple[int, ...] = (1, 2, 4), patch: int = 7,
+                                  settings: MetricSettings = DEFAULT_SETTINGS) -> float:
+    """Sliced Wasserstein distance of ``patch x patch`` patches, averaged over scales.
+
+    At each scale ``s`` the exemplar and every slice of the view are reduced by the mean of
+    each ``s x s`` block, then compared as in :func:`sliced_wasserstein` (patches of side
+    ``min(patch, sides)``, channel means removed when ``settings.centre_patches``); the result
+    is the mean over the scales, in exemplar value units (SPEC.md section 7: 7 x 7 patches at
+    scales 1, 2 and 4 ranked pictures as the eye did). A scale whose reduced exemplar or
+    slices would be smaller than :data:`MIN_SIDE` is skipped (at least scale 1 is kept).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> image = rng.random((32, 32))
+    >>> volume = np.repeat(image[:, :, None], 4, axis=2)   # every front slice is the image
+    >>> round(multiscale_sliced_wasserstein(image, volume, "front"), 12)
+    0.0
+    >>> noise = rng.random((32, 32, 32))                    # same values, no arrangement
+    >>> multiscale_sliced_wasserstein(image, noise, "front") > 0.001
+    True
+    """
+    e, v = _pair(exemplar, volume)
+    view = check.choice("view", view, VIEWS)
+    check.integer("patch", patch, low=1)
+    scales = tuple(check.integer("scale", s, low=1) for s in scales) or (1,)
+    slices = view_slices(v, view)
+    smallest = min(e.shape[0], e.shape[1], slices.shape[1], slices.shape[2])
+    kept = [s for s in scales if smallest // s >= MIN_SIDE] or [1]
+    s_patch = dataclasses.replace(settings, patch=patch)
+    values = [_sliced_wasserstein(_block_mean(e[None], f)[0], _block_mean(slices, f), s_patch)[0]
+              for f in kept]
+    return float(np.mean(values))
 
 
 def _centred(patches: np.ndarray, channels: int) -> np.ndarray:
