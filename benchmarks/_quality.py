@@ -79,9 +79,19 @@ def _npk(ex, size, levels, seed, **_):
 
 #: Name -> ``(exemplar (H, W, C), size, levels, seed, **options) -> volume (N, N, N, C)``.
 #: Options passed: ``palette`` (int or None; colour exemplars only, when ``--palette`` is given).
+def _registered(name):
+    """A method of npmrf3d's registry with its defaults (the public one-call function)."""
+    def run(ex, size, levels, seed, **_):
+        from npmrf3d.methods import get_method
+        return get_method(name).synthesize(ex, size=size, levels=levels, rng=seed).volume
+    return run
+
+
 METHODS: dict[str, Callable[..., np.ndarray]] = {
     "npmrf-default": _npmrf_default,
     "npk": _npk,
+    "chen-wang": _registered("chen-wang"),
+    "coherent": _registered("coherent"),
 }
 #: Methods that take ``palette`` (the others never see it, and their cache key has none).
 PALETTE_METHODS = {"npmrf-default"}
