@@ -131,11 +131,11 @@ def coherent_synthesize(exemplar=None, *, exemplars: Mapping | None = None, rng=
                            t_start=t_start)
 
 
-def coherent_method(per_view_exemplars, config: CoherentConfig, rng: np.random.Generator, *,
+def coherent_method(per_view, config: CoherentConfig, rng: np.random.Generator, *,
                     progress=None, checkpoint=None, t_start=None) -> SynthesisResult:
     """The registered form of :func:`run` (exemplars first, as every method of the registry)."""
-    chen_wang._check_exemplar_levels(_chen_wang_config(config), per_view_exemplars)
-    return run(config, per_view_exemplars, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
+    chen_wang._check_exemplar_levels(_chen_wang_config(config), per_view)
+    return run(config, per_view, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
 
 
 METHOD = SynthesisMethod(

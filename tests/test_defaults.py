@@ -13,7 +13,9 @@ import inspect
 import pytest
 
 from npmrf3d import kopf_synthesize, synthesize
+from npmrf3d.baselines.chen_wang import ChenWangConfig, chen_wang_synthesize, make_chen_wang_config
 from npmrf3d.baselines.kopf import KopfConfig, make_kopf_config
+from npmrf3d.coherent import CoherentConfig, coherent_synthesize, make_coherent_config
 from npmrf3d.cli import build_parser
 from npmrf3d.config import DEFAULT_SIZE, SynthesisConfig
 from npmrf3d.methods import METHODS, get_method
@@ -56,6 +58,8 @@ def _as_cli(value):
 CASES = {
     "npmrf": (("synth",), synthesize, make_config, SynthesisConfig),
     "kopf": (("baseline", "kopf"), kopf_synthesize, make_kopf_config, KopfConfig),
+    "chen-wang": (("baseline", "chen-wang"), chen_wang_synthesize, make_chen_wang_config, ChenWangConfig),
+    "coherent": (("coherent",), coherent_synthesize, make_coherent_config, CoherentConfig),
 }
 
 
@@ -68,7 +72,7 @@ def test_api_config_and_cli_agree_on_every_default(name):
     api = _signature_defaults(public)
     made = _signature_defaults(builder)
     # options whose default is decided elsewhere on purpose
-    special = {"upsample"} if name == "npmrf" else {"iterations"}
+    special = {"upsample"} if name == "npmrf" else {"iterations"} if name == "kopf" else set()
     checked = 0
     for field, value in fields.items():
         if field in special or field in ("seed", "constrained", "rule"):
@@ -85,7 +89,10 @@ def test_api_config_and_cli_agree_on_every_default(name):
             assert cli_value == expected, f"{name}: CLI default of --{field.replace('_', '-')}"
             checked += 1
     assert checked >= 8
-    assert cli["size"] == str(DEFAULT_SIZE) == str(api["size"]) == str(made["size"])
+    if name in ("npmrf", "kopf"):
+        assert cli["size"] == str(DEFAULT_SIZE) == str(api["size"]) == str(made["size"])
+    else:  # the coherent methods default to the paper's scale, 64^3
+        assert cli["size"] == _as_cli(config_class.size) and made["size"] == config_class.size
 
 
 def test_special_defaults_agree_too():
@@ -117,6 +124,6 @@ def test_every_registered_method_has_the_common_signature():
 def test_unknown_method_lists_the_registered_ones():
     from npmrf3d.errors import ParameterError
 
-    with pytest.raises(ParameterError, match="method must be one of npmrf, kopf; got 'nope'"):
+    with pytest.raises(ParameterError, match="method must be one of npmrf, coherent, kopf, chen-wang; got 'nope'"):
         get_method("nope")
     assert get_method("np_k") is METHODS["kopf"]

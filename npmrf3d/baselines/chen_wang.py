@@ -512,11 +512,11 @@ def _fit(config) -> dict:
     return {"window": max(config.window), "levels": config.levels, "toroidal": False}
 
 
-def chen_wang_method(per_view_exemplars, config: ChenWangConfig, rng: np.random.Generator, *,
+def chen_wang_method(per_view, config: ChenWangConfig, rng: np.random.Generator, *,
                      progress=None, checkpoint=None, t_start=None) -> SynthesisResult:
     """The registered form of :func:`run` (exemplars first, as every method of the registry)."""
-    _check_exemplar_levels(config, per_view_exemplars)
-    return run(config, per_view_exemplars, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
+    _check_exemplar_levels(config, per_view)
+    return run(config, per_view, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
 
 
 METHOD = SynthesisMethod(

@@ -15,6 +15,7 @@ import argparse
 import time
 
 from .. import data, io
+from ..baselines import chen_wang
 from ..baselines.kopf import DEFAULT_ITERATIONS, METHOD, UPSAMPLING, KopfConfig
 from ..config import DEFAULT_SIZE
 from ..errors import ParameterError
@@ -22,6 +23,7 @@ from ..exemplar import BUNDLED_PREFIX
 from ..neighborhood import VIEWS
 from ..runs import RUN_FILES
 from ._common import choices, default, parse_size, prepare_run, run_method, write_result
+from ._generic import add_method_parser
 
 __all__ = ["register"]
 
@@ -36,7 +38,7 @@ def register(commands, formatter_class) -> None:
     """Add ``baseline`` with its nested sub-command ``kopf`` to the ``npmrf3d`` parser."""
     baseline = commands.add_parser(
         "baseline",
-        help="synthesise with a baseline method the NP-MRF sampler is compared with (kopf)",
+        help="synthesise with a baseline method the NP-MRF sampler is compared with (kopf, chen-wang)",
         description="Baseline methods, with the same outputs as 'npmrf3d synth'.",
         formatter_class=formatter_class,
     )
@@ -125,6 +127,43 @@ def register(commands, formatter_class) -> None:
                           "run, synthesis resumes after its last finished level (default: none = "
                           "no checkpoint)")
     kopf.set_defaults(handler=_kopf)
+    add_method_parser(
+        methods, "chen-wang", chen_wang.METHOD,
+        help="Chen & Wang 2010: k-coherence search, discrete solver, position and index histograms",
+        description=(
+            "Chen & Wang (2010): every voxel keeps, per view, the exemplar pixel it was copied\n"
+            "from; each view's neighbourhoods search their best match among the neighbours'\n"
+            "coherent shifts and k-coherence sets (index-histogram penalty), and every voxel\n"
+            "copies one texel voted by the neighbourhoods that contain it (IRLS weights with\n"
+            "position-histogram re-weighting). Colours are exemplar colours. docs/chen_wang.md\n\n"
+            "examples:\n"
+            "  npmrf3d baseline chen-wang bundled:gravel --size 64\n"
+            "  npmrf3d baseline chen-wang bundled:ihc --size 128 --window 8,6,4 --out ihc-cw"
+        ),
+        out="npmrf3d-chen-wang-out", field_help=CHEN_WANG_HELP, formatter_class=formatter_class,
+    )
+
+#: One line per configuration field of :class:`npmrf3d.baselines.chen_wang.ChenWangConfig`.
+CHEN_WANG_HELP = {
+    "window": "window side per level, coarsest first: one number or one per level (the paper: 8,8,6 or 8,6,4)",
+    "levels": "resolution levels, coarse to fine (the paper: 3)",
+    "iterations": "search + solve iterations per level: one number or one per level, coarsest first",
+    "k": "size of the k-coherence sets (the paper: 5)",
+    "pca_dims": "dimensions of the PCA-reduced neighbourhoods (the paper: about 20)",
+    "r": "exponent of the robust energy ||s - e||^r, in (0, 2]; IRLS weights ||s - e||^(r-2)",
+    "grid": "search sites every GRID voxels along both plane axes (1 = every voxel, the paper)",
+    "index_weight": "strength of the index-histogram penalty on the search distance, >= 0 (0 = off)",
+    "position_weight": "strength of the position-histogram re-weighting of the votes, >= 0 (0 = off)",
+    "position_boost": "this project's addition: votes for under-used exemplar pixels weigh up to 1 + B "
+                      "times more, >= 0 (0 = the paper)",
+    "coherence_exclude": "k-coherence sets skip centres within this many pixels of the query (0 = off)",
+    "random_candidates": "this project's addition: random valid centres added to each site's candidates "
+                         "(0 = the paper)",
+    "batches": "histogram updates per pass (more track the histograms closer, fewer run more in parallel)",
+    "solver": "how a voxel picks among its voted texels: medoid (weighted medoid of the 8 heaviest, "
+              "chosen by measurement) or mean (nearest to the weighted mean, the paper's practice)",
+    "balance_views": "give every view's votes the same total weight at each voxel (the paper: off)",
+}
 
 def _parse_iterations(text: str):
     parts = [p.strip() for p in str(text).split(",")]

@@ -18,13 +18,13 @@ import sys
 
 from .. import __version__
 from ..errors import ParameterError
-from . import baseline, info, metrics, study, synth
+from . import baseline, coherent, info, metrics, study, synth
 from ._common import PROG, HelpFormatter, error
 
 __all__ = ["COMMANDS", "build_parser", "main"]
 
 #: The sub-command modules, in the order ``--help`` lists them (``study`` adds ``report``).
-COMMANDS = (synth, info, metrics, study, baseline)
+COMMANDS = (synth, coherent, info, metrics, study, baseline)
 #: Library parameter names that messages should call by their option names.
 OPTION_NAMES = synth.OPTION_NAMES
 

@@ -1,0 +1,51 @@
+"""The command lines of the coherent methods: ``npmrf3d coherent`` and ``npmrf3d baseline chen-wang``."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from npmrf3d.cli import main
+
+COMMANDS = {"coherent": ["coherent"], "chen-wang": ["baseline", "chen-wang"]}
+
+
+@pytest.mark.parametrize("name", sorted(COMMANDS))
+def test_tiny_run_writes_a_complete_folder_of_exemplar_colours(name, tmp_path, capsys):
+    out = tmp_path / "run"
+    code = main([*COMMANDS[name], "bundled:gravel64", "--size", "16", "--levels", "2", "--window", "4",
+                 "--iterations", "2", "--out", str(out), "--quiet"])
+    assert code == 0
+    assert {p.name for p in out.iterdir()} == {"volume.npy", "volume.tif", "preview.png", "run.json"}
+    record = json.loads((out / "run.json").read_text())
+    assert record["method"] == name
+    assert record["config"]["levels"] == 2 and record["config"]["window"] == [4, 4]
+    volume = np.load(out / "volume.npy")
+    assert volume.shape == (16, 16, 16, 1)
+    from npmrf3d import data, load_exemplar
+    assert set(np.unique(volume)) <= set(np.unique(load_exemplar(data.path("gravel64"))))
+
+
+@pytest.mark.parametrize("name", sorted(COMMANDS))
+@pytest.mark.parametrize("bad, message", [
+    (["--window", "8,6"], "--window must be one integer or 3 integers"),
+    (["--window", "x"], "--window"),
+    (["--size", "30"], "size"),
+    (["--k", "0"], "--k must be"),
+])
+def test_bad_options_exit_2_and_write_nothing(name, bad, message, tmp_path, capsys):
+    out = tmp_path / "never"
+    try:
+        code = main([*COMMANDS[name], *bad, "--out", str(out)])
+    except SystemExit as exc:  # argparse's own type errors
+        code = exc.code
+    assert code == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_coherent_refuses_a_heuristic_without_objective(tmp_path, capsys):
+    assert main(["coherent", "--heuristic", "ML_H1a", "--out", str(tmp_path / "x")]) == 2
+    assert "--heuristic must be one of ML_H2b, ML_H2a" in capsys.readouterr().err
