@@ -11,8 +11,9 @@ from pathlib import Path
 import numpy as np
 
 from . import _validation as check
+from . import coherent
 from ._kernels import _jit
-from .config import DEFAULT_SIZE, VARIANTS, SynthesisConfig, SynthesisMethod, SynthesisResult
+from .config import DEFAULT_SIZE, DEFAULT_VARIANT, VARIANT_ALIASES, VARIANTS, SynthesisConfig, SynthesisMethod, SynthesisResult
 from .exemplar import make_labels, resolve_exemplars
 from .heuristics import DECISIONS, get_heuristic
 from .neighborhood import VIEWS, colour_classes
@@ -37,7 +38,7 @@ def make_config(
     *, size=DEFAULT_SIZE, window=_C.window, levels=_C.levels, heuristic=_C.heuristic,
     relaxation=_C.relaxation, views=_C.views, upsample=None, inherit=_C.inherit, xi=_C.xi,
     stop=_C.stop, max_sweeps=_C.max_sweeps, sampler=_C.sampler, schedule=_C.schedule, t0=_C.t0,
-    t_end=_C.t_end, proposals=_C.proposals, proposal=_C.proposal, variant=_C.variant,
+    t_end=_C.t_end, proposals=_C.proposals, proposal=_C.proposal, variant=None,
     bandwidth=None, centre_bandwidth=None, adaptive=None, decision=None, tau=None,
     histogram_weight=None, outlier=None, grey_levels=None, palette=None, toroidal_exemplar=False,
     seed=None,
@@ -69,7 +70,18 @@ def make_config(
     t_end = check.real("t_end", t_end, low=0.0, low_open=schedule == "geometric", high=t0)
     proposals = check.integer("proposals", proposals, low=1)
     proposal = check.choice("proposal", proposal, PROPOSALS)
+    variant = DEFAULT_VARIANT[relaxation] if variant is None else VARIANT_ALIASES.get(variant, variant)
     variant = check.choice("variant", variant, VARIANTS)
+    if variant == "coherent":
+        if relaxation != "icm":
+            check.fail("variant 'coherent' decides each voxel over its coherent candidates and has no "
+                       "annealing; use relaxation 'icm', or variant 'sharp' or 'literal' for annealing")
+        if heuristic not in coherent.HEURISTIC_CODES:
+            check.fail(f"variant 'coherent' ranks candidates by an objective: use heuristic ML_H2b or "
+                       f"ML_H2a, or variant 'sharp' or 'literal' for {heuristic}")
+        if toroidal_exemplar:
+            check.fail("variant 'coherent' does not wrap exemplar patches; drop toroidal_exemplar or "
+                       "use variant 'sharp' or 'literal'")
     rule = VARIANTS[variant]
     overrides = {}
     for name, value, low in (("bandwidth", bandwidth, 0.0), ("centre_bandwidth", centre_bandwidth, 0.0),
@@ -107,7 +119,7 @@ def synthesize(
     heuristic=_C.heuristic, relaxation=_C.relaxation, views=_C.views,
     exemplars: dict | None = None, upsample=None, inherit=_C.inherit, xi=_C.xi, stop=_C.stop,
     max_sweeps=_C.max_sweeps, sampler=_C.sampler, schedule=_C.schedule, t0=_C.t0,
-    t_end=_C.t_end, proposals=_C.proposals, proposal=_C.proposal, variant=_C.variant,
+    t_end=_C.t_end, proposals=_C.proposals, proposal=_C.proposal, variant=None,
     bandwidth=None, centre_bandwidth=None,
     adaptive=None, decision=None, tau=None, histogram_weight=None, outlier=None, grey_levels=None,
     palette=None, toroidal_exemplar=False, rng=None, progress: ProgressCallback | None = None,
@@ -159,9 +171,14 @@ def synthesize(
     proposal : {"exemplar", "labels"}
         Annealing (Metropolis): candidates drawn from the exemplar's values (the paper) or
         uniformly from the label set.
-    variant : {"default", "literal"}
-        Preset of the decision rule (:data:`npmrf3d.config.VARIANTS`); ``literal`` is the paper
-        word for word, ``default`` the variant chosen by measurement (docs/quality.md).
+    variant : {"coherent", "sharp", "literal"} or None
+        How a voxel decides (:data:`npmrf3d.config.VARIANTS`). None: ``coherent`` for ICM,
+        ``sharp`` for annealing. ``coherent`` (issue 12, :mod:`npmrf3d.coherent`): each view's
+        Parzen estimate sums over the coherent candidates of every neighbourhood containing the
+        voxel, and the voxel copies the best exemplar texel (``window`` at every level; the ICM
+        and annealing options are not used; ``history`` holds the mean patch energy per
+        iteration). ``sharp`` (formerly ``default``, still accepted): the full-Parzen rule chosen
+        by an earlier measurement (docs/quality.md). ``literal``: the paper word for word.
     bandwidth, centre_bandwidth, adaptive, decision, tau, histogram_weight, outlier : optional
         Override single fields of the preset (:class:`npmrf3d.config.DecisionRule`).
     grey_levels : int, optional
@@ -205,7 +222,8 @@ def synthesize(
     generator = check.rng(rng)
     per_view = resolve_exemplars(exemplar, exemplars, config.views, window=config.window,
                                  levels=config.levels, toroidal=config.toroidal_exemplar)
-    return run(config, per_view, generator, progress=progress, checkpoint=checkpoint, t_start=t_start)
+    return npmrf_method(per_view, config, generator, progress=progress, checkpoint=checkpoint,
+                        t_start=t_start)
 
 
 class _NpmrfLevels(Levels):
@@ -299,7 +317,29 @@ def npmrf_method(per_view: dict[str, np.ndarray], config: SynthesisConfig, rng: 
     ``t_start`` (optional, every method accepts it): ``time.perf_counter()`` when the caller
     started, so that ``timings["setup"]`` includes loading the exemplars.
     """
+    if config.variant == "coherent":
+        return _run_coherent(per_view, config, rng, progress=progress, checkpoint=checkpoint,
+                             t_start=t_start)
     return run(config, per_view, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
+
+
+def _run_coherent(per_view, config: SynthesisConfig, rng, *, progress, checkpoint, t_start) -> SynthesisResult:
+    """The ``coherent`` variant: :mod:`npmrf3d.coherent` with this configuration's window (at every
+    level), levels, views, heuristic, centre bandwidth and outlier share; the exemplars reduced to
+    ``grey_levels`` or a ``palette`` first when asked."""
+    if config.grey_levels is not None or config.palette is not None:
+        distinct = {id(a): a for a in per_view.values()}
+        labels, images = make_labels(list(distinct.values()), grey_levels=config.grey_levels,
+                                     palette=config.palette, rng=rng)
+        reduced = {key: labels[image] for key, image in zip(distinct, images)}
+        per_view = {v: reduced[id(a)] for v, a in per_view.items()}
+    options = coherent.make_coherent_config(
+        size=config.size, window=(config.window,) * config.levels, levels=config.levels,
+        views=config.views, heuristic=config.heuristic, centre_bandwidth=config.rule.centre_bandwidth,
+        outlier=config.rule.outlier, seed=config.seed)
+    result = coherent.coherent_method(per_view, options, rng, progress=progress, checkpoint=checkpoint,
+                                      t_start=t_start)
+    return dataclasses.replace(result, config=config)
 
 
 #: The registry entry of the NP-MRF sampler.

@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 from .. import data
-from ..config import DEFAULT_SIZE, VARIANTS, SynthesisConfig
+from ..config import DEFAULT_SIZE, VARIANT_ALIASES, VARIANTS, SynthesisConfig
 from ..exemplar import BUNDLED_PREFIX
 from ..heuristics import DECISIONS, HEURISTICS
 from ..neighborhood import VIEWS
@@ -29,7 +29,7 @@ __all__ = ["register", "run"]
 
 #: Parameters whose library name differs from the option; messages name the option instead.
 OPTION_NAMES = ("max_sweeps", "centre_bandwidth", "histogram_weight", "grey_levels", "t_end")
-_DEFAULT_RULE = VARIANTS["default"]
+_DEFAULT_RULE = VARIANTS["sharp"]
 
 
 def _d(name: str):
@@ -38,7 +38,7 @@ def _d(name: str):
 
 def _rule_help(text: str, field: str) -> str:
     value = getattr(_DEFAULT_RULE, field)
-    return f"{text} (default: None = the variant's value; the 'default' variant uses {value})"
+    return f"{text} (default: None = the variant's value; the 'sharp' variant uses {value})"
 
 
 def register(commands, formatter_class) -> None:
@@ -145,9 +145,15 @@ def register(commands, formatter_class) -> None:
              "uniformly from the label set",
     )
     method.add_argument(
-        "--variant", default=_d("variant"), metavar=choices(sorted(VARIANTS)),
-        help="preset of the decision rule: literal = the paper word for word (collapses to a flat "
-             "volume), default = the variant chosen by measurement (see docs/quality.md)",
+        "--variant", default=None, metavar=choices(sorted([*VARIANTS, *VARIANT_ALIASES])),
+        help="how a voxel decides: coherent = the NP-MRF likelihood over coherent candidates (each "
+             "view's Parzen estimate sums over the exemplar patches that the neighbourhoods "
+             "containing the voxel copy; chosen by measurement, docs/quality.md; uses --window at "
+             "every level, --heuristic ML_H2b/ML_H2a, --centre-bandwidth as a factor of the "
+             "exemplar's standard deviation and --outlier; the icm/anneal options are not used), "
+             "sharp = the full-Parzen rule of an earlier round (old name: default), literal = the "
+             "paper word for word (collapses to a flat volume) "
+             "(default: none = coherent for icm, sharp for anneal)",
     )
     method.add_argument(
         "--bandwidth", type=float, default=None, metavar="B",
