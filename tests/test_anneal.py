@@ -109,7 +109,7 @@ def _tiny_level(channels, heuristic="ML_H2b", shape=(8, 8, 8), window=3, seed=0)
     exemplar = palette[rng.integers(0, 5, size=(10, 12))].astype(np.float32)
     labels, (image,) = make_labels([exemplar], rng=rng)
     freq = np.bincount(image.ravel(), minlength=len(labels)) / image.size
-    rule = VARIANTS["default"]
+    rule = VARIANTS["sharp"]
     models, info = build_view_models({v: image for v in VIEWS3}, labels, window=window,
                                      level=0, rule=rule)
     lab = rng.integers(0, len(labels), size=shape).astype(np.int32)

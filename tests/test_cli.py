@@ -75,11 +75,11 @@ def test_synth_help_lists_every_option_with_its_default(capsys):
     for expected in ("(default: 7)", "(default: 32)", "(default: 3)", "(default: ML_H2b)",
                      "(default: icm)", "(default: -3.0)", "(default: 0.95)", "(default: 30)",
                      "1/8 for icm and 8/8 for anneal", "(default: resynth)", "(default: front,right,top)",
-                     "(default: default)", "(default: 0)", "(default: npmrf3d-out)",
+                     "coherent for icm, sharp for anneal", "(default: 0)", "(default: npmrf3d-out)",
                      "(default: heat-bath)", "(default: geometric)", "(default: 10)",
                      "(default: 0.05)", "(default: exemplar)", "this project's addition",
                      "needs ML_H2a or ML_H2b", "word for word", "docs/quality.md",
-                     "'default' variant uses 0.1", "bundled:gravel64"):
+                     "'sharp' variant uses 0.1", "bundled:gravel64"):
         assert expected in text, expected
 
 
@@ -214,7 +214,7 @@ def test_keyboard_interrupt_exits_130(tmp_path, exemplar, capsys, monkeypatch):
 
     monkeypatch.setattr(npmrf3d.synthesis, "run", interrupted)
     out_dir = tmp_path / "run"
-    code, out, err = run_cli(capsys, "synth", str(exemplar), *TINY, "--out", str(out_dir))
+    code, out, err = run_cli(capsys, "synth", str(exemplar), *TINY, "--variant", "sharp", "--out", str(out_dir))
     assert code == 130 and err.strip() == "npmrf3d: interrupted"
     assert not out_dir.exists()
 
@@ -280,7 +280,9 @@ BAD_INPUTS = {
                                                    "bundled:gravel64"], "not constrained"),
     "unknown-bundled-exemplar": (lambda t: ["bundled:marble"], "gravel64"),
     "negative-seed": (lambda t: ["--seed", "-1"], "seed"),
-    "sample-with-H1": (lambda t: ["--heuristic", "ML_H1a", "--decision", "sample"], "argmax"),
+    "sample-with-H1": (lambda t: ["--heuristic", "ML_H1a", "--decision", "sample", "--variant", "sharp"], "argmax"),
+    "coherent-with-H1": (lambda t: ["--heuristic", "ML_H1a"], "variant 'coherent' ranks candidates by an objective"),
+    "coherent-anneal": (lambda t: ["--relaxation", "anneal", "--variant", "coherent"], "has no annealing"),
 }
 
 

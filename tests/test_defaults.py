@@ -72,7 +72,7 @@ def test_api_config_and_cli_agree_on_every_default(name):
     api = _signature_defaults(public)
     made = _signature_defaults(builder)
     # options whose default is decided elsewhere on purpose
-    special = {"upsample"} if name == "npmrf" else {"iterations"} if name == "kopf" else set()
+    special = {"upsample", "variant"} if name == "npmrf" else {"iterations"} if name == "kopf" else set()
     checked = 0
     for field, value in fields.items():
         if field in special or field in ("seed", "constrained", "rule"):
@@ -100,6 +100,11 @@ def test_special_defaults_agree_too():
     assert _signature_defaults(synthesize)["upsample"] is None
     assert _signature_defaults(make_config)["upsample"] is None
     assert _cli_defaults("synth")["upsample"] is None
+    # NP-MRF variant: None everywhere means "the relaxation's choice" (coherent for icm)
+    assert _signature_defaults(synthesize)["variant"] is None
+    assert _signature_defaults(make_config)["variant"] is None
+    assert _cli_defaults("synth")["variant"] is None
+    assert make_config().variant == SynthesisConfig.variant == "coherent"
     # NP_K iterations: one number for every level
     one = _signature_defaults(kopf_synthesize)["iterations"]
     assert one == _signature_defaults(make_kopf_config)["iterations"]

@@ -30,14 +30,14 @@ def _ihc():
 
 PINNED = {
     "npmrf_icm_default": (
-        lambda: npmrf3d.synthesize(checker(), size=16, window=5, levels=2, rng=7),
+        lambda: npmrf3d.synthesize(checker(), size=16, window=5, levels=2, variant="sharp", rng=7),
         "d8188583ec25a2002eefc7b6788956cca79a1e5f2bc00d77cfafbe63f7876807"),
     "npmrf_icm_literal": (
         lambda: npmrf3d.synthesize(checker(), size=16, window=5, levels=2, variant="literal", rng=7),
         "133d6b8c5539b2af7e2a5ce4b136d4504587e5ff6a9593dbd5154d452e95fbd3"),
     "npmrf_icm_8of8_fixed": (
         lambda: npmrf3d.synthesize(checker(), size=16, window=3, levels=2, upsample="8/8",
-                                   inherit="fixed", views="front,right", rng=5),
+                                   inherit="fixed", views="front,right", variant="sharp", rng=5),
         "95fb8f536f248435bf22829e9a7d5645c7fd1571e81cc6f523d6c8063351dd6e"),
     "npmrf_anneal_heatbath": (
         lambda: npmrf3d.synthesize(_ihc(), size=8, window=3, levels=2, relaxation="anneal",

@@ -77,7 +77,7 @@ def test_catalog_declares_the_seven_studies_and_ground_truth():
     assert {r.method for r in STUDIES["heuristics"].runs()} >= {"ML_H1a", "ML_H1b", "ML_H2a",
                                                                 "ML_H2b"}
     npk = STUDIES["npk"].runs("full")
-    assert {r.algorithm for r in npk} == {"npmrf", "kopf", "control"}
+    assert {r.algorithm for r in npk} == {"npmrf", "kopf", "chen-wang", "coherent", "control"}
     assert len({r.exemplar for r in npk}) >= 14
     assert all(dict(r.params)["relaxation"] == "anneal" for r in npk if r.algorithm == "npmrf")
     views = {dict(r.params)["views"] for r in STUDIES["views"].runs()}

@@ -74,7 +74,7 @@ def _level_setup(window=5, shape=(16, 16, 16), seed=0):
     ex = npmrf3d.load_exemplar(None)[:32, :32]
     labels, (image,) = make_labels([ex], rng=rng)
     freq = np.bincount(image.ravel(), minlength=len(labels)) / image.size
-    rule = VARIANTS["default"]
+    rule = VARIANTS["sharp"]
     models, info = build_view_models({"front": image, "right": image, "top": image}, labels,
                                      window=window, level=0, rule=rule)
     parent = random_state(tuple(n // 2 for n in shape), labels, freq, rng)

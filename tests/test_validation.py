@@ -20,6 +20,7 @@ def no_compiled_work(monkeypatch):
         raise AssertionError("validation passed: synthesis started")
 
     monkeypatch.setattr(synthesis, "run", forbidden)
+    monkeypatch.setattr(synthesis, "_run_coherent", forbidden)
     monkeypatch.setattr(synthesis, "build_view_models", forbidden)
 
 
@@ -252,9 +253,12 @@ def test_per_view_exemplar_is_validated_with_its_view_name(grey):
 def test_sample_decision_needs_an_objective(grey, heuristic):
     with pytest.raises(ParameterError, match=rf"decision 'sample' needs a heuristic with an "
                                              rf"objective.*{heuristic}"):
-        call(grey, heuristic=heuristic, decision="sample")
-    # the default variant samples: the same mistake without naming the decision
+        call(grey, heuristic=heuristic, decision="sample", variant="sharp")
+    # the sharp variant samples: the same mistake without naming the decision
     with pytest.raises(ParameterError, match="decision 'sample'"):
+        call(grey, heuristic=heuristic, variant="sharp")
+    # the coherent variant (the default) ranks candidates by an objective too
+    with pytest.raises(ParameterError, match="variant 'coherent' ranks candidates by an objective"):
         call(grey, heuristic=heuristic)
 
 

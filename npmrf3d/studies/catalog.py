@@ -77,6 +77,10 @@ _QUICK_ANNEAL = (("proposals", 2),)
 
 
 def _m(name: str, algorithm: str = "npmrf", **params) -> Method:
+    # the paper's studies compare full-Parzen NP-MRF settings: they keep the rule they were
+    # defined with ("sharp", the default before the coherent variant) unless they name one
+    if algorithm == "npmrf" and "variant" not in params and params.get("relaxation", "icm") == "icm":
+        params = {**params, "variant": "sharp"}
     return Method(name, algorithm, tuple(params.items()))
 
 
@@ -95,7 +99,7 @@ HEURISTICS = Study(
         _m("ML_H1b", heuristic="ML_H1b", variant="literal"),
         _m("ML_H2a", heuristic="ML_H2a", variant="literal"),
         _m("ML_H2b", heuristic="ML_H2b", variant="literal"),
-        _m("ML_H2b-default", heuristic="ML_H2b", variant="default"),
+        _m("ML_H2b-default", heuristic="ML_H2b", variant="sharp"),
     ),
     full=Scale(exemplars=GREY_EXEMPLARS, **_FULL),
     quick=Scale(**_QUICK),
@@ -199,6 +203,8 @@ NPK = Study(
         _m("ML_H2b-anneal"),
         _m("ML_H2b-heat-bath", sampler="heat-bath"),
         _m("NP_K", "kopf", window=8),
+        _m("chen-wang", "chen-wang"),
+        _m("coherent", "coherent"),
         _m("control", "control"),
     ),
     full=Scale(exemplars=STUDY_EXEMPLARS, seeds=(0,), sizes=(32,), levels=2, crop=64),
