@@ -69,7 +69,14 @@ ETR_HINT = ("the etr: exemplars are terrain photographs of Debian's extremetuxra
 # --------------------------------------------------------------------------- methods
 
 def _npmrf_default(ex, size, levels, seed, *, palette=None, **_):
+    """``npmrf3d synth``'s default: since issue 12 the coherent variant (window 7 at every level)."""
     return npmrf3d.synthesize(ex, size=size, levels=levels, rng=seed, palette=palette).volume
+
+
+def _npmrf_sharp(ex, size, levels, seed, *, palette=None, **_):
+    """The full-Parzen rule that was the default before issue 12 (variant ``sharp``)."""
+    return npmrf3d.synthesize(ex, size=size, levels=levels, rng=seed, palette=palette,
+                              variant="sharp").volume
 
 
 def _npk(ex, size, levels, seed, **_):
@@ -89,12 +96,13 @@ def _registered(name):
 
 METHODS: dict[str, Callable[..., np.ndarray]] = {
     "npmrf-default": _npmrf_default,
+    "npmrf-sharp": _npmrf_sharp,
     "npk": _npk,
     "chen-wang": _registered("chen-wang"),
     "coherent": _registered("coherent"),
 }
 #: Methods that take ``palette`` (the others never see it, and their cache key has none).
-PALETTE_METHODS = {"npmrf-default"}
+PALETTE_METHODS = {"npmrf-default", "npmrf-sharp"}
 
 
 # --------------------------------------------------------------------------- exemplars
