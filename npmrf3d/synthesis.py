@@ -20,6 +20,7 @@ from .parzen import PRUNE, adaptive_floor, build_view_models
 from .pyramid import INHERIT, UPSAMPLING, Levels, LevelState, random_state, run_pyramid, upsample
 from .relax import RELAXATIONS
 from .relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
+from .resources import check_memory, npmrf_estimate
 
 __all__ = ["METHOD", "make_config", "npmrf_method", "run", "synthesize"]
 
@@ -205,6 +206,7 @@ def synthesize(
     generator = check.rng(rng)
     per_view = resolve_exemplars(exemplar, exemplars, config.views, window=config.window,
                                  levels=config.levels, toroidal=config.toroidal_exemplar)
+    check_memory(npmrf_estimate(config, per_view))
     return run(config, per_view, generator, progress=progress, checkpoint=checkpoint, t_start=t_start)
 
 
@@ -307,5 +309,6 @@ METHOD = SynthesisMethod(
     name="npmrf", run=npmrf_method, make_config=make_config, config_class=SynthesisConfig,
     synthesize=synthesize,
     fit=lambda c: {"window": c.window, "levels": c.levels, "toroidal": c.toroidal_exemplar},
+    resources=npmrf_estimate,
     description="the NP-MRF sampler (ICM or annealing; SPEC.md sections 2-5)",
 )

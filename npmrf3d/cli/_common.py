@@ -19,7 +19,9 @@ from tqdm import tqdm
 from ..errors import ParameterError
 from ..exemplar import exemplar_source, resolve_exemplars
 from ..neighborhood import VIEWS
+from ..methods import check_resources, estimate
 from ..pyramid import level_shape
+from ..resources import available_memory, format_bytes
 from ..runs import RUN_FILES, run_record, write_run
 
 PROG = "npmrf3d"
@@ -151,7 +153,24 @@ def prepare_run(args: argparse.Namespace, method, config):
     check_checkpoint(checkpoint)
     exemplar, per_view_sources, source_names = view_sources(args)
     per_view = resolve_exemplars(exemplar, per_view_sources, config.views, **method.fit(config))
+    if not getattr(args, "dry_run", False):
+        check_resources(method, config, per_view, hint=_RESOURCE_HINT)
     return out, checkpoint, per_view, source_names(config.views)
+
+
+_RESOURCE_HINT = "lower --size (or --levels, the exemplar size); --dry-run shows the estimate"
+
+
+def dry_run(method, config, per_view: dict) -> int:
+    """``--dry-run``: print what the run would need and whether it fits; write nothing."""
+    needed = estimate(method, config, per_view)
+    available = available_memory()
+    size = "x".join(str(n) for n in config.size)
+    say(f"{method.name} {size}: {needed.describe()}")
+    if available is not None:
+        fits = "fits" if needed.bytes <= available else "does NOT fit"
+        say(f"available memory: {format_bytes(available)} (the run {fits})")
+    return 0
 
 
 def run_method(args: argparse.Namespace, method, config, per_view: dict, *, checkpoint=None,
