@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import errno
 import os
 import pathlib
 import sys
@@ -25,6 +26,60 @@ from ..resources import available_memory, format_bytes
 from ..runs import RUN_FILES, run_record, write_run
 
 PROG = "npmrf3d"
+
+
+class Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line, ``npmrf3d <command>: error: ...``,
+    with exit code 2 (the usage block only with ``--help``); sub-parsers inherit the class."""
+
+    def error(self, message: str):
+        line = " ".join(str(message).split())
+        self.exit(2, f"{self.prog}: error: {line} (see '{self.prog} --help')\n")
+
+
+def positive_int(text: str) -> int:
+    """An argparse type: an integer >= 1."""
+    return _bounded_int(text, 1, "a positive integer")
+
+
+def non_negative_int(text: str) -> int:
+    """An argparse type: an integer >= 0."""
+    return _bounded_int(text, 0, "a non-negative integer")
+
+
+def _bounded_int(text: str, low: int, what: str) -> int:
+    try:
+        value = int(text)
+    except (TypeError, ValueError):
+        raise argparse.ArgumentTypeError(f"must be {what}; got {text!r}") from None
+    if value < low:
+        raise argparse.ArgumentTypeError(f"must be {what}; got {value}")
+    return value
+
+
+def os_error_message(exc: OSError) -> str:
+    """One line for an operating-system error while reading or writing (a full disk, a missing
+    permission, a path through a file)."""
+    reason = exc.strerror or str(exc) or type(exc).__name__
+    where = f" '{exc.filename}'" if getattr(exc, "filename", None) else ""
+    hint = "; free some space or choose another --out" if exc.errno == errno.ENOSPC else ""
+    return f"cannot read or write{where}: {reason}{hint}"
+
+
+def guarded(handler, args, argv, option_names=()) -> int:
+    """Run a command handler and turn every user-facing failure into one line and an exit code:
+    2 for user errors, operating-system errors (a full disk) and memory exhaustion, 130 for
+    Ctrl-C or SIGTERM."""
+    try:
+        return handler(args, argv)
+    except ParameterError as exc:
+        return error(str(exc), option_names)
+    except MemoryError:
+        return error("out of memory; lower --size (--dry-run shows what a run needs)")
+    except OSError as exc:
+        if isinstance(exc, BrokenPipeError):
+            raise
+        return error(os_error_message(exc))
 
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):

@@ -1,9 +1,11 @@
 """The ``npmrf3d`` parser and entry point.
 
 Every user mistake (bad option values, unreadable exemplars, an output folder that already
-holds a run) is reported as one line ``npmrf3d: error: <message>`` on stderr with exit code 2,
-before any synthesis work starts and without leaving files behind. Argparse usage errors also
-exit with 2 (with argparse's own message); Ctrl-C exits with 130.
+holds a run, a run larger than the memory, a full disk) is reported as one line
+``npmrf3d: error: <message>`` on stderr with exit code 2, before any synthesis work starts and
+without leaving files behind. Argparse usage errors are one line too,
+``npmrf3d <command>: error: ...`` with exit 2 (:class:`npmrf3d.cli._common.Parser`); Ctrl-C exits
+with 130.
 
 Sub-commands are the modules of :data:`COMMANDS`, a static list: each has
 ``register(commands, formatter_class)``, which adds its parser and sets ``handler=fn`` with
@@ -17,9 +19,8 @@ import os
 import sys
 
 from .. import __version__
-from ..errors import ParameterError
 from . import baseline, info, metrics, study, synth
-from ._common import PROG, HelpFormatter, error
+from ._common import PROG, HelpFormatter, Parser, guarded
 
 __all__ = ["COMMANDS", "build_parser", "main"]
 
@@ -31,7 +32,7 @@ OPTION_NAMES = synth.OPTION_NAMES
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``npmrf3d`` argument parser with every sub-command of :data:`COMMANDS`."""
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog=PROG,
         description="3D solid textures from one 2D exemplar with a non-parametric Markov random field.",
         epilog="Run 'npmrf3d synth --help' for the synthesis options.",
@@ -53,9 +54,7 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:  # --help, --version and usage errors (argparse printed them)
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
     try:
-        return args.handler(args, argv)
-    except ParameterError as exc:
-        return error(str(exc), OPTION_NAMES)
+        return guarded(args.handler, args, argv, OPTION_NAMES)
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130
