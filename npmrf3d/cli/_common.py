@@ -23,7 +23,7 @@ from ..neighborhood import VIEWS
 from ..methods import check_resources, estimate
 from ..pyramid import level_shape
 from ..resources import available_memory, format_bytes
-from ..runs import RUN_FILES, run_record, write_run
+from ..runs import RUN_FILES, OutputLock, run_record, write_run
 
 PROG = "npmrf3d"
 
@@ -214,6 +214,26 @@ def prepare_run(args: argparse.Namespace, method, config):
 
 
 _RESOURCE_HINT = "lower --size (or --levels, the exemplar size); --dry-run shows the estimate"
+
+
+class claim_output:
+    """``with claim_output(out, overwrite):`` the exclusive lock on ``--out`` for a whole run
+    (a second run into the same folder refuses at once), with the folder checked again under it."""
+
+    def __init__(self, out: pathlib.Path, overwrite: bool):
+        self.out, self.overwrite, self.lock = out, overwrite, OutputLock(out)
+
+    def __enter__(self):
+        self.lock.acquire()
+        try:
+            check_out(self.out, self.overwrite)
+        except BaseException:
+            self.lock.release()
+            raise
+        return self
+
+    def __exit__(self, *exc):
+        self.lock.release()
 
 
 def dry_run(method, config, per_view: dict) -> int:

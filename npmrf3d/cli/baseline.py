@@ -21,7 +21,7 @@ from ..errors import ParameterError
 from ..exemplar import BUNDLED_PREFIX
 from ..neighborhood import VIEWS
 from ..runs import RUN_FILES
-from ._common import dry_run, choices, default, parse_size, prepare_run, run_method, write_result
+from ._common import claim_output, dry_run, choices, default, parse_size, prepare_run, run_method, write_result
 
 __all__ = ["register"]
 
@@ -190,12 +190,13 @@ def _run(args: argparse.Namespace, argv: list[str]) -> int:
     out, checkpoint, per_view, sources = prepare_run(args, METHOD, config)
     if args.dry_run:
         return dry_run(METHOD, config, per_view)
-    result = run_method(args, METHOD, config, per_view, checkpoint=checkpoint, t_start=t_start,
-                        unit="iter", symbol="E", constraint=constraint, constraint_weight=weight)
-
-    title = (f"NP_K (Kopf et al. 2007), window {config.window}, {config.levels} levels, "
-             f"seed {config.seed}")
-    write_result(out, args, argv, "baseline kopf", result, per_view, sources, title,
-                 method=METHOD.name, constraint=args.constraint,
-                 constraint_weight=args.constraint_weight)
+    with claim_output(out, args.overwrite):
+        result = run_method(args, METHOD, config, per_view, checkpoint=checkpoint,
+                            t_start=t_start, unit="iter", symbol="E", constraint=constraint,
+                            constraint_weight=weight)
+        title = (f"NP_K (Kopf et al. 2007), window {config.window}, {config.levels} levels, "
+                 f"seed {config.seed}")
+        write_result(out, args, argv, "baseline kopf", result, per_view, sources, title,
+                     method=METHOD.name, constraint=args.constraint,
+                     constraint_weight=args.constraint_weight)
     return 0

@@ -23,7 +23,7 @@ from ..relax import RELAXATIONS
 from ..relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
 from ..runs import RUN_FILES
 from ..synthesis import METHOD
-from ._common import dry_run, PROG, choices, default, parse_size, prepare_run, run_method, say, write_result
+from ._common import claim_output, dry_run, PROG, choices, default, parse_size, prepare_run, run_method, say, write_result
 
 __all__ = ["register", "run"]
 
@@ -272,10 +272,10 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
         return dry_run(METHOD, config, per_view)
     if not args.quiet and config.palette is None and config.grey_levels is None:
         _note_many_values(per_view)
-    result = run_method(args, METHOD, config, per_view, checkpoint=checkpoint, t_start=t_start)
-
-    title = (f"npmrf3d {config.heuristic}, variant {config.variant}, window {config.window}, "
-             f"{config.levels} levels, seed {config.seed}")
-    write_result(out, args, argv, "synth", result, per_view, sources, title,
-                 method=METHOD.name, labels=int(len(result.labels)))
+    with claim_output(out, args.overwrite):
+        result = run_method(args, METHOD, config, per_view, checkpoint=checkpoint, t_start=t_start)
+        title = (f"npmrf3d {config.heuristic}, variant {config.variant}, window {config.window}, "
+                 f"{config.levels} levels, seed {config.seed}")
+        write_result(out, args, argv, "synth", result, per_view, sources, title,
+                     method=METHOD.name, labels=int(len(result.labels)))
     return 0
