@@ -300,6 +300,8 @@ class LevelProgress:
             self.bar = tqdm(total=max_sweeps, desc=f"level {level} ({side})", unit=self.unit,
                             file=sys.stderr, leave=True, dynamic_ncols=True)
         self.bar.set_postfix({self.symbol: f"{temperature:.4g}"}, refresh=False)
+        if max_sweeps != self.bar.total:  # the method corrected its expected step count
+            self.bar.total = max_sweeps
         if sweep > self.bar.n:
             self.bar.update(sweep - self.bar.n)
         else:
