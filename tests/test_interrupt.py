@@ -78,6 +78,29 @@ def test_sigkill_then_sigint_then_resume_is_bit_identical(tmp_path):
     assert hidden == []
 
 
+@pytest.mark.slow
+def test_kopf_sigkill_mid_level_then_resume_is_bit_identical(tmp_path):
+    run = ["baseline", "kopf", "--size", "32", "--levels", "2", "--seed", "2", "--quiet"]
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+
+    def start(*extra):
+        return subprocess.Popen([sys.executable, "-m", "npmrf3d", *run, *extra], cwd=tmp_path,
+                                env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+    reference = start("--out", "ref")
+    assert reference.communicate(timeout=600)[1] == "" and reference.returncode == 0
+    checkpoint = tmp_path / "k.npz"
+    first = start("--out", "run", "--checkpoint", "k.npz")
+    _wait_for(checkpoint.exists, first)
+    first.send_signal(signal.SIGKILL)
+    first.communicate(timeout=60)
+    assert first.returncode == -signal.SIGKILL and not (tmp_path / "run").exists()
+    last = start("--out", "run", "--checkpoint", "k.npz")
+    assert last.communicate(timeout=600)[1] == "" and last.returncode == 0
+    assert (tmp_path / "run" / "volume.npy").read_bytes() == (tmp_path / "ref" / "volume.npy").read_bytes()
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []
+
+
 def _checkpoint(tmp_path) -> pathlib.Path:
     path = tmp_path / "c.npz"
     io.save_checkpoint(path, volume=np.arange(64, dtype=np.float32), level=1, config="{}")

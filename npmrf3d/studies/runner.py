@@ -1,5 +1,9 @@
 """Run a study's grid on Dask (or serially) and write its runs, table and figures.
 
+(Why over 400 lines: besides the runner, the up-front checks that refuse a bad --workers,
+--threads, --scheduler address or study folder before anything is created live here, beside
+the only code that uses them.)
+
 Layout of the output (``OUT`` is ``--out``)::
 
     OUT/<study>/study.json            declaration, options, scheduler, versions, wall time
