@@ -41,9 +41,11 @@ KOPF_CHUNK_BYTES = 48 * 2**20
 #: NP_K: voxels gathered per optimisation batch (mirrors _kopf_steps._SWEEP_CHUNK).
 KOPF_SWEEP_CHUNK = 1 << 15
 #: Rough throughputs on this project's 2-core machine (README, Performance), for time guesses:
-#: NP-MRF multiply-adds of the patch-distance loop per second, NP_K kd-tree queries per second.
+#: NP-MRF multiply-adds of the patch-distance loop per second; NP_K kd-tree queries per second
+#: of wall time with the optimisation phase included (the README's jobs: 64^3 ICM 89 s, guessed
+#: 2 min; 64^3 Metropolis annealing 7.3 min, guessed 11 min; NP_K 128^3 2.6 min, guessed 2.5 min).
 NPMRF_FLOPS = 1.3e10
-KOPF_QUERIES = 1.2e5
+KOPF_QUERIES = 6.0e4
 #: ICM sweeps per level assumed by the time guess (the stop rule usually needs about 8).
 ICM_SWEEPS_GUESS = 10
 
