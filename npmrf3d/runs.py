@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 import pathlib
 import shutil
+import socket
 import tempfile
 from collections.abc import Mapping
 from datetime import datetime, timezone
@@ -121,11 +122,12 @@ _HELD: dict[pathlib.Path, int] = {}
 
 class OutputLock:
     """An exclusive claim on an output folder: a lock file created with ``O_EXCL`` beside it
-    (``.NAME.lock`` in its nearest existing ancestor) holding the owner's PID.
+    (``.NAME.lock`` in its nearest existing ancestor) holding the owner's PID and host.
 
-    A second run into the same folder, in this or another process on this machine, is refused
-    with a :class:`ParameterError` while the owner lives; a lock left by a killed run (its PID
-    is dead) is taken over. Re-entrant within one process. Use as a context manager.
+    A second run into the same folder, in this or another process, is refused with a
+    :class:`ParameterError` while the owner lives; a lock left by a killed run on this host (its
+    PID is dead) is taken over; a lock from another host (a shared file system) is never taken
+    over. Re-entrant within one process. Use as a context manager.
     """
 
     def __init__(self, out_dir: str | os.PathLike[str]):
@@ -149,9 +151,10 @@ class OutputLock:
             try:
                 fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
             except FileExistsError:
-                owner = _lock_owner(path)
-                if owner is None or _pid_alive(owner):
+                owner, host = _lock_owner(path)
+                if owner is None or host != socket.gethostname() or _pid_alive(owner):
                     who = f"PID {owner}" if owner is not None else "another run"
+                    who += f" on {host}" if host and host != socket.gethostname() else ""
                     raise ParameterError(
                         f"output folder '{self.target}' is in use by another run ({who}, lock "
                         f"file '{path}'); wait for it to finish or choose another --out") from None
@@ -164,7 +167,7 @@ class OutputLock:
                 raise ParameterError(f"output folder '{self.target}' cannot be locked: "
                                      f"{exc.strerror or exc}") from None
             with os.fdopen(fd, "w", encoding="ascii") as handle:
-                handle.write(f"{os.getpid()}\n")
+                handle.write(f"{os.getpid()} {socket.gethostname()}\n")
             _HELD[path] = 1
             self.path = path
             clean_stale_staging(self.target)
@@ -185,11 +188,13 @@ class OutputLock:
                 pass
 
 
-def _lock_owner(path: pathlib.Path) -> int | None:
+def _lock_owner(path: pathlib.Path) -> tuple[int | None, str | None]:
+    """(PID, host) written in a lock file; a lock without a host is this host's."""
     try:
-        return int(path.read_text(encoding="ascii").split()[0])
-    except (OSError, ValueError, IndexError):
-        return None
+        parts = path.read_text(encoding="ascii").split()
+        return int(parts[0]), (parts[1] if len(parts) > 1 else socket.gethostname())
+    except (OSError, ValueError, IndexError, UnicodeError):
+        return None, None
 
 
 def _staging_owner(name: str) -> int | None:

@@ -37,9 +37,12 @@ def test_second_lock_on_one_folder_is_refused_while_the_owner_lives(tmp_path):
     lock.write_text(f"{os.getppid()}\n")  # a live process other than this one
     with pytest.raises(ParameterError, match="in use by another run"):
         OutputLock(out).acquire()
+    lock.write_text(f"{_dead_pid()} elsewhere.example\n")  # another host: never taken over
+    with pytest.raises(ParameterError, match="on elsewhere.example"):
+        OutputLock(out).acquire()
     lock.write_text(f"{_dead_pid()}\n")  # its owner died: taken over
     with OutputLock(out):
-        assert lock.read_text().strip() == str(os.getpid())
+        assert lock.read_text().split()[0] == str(os.getpid())
         with OutputLock(out):  # re-entrant in one process
             pass
         assert lock.exists()
