@@ -23,6 +23,7 @@ Conventions
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import importlib.metadata
 import json
 import os
@@ -387,11 +388,30 @@ def save_checkpoint(path: str | os.PathLike[str], /, **arrays: Any) -> pathlib.P
                 f"got {type(value.item() if value.ndim == 0 else value).__name__}"
             )
 
+    if CHECKSUM in arrays:
+        raise TypeError(f"checkpoint value name {CHECKSUM!r} is reserved")
+    arrays[CHECKSUM] = np.asarray(_checksum(arrays))
+
     def write(tmp: pathlib.Path) -> None:
         with open(tmp, "wb") as handle:  # a handle keeps np.savez from appending ".npz"
             np.savez(handle, **arrays)
+            handle.flush()
+            os.fsync(handle.fileno())
 
     return atomic_write(path, write)
+
+
+#: Name of the member holding the SHA-256 of every other member (names, dtypes, shapes, bytes).
+CHECKSUM = "npmrf3d_checksum"
+
+
+def _checksum(arrays: Mapping[str, np.ndarray]) -> str:
+    digest = hashlib.sha256()
+    for name in sorted(n for n in arrays if n != CHECKSUM):
+        value = np.ascontiguousarray(arrays[name])
+        digest.update(f"{name}|{value.dtype.str}|{value.shape}|".encode())
+        digest.update(value.tobytes())
+    return digest.hexdigest()
 
 
 def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
@@ -413,7 +433,15 @@ def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
         with open(path, "rb") as handle, np.load(handle, allow_pickle=False) as npz:
             items = {name: npz[name] for name in npz.files}
     except Exception as exc:
-        raise ParameterError(f"{what} '{path}' cannot be read: {_reason(exc)}") from exc
+        raise ParameterError(f"{what} '{path}' cannot be read (damaged or not a checkpoint): "
+                             f"{_reason(exc)}; delete it to start afresh") from exc
+    if CHECKSUM not in items:
+        raise ParameterError(f"{what} '{path}' is not an npmrf3d checkpoint (it has no checksum); "
+                             f"delete it or choose another --checkpoint")
+    stored = str(items.pop(CHECKSUM))
+    if _checksum(items) != stored:
+        raise ParameterError(f"{what} '{path}' is damaged (its checksum does not match its "
+                             f"contents); delete it to start afresh")
     return {name: value.item() if value.ndim == 0 else value for name, value in items.items()}
 
 

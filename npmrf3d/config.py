@@ -185,6 +185,11 @@ class SynthesisMethod:
         :func:`npmrf3d.exemplar.resolve_exemplars` checks every exemplar against.
     description : str
         One line for ``npmrf3d info`` and error messages.
+    resources : callable, optional
+        ``resources(config, exemplar_shapes) -> npmrf3d.resources.Estimate``: the peak memory
+        (and a rough time) of a run, from its configuration and the (H, W, C) shape of each
+        view's exemplar, before anything is allocated. None: the volume and one work copy
+        (:func:`npmrf3d.resources.generic_estimate`).
     """
 
     name: str
@@ -194,3 +199,4 @@ class SynthesisMethod:
     synthesize: Callable[..., SynthesisResult]
     fit: Callable[[Any], dict]
     description: str = ""
+    resources: Callable[[Any, dict], Any] | None = None

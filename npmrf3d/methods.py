@@ -16,11 +16,11 @@ methods (they make no volume from an exemplar); they stay in :mod:`npmrf3d.studi
 from __future__ import annotations
 
 from . import _validation as check
-from . import coherent, synthesis
+from . import coherent, resources, synthesis
 from .baselines import chen_wang, kopf
 from .config import SynthesisMethod
 
-__all__ = ["ALIASES", "METHODS", "get_method"]
+__all__ = ["ALIASES", "METHODS", "check_resources", "estimate", "get_method"]
 
 #: name -> method, in the order ``npmrf3d info`` lists them.
 METHODS: dict[str, SynthesisMethod] = {
@@ -47,3 +47,18 @@ def get_method(name: str) -> SynthesisMethod:
     if key not in METHODS:
         check.fail(f"method must be one of {', '.join(METHODS)}; got {name!r}")
     return METHODS[key]
+
+
+def estimate(method: SynthesisMethod, config, per_view: dict) -> resources.Estimate:
+    """What a run of ``method`` with ``config`` will need (``per_view``: view -> exemplar array
+    or its (H, W, C) shape), from the method's ``resources`` hook (a generic one without)."""
+    hook = method.resources or resources.generic_estimate
+    return hook(config, per_view)
+
+
+def check_resources(method: SynthesisMethod, config, per_view: dict, **kwargs) -> resources.Estimate:
+    """:func:`estimate`, refused by :func:`npmrf3d.resources.check_memory` beyond the machine's
+    available memory (a ``ResourceError``, one line with exit 2 on the command line)."""
+    needed = estimate(method, config, per_view)
+    resources.check_memory(needed, **kwargs)
+    return needed

@@ -165,7 +165,8 @@ class Levels:
         raise NotImplementedError
 
     def start(self, level: int, state: Any) -> tuple[int, float]:
-        """(steps at most, the level quantity before the first step) for progress."""
+        """(steps expected, the level quantity before the first step) for progress; ``relax``
+        may correct the expected steps as it goes (``on_step(step, value, expected)``)."""
         raise NotImplementedError
 
     def relax(self, level: int, state: Any, rng: np.random.Generator,
@@ -204,7 +205,8 @@ def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressC
         The only source of randomness; restored from the checkpoint on resume.
     progress : callable, optional
         ``progress(level, step, steps, value)`` before the first step of a level (``step = 0``)
-        and after every step.
+        and after every step; ``steps`` is the number of steps expected on the level, which a
+        method may correct as it goes (ICM: the sweeps its stop rule will need).
     checkpoint : path, optional
         A ``.npz`` file written after each level; if it exists and matches ``method.key`` and
         ``method.fingerprint``, the run resumes after its last finished level.
@@ -232,9 +234,9 @@ def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressC
         state = method.initial(shape, rng) if state is None else method.upsample(state, rng)
         steps, value = method.start(level, state)
 
-        def on_step(step, value, level=level, steps=steps):
+        def on_step(step, value, expected=None, level=level, steps=steps):
             if progress is not None:
-                progress(level, step, steps, value)
+                progress(level, step, steps if expected is None else expected, value)
 
         if progress is not None:
             progress(level, 0, steps, value)

@@ -21,6 +21,8 @@ from .parzen import PRUNE, adaptive_floor, build_view_models
 from .pyramid import INHERIT, UPSAMPLING, Levels, LevelState, random_state, run_pyramid, upsample
 from .relax import RELAXATIONS
 from .relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
+from .relax.icm import expected_sweeps
+from .resources import check_memory, npmrf_estimate
 
 __all__ = ["METHOD", "make_config", "npmrf_method", "run", "synthesize"]
 
@@ -190,8 +192,10 @@ def synthesize(
     rng : None, int or numpy Generator
         Seed; the result depends on it only (not on the number of threads).
     progress : callable, optional
-        Called as ``progress(level, sweep, max_sweeps, global_temperature)`` before the first
-        sweep of each level (``sweep = 0``) and after every sweep.
+        Called as ``progress(level, sweep, expected_sweeps, global_temperature)`` before the
+        first sweep of each level (``sweep = 0``) and after every sweep; for ICM
+        ``expected_sweeps`` is the sweeps the stop rule will need, corrected as it goes
+        (:func:`npmrf3d.relax.icm.expected_sweeps`), for annealing ``proposals``.
     checkpoint : path, optional
         A ``.npz`` file written after each level; if it exists and holds a checkpoint of the
         same configuration, synthesis resumes after its last finished level.
@@ -222,6 +226,7 @@ def synthesize(
     generator = check.rng(rng)
     per_view = resolve_exemplars(exemplar, exemplars, config.views, window=config.window,
                                  levels=config.levels, toroidal=config.toroidal_exemplar)
+    check_memory(npmrf_estimate(config, per_view))
     return npmrf_method(per_view, config, generator, progress=progress, checkpoint=checkpoint,
                         t_start=t_start)
 
@@ -256,13 +261,27 @@ class _NpmrfLevels(Levels):
     def start(self, level, state):
         if self.config.relaxation == "anneal":
             return self.options.proposals, self.options.t0
-        return self.options.max_sweeps, float(state.temps.sum(dtype=np.float64))
+        initial = float(state.temps.sum(dtype=np.float64))
+        return self._expected([initial], state), initial
+
+    def _expected(self, history, state):
+        """ICM: the sweeps the stop rule will need (corrected after every sweep)."""
+        o = self.options
+        return expected_sweeps(history, n_voxels=state.temps.size, xi=o.xi, stop=o.stop,
+                               max_sweeps=o.max_sweeps, n_union=self.models.union_offsets.shape[0])
 
     def relax(self, level, state, rng, on_step):
         config, rule = self.config, self.config.rule
         specific = dataclasses.asdict(self.options)
         if config.relaxation == "icm":
             specific.update(decision=DECISIONS[rule.decision], tau=rule.tau)
+            seen = [float(state.temps.sum(dtype=np.float64))]
+
+            def on_sweep(sweep, value, report=on_step):
+                seen.append(value)
+                report(sweep, value, self._expected(seen, state))
+
+            on_step = on_sweep
         history, stats = self.relax_level(
             state.volume, state.labels_volume, state.temps, state.inherited, self.models,
             self.classes, heuristic=self.heuristic.code, resynth=config.inherit == "resynth",
@@ -347,5 +366,6 @@ METHOD = SynthesisMethod(
     name="npmrf", run=npmrf_method, make_config=make_config, config_class=SynthesisConfig,
     synthesize=synthesize,
     fit=lambda c: {"window": c.window, "levels": c.levels, "toroidal": c.toroidal_exemplar},
+    resources=npmrf_estimate,
     description="the NP-MRF sampler (ICM or annealing; SPEC.md sections 2-5)",
 )

@@ -134,7 +134,9 @@ def test_info_prints_version_and_registries(capsys):
 
 def test_no_command_is_a_usage_error(capsys):
     code, out, err = run_cli(capsys)
-    assert code == 2 and "usage:" in err and out == ""
+    assert code == 2 and out == "" and "usage:" not in err
+    assert err.strip().splitlines() == [
+        "npmrf3d: error: the following arguments are required: COMMAND (see 'npmrf3d --help')"]
 
 
 # --------------------------------------------------------------------------- successful runs
@@ -215,7 +217,8 @@ def test_keyboard_interrupt_exits_130(tmp_path, exemplar, capsys, monkeypatch):
     monkeypatch.setattr(npmrf3d.synthesis, "run", interrupted)
     out_dir = tmp_path / "run"
     code, out, err = run_cli(capsys, "synth", str(exemplar), *TINY, "--variant", "sharp", "--out", str(out_dir))
-    assert code == 130 and err.strip() == "npmrf3d: interrupted"
+    assert code == 130 and len(err.strip().splitlines()) == 1
+    assert err.startswith("npmrf3d: interrupted; nothing was written")
     assert not out_dir.exists()
 
 
@@ -317,11 +320,12 @@ def test_output_path_that_is_a_file_is_a_user_error(tmp_path, exemplar, capsys):
     assert target.read_text() == "not a folder"
 
 
-def test_non_numeric_option_is_an_argparse_usage_error(tmp_path, exemplar, capsys):
+def test_non_numeric_option_is_a_one_line_usage_error(tmp_path, exemplar, capsys):
     out_dir = tmp_path / "out"
     code, out, err = run_cli(capsys, "synth", str(exemplar), "--window", "seven",
                              "--out", str(out_dir))
-    assert code == 2 and "usage:" in err and "--window" in err
+    assert code == 2 and "usage:" not in err and len(err.strip().splitlines()) == 1
+    assert err.startswith("npmrf3d synth: error: argument --window: invalid int value")
     assert not out_dir.exists()
 
 

@@ -294,7 +294,7 @@ def test_study_script_entry_point(tmp_path):
     assert study_main("views", ["--quick", "--out", str(tmp_path), "--scheduler", "serial",
                                 "--quiet"]) == 0
     assert study_main("views", ["--quick", "--out", str(tmp_path), "--scheduler", "serial",
-                                "--quiet", "--exemplars", "nope.png"]) == 0  # failed run, recorded
+                                "--quiet", "--exemplars", "nope.png"]) == 1  # failed run: recorded, exit 1
     rows = runner.read_results(tmp_path / "views" / "results.csv")
     assert {r["status"] for r in rows} == {"failed"} and "does not exist" in rows[0]["error"]
 

@@ -70,6 +70,7 @@ from ..config import DEFAULT_SIZE, SynthesisMethod, SynthesisResult
 from ..exemplar import resolve_exemplars
 from ..neighborhood import VIEW_AXES, VIEWS
 from ..pyramid import Levels, run_pyramid
+from ..resources import check_memory, kopf_estimate
 # The building blocks (search, IRLS optimisation, histograms, up-sampling, constraints) live in
 # _kopf_steps; they are re-exported here, where the tests and docs/kopf.md have always found them.
 from ._kopf_steps import (  # noqa: F401
@@ -293,6 +294,7 @@ def kopf_synthesize(
     generator = check.rng(rng)
     per_view = resolve_exemplars(exemplar, exemplars, config.views, window=config.window,
                                  levels=config.levels)
+    check_memory(kopf_estimate(config, per_view))
     channels = next(iter(per_view.values())).shape[2]
     target, tau = _constraint_arrays(constraint, constraint_weight, config.size, channels)
     return run_kopf(config, per_view, generator, constraint=target, constraint_weight=tau,
@@ -432,5 +434,6 @@ METHOD = SynthesisMethod(
     name="kopf", run=kopf_method, make_config=make_kopf_config, config_class=KopfConfig,
     synthesize=kopf_synthesize,
     fit=lambda c: {"window": c.window, "levels": c.levels, "toroidal": False},
+    resources=kopf_estimate,
     description="NP_K, texture optimisation with histogram matching (Kopf et al. 2007)",
 )

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import errno
 import os
 import pathlib
 import sys
@@ -19,10 +20,66 @@ from tqdm import tqdm
 from ..errors import ParameterError
 from ..exemplar import exemplar_source, resolve_exemplars
 from ..neighborhood import VIEWS
+from ..methods import check_resources, estimate
 from ..pyramid import level_shape
-from ..runs import RUN_FILES, run_record, write_run
+from ..resources import available_memory, format_bytes
+from ..runs import RUN_FILES, OutputLock, run_record, write_run
 
 PROG = "npmrf3d"
+
+
+class Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line, ``npmrf3d <command>: error: ...``,
+    with exit code 2 (the usage block only with ``--help``); sub-parsers inherit the class."""
+
+    def error(self, message: str):
+        line = " ".join(str(message).split())
+        self.exit(2, f"{self.prog}: error: {line} (see '{self.prog} --help')\n")
+
+
+def positive_int(text: str) -> int:
+    """An argparse type: an integer >= 1."""
+    return _bounded_int(text, 1, "a positive integer")
+
+
+def non_negative_int(text: str) -> int:
+    """An argparse type: an integer >= 0."""
+    return _bounded_int(text, 0, "a non-negative integer")
+
+
+def _bounded_int(text: str, low: int, what: str) -> int:
+    try:
+        value = int(text)
+    except (TypeError, ValueError):
+        raise argparse.ArgumentTypeError(f"must be {what}; got {text!r}") from None
+    if value < low:
+        raise argparse.ArgumentTypeError(f"must be {what}; got {value}")
+    return value
+
+
+def os_error_message(exc: OSError) -> str:
+    """One line for an operating-system error while reading or writing (a full disk, a missing
+    permission, a path through a file)."""
+    reason = exc.strerror or str(exc) or type(exc).__name__
+    where = f" '{exc.filename}'" if getattr(exc, "filename", None) else ""
+    hint = "; free some space or choose another --out" if exc.errno == errno.ENOSPC else ""
+    return f"cannot read or write{where}: {reason}{hint}"
+
+
+def guarded(handler, args, argv, option_names=()) -> int:
+    """Run a command handler and turn every user-facing failure into one line and an exit code:
+    2 for user errors, operating-system errors (a full disk) and memory exhaustion, 130 for
+    Ctrl-C or SIGTERM."""
+    try:
+        return handler(args, argv)
+    except ParameterError as exc:
+        return error(str(exc), option_names)
+    except MemoryError:
+        return error("out of memory; lower --size (--dry-run shows what a run needs)")
+    except OSError as exc:
+        if isinstance(exc, BrokenPipeError):
+            raise
+        return error(os_error_message(exc))
 
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
@@ -151,7 +208,44 @@ def prepare_run(args: argparse.Namespace, method, config):
     check_checkpoint(checkpoint)
     exemplar, per_view_sources, source_names = view_sources(args)
     per_view = resolve_exemplars(exemplar, per_view_sources, config.views, **method.fit(config))
+    if not getattr(args, "dry_run", False):
+        check_resources(method, config, per_view, hint=_RESOURCE_HINT)
     return out, checkpoint, per_view, source_names(config.views)
+
+
+_RESOURCE_HINT = "lower --size (or --levels, the exemplar size); --dry-run shows the estimate"
+
+
+class claim_output:
+    """``with claim_output(out, overwrite):`` the exclusive lock on ``--out`` for a whole run
+    (a second run into the same folder refuses at once), with the folder checked again under it."""
+
+    def __init__(self, out: pathlib.Path, overwrite: bool):
+        self.out, self.overwrite, self.lock = out, overwrite, OutputLock(out)
+
+    def __enter__(self):
+        self.lock.acquire()
+        try:
+            check_out(self.out, self.overwrite)
+        except BaseException:
+            self.lock.release()
+            raise
+        return self
+
+    def __exit__(self, *exc):
+        self.lock.release()
+
+
+def dry_run(method, config, per_view: dict) -> int:
+    """``--dry-run``: print what the run would need and whether it fits; write nothing."""
+    needed = estimate(method, config, per_view)
+    available = available_memory()
+    size = "x".join(str(n) for n in config.size)
+    say(f"{method.name} {size}: {needed.describe()}")
+    if available is not None:
+        fits = "fits" if needed.bytes <= available else "does NOT fit"
+        say(f"available memory: {format_bytes(available)} (the run {fits})")
+    return 0
 
 
 def run_method(args: argparse.Namespace, method, config, per_view: dict, *, checkpoint=None,
@@ -206,6 +300,8 @@ class LevelProgress:
             self.bar = tqdm(total=max_sweeps, desc=f"level {level} ({side})", unit=self.unit,
                             file=sys.stderr, leave=True, dynamic_ncols=True)
         self.bar.set_postfix({self.symbol: f"{temperature:.4g}"}, refresh=False)
+        if max_sweeps != self.bar.total:  # the method corrected its expected step count
+            self.bar.total = max_sweeps
         if sweep > self.bar.n:
             self.bar.update(sweep - self.bar.n)
         else:

@@ -19,7 +19,7 @@ from ..errors import ParameterError
 from ..exemplar import BUNDLED_PREFIX
 from ..neighborhood import VIEWS
 from ..runs import RUN_FILES
-from ._common import parse_size, prepare_run, run_method, write_result
+from ._common import claim_output, dry_run, parse_size, prepare_run, run_method, write_result
 
 __all__ = ["add_method_parser"]
 
@@ -86,6 +86,8 @@ def add_method_parser(commands, name: str, method, *, help: str, description: st
     run.add_argument("--overwrite", action="store_true",
                      help="replace the files of a previous run in --out instead of refusing")
     run.add_argument("--quiet", action="store_true", help="print nothing but errors (no progress bars, no summary)")
+    run.add_argument("--dry-run", action="store_true",
+                     help="print the memory the run needs and whether it fits, then exit; write nothing")
     run.add_argument("--checkpoint", default=None, metavar="PATH",
                      help="a .npz file written after each level; if it exists and matches this run, "
                           "synthesis resumes after its last finished level (default: none = no checkpoint)")
@@ -106,11 +108,14 @@ def add_method_parser(commands, name: str, method, *, help: str, description: st
                     message = _option(fname) + message[len(fname):]
             raise ParameterError(message) from None
         out_dir, checkpoint, per_view, sources = prepare_run(args, method, config)
-        result = run_method(args, method, config, per_view, checkpoint=checkpoint, t_start=t_start,
-                            unit="iter", symbol="E")
-        title = f"{method.description.split(':')[0]}, {config.levels} levels, seed {config.seed}"
-        write_result(out_dir, args, argv, parser.prog.replace("npmrf3d ", "", 1), result, per_view,
-                     sources, title, method=method.name)
+        if args.dry_run:
+            return dry_run(method, config, per_view)
+        with claim_output(out_dir, args.overwrite):
+            result = run_method(args, method, config, per_view, checkpoint=checkpoint,
+                                t_start=t_start, unit="iter", symbol="E")
+            title = f"{method.description.split(':')[0]}, {config.levels} levels, seed {config.seed}"
+            write_result(out_dir, args, argv, parser.prog.replace("npmrf3d ", "", 1), result,
+                         per_view, sources, title, method=method.name)
         return 0
 
     parser.set_defaults(handler=handler)

@@ -22,7 +22,7 @@ from ..errors import ParameterError
 from ..exemplar import BUNDLED_PREFIX
 from ..neighborhood import VIEWS
 from ..runs import RUN_FILES
-from ._common import choices, default, parse_size, prepare_run, run_method, write_result
+from ._common import claim_output, dry_run, choices, default, parse_size, prepare_run, run_method, write_result
 from ._generic import add_method_parser
 
 __all__ = ["register"]
@@ -122,6 +122,9 @@ def register(commands, formatter_class) -> None:
                      help="replace the files of a previous run in --out instead of refusing")
     run_group.add_argument("--quiet", action="store_true",
                      help="print nothing but errors (no progress bars, no summary)")
+    run_group.add_argument("--dry-run", action="store_true",
+                     help="print the memory (and rough time) the run needs and whether it fits; "
+                          "write nothing")
     run_group.add_argument("--checkpoint", default=None, metavar="PATH",
                      help="a .npz file written after each level; if it exists and matches this "
                           "run, synthesis resumes after its last finished level (default: none = "
@@ -224,12 +227,15 @@ def _run(args: argparse.Namespace, argv: list[str]) -> int:
         upsample=args.upsample, constrained=constraint is not None, seed=args.seed,
     )
     out, checkpoint, per_view, sources = prepare_run(args, METHOD, config)
-    result = run_method(args, METHOD, config, per_view, checkpoint=checkpoint, t_start=t_start,
-                        unit="iter", symbol="E", constraint=constraint, constraint_weight=weight)
-
-    title = (f"NP_K (Kopf et al. 2007), window {config.window}, {config.levels} levels, "
-             f"seed {config.seed}")
-    write_result(out, args, argv, "baseline kopf", result, per_view, sources, title,
-                 method=METHOD.name, constraint=args.constraint,
-                 constraint_weight=args.constraint_weight)
+    if args.dry_run:
+        return dry_run(METHOD, config, per_view)
+    with claim_output(out, args.overwrite):
+        result = run_method(args, METHOD, config, per_view, checkpoint=checkpoint,
+                            t_start=t_start, unit="iter", symbol="E", constraint=constraint,
+                            constraint_weight=weight)
+        title = (f"NP_K (Kopf et al. 2007), window {config.window}, {config.levels} levels, "
+                 f"seed {config.seed}")
+        write_result(out, args, argv, "baseline kopf", result, per_view, sources, title,
+                     method=METHOD.name, constraint=args.constraint,
+                     constraint_weight=args.constraint_weight)
     return 0

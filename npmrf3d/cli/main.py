@@ -1,9 +1,11 @@
 """The ``npmrf3d`` parser and entry point.
 
 Every user mistake (bad option values, unreadable exemplars, an output folder that already
-holds a run) is reported as one line ``npmrf3d: error: <message>`` on stderr with exit code 2,
-before any synthesis work starts and without leaving files behind. Argparse usage errors also
-exit with 2 (with argparse's own message); Ctrl-C exits with 130.
+holds a run, a run larger than the memory, a full disk) is reported as one line
+``npmrf3d: error: <message>`` on stderr with exit code 2, before any synthesis work starts and
+without leaving files behind. Argparse usage errors are one line too,
+``npmrf3d <command>: error: ...`` with exit 2 (:class:`npmrf3d.cli._common.Parser`); Ctrl-C exits
+with 130.
 
 Sub-commands are the modules of :data:`COMMANDS`, a static list: each has
 ``register(commands, formatter_class)``, which adds its parser and sets ``handler=fn`` with
@@ -14,12 +16,13 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
+import threading
 
 from .. import __version__
-from ..errors import ParameterError
 from . import baseline, coherent, info, metrics, study, synth
-from ._common import PROG, HelpFormatter, error
+from ._common import PROG, HelpFormatter, Parser, guarded
 
 __all__ = ["COMMANDS", "build_parser", "main"]
 
@@ -31,7 +34,7 @@ OPTION_NAMES = synth.OPTION_NAMES
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``npmrf3d`` argument parser with every sub-command of :data:`COMMANDS`."""
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog=PROG,
         description="3D solid textures from one 2D exemplar with a non-parametric Markov random field.",
         epilog="Run 'npmrf3d synth --help' for the synthesis options.",
@@ -44,6 +47,31 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _raise_interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+def _terminate_as_interrupt():
+    """SIGTERM ends a run like Ctrl-C (one line, exit 130); returns the previous handler."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    return signal.signal(signal.SIGTERM, _raise_interrupt)
+
+
+def interrupted_message(args) -> str:
+    """One line after Ctrl-C or SIGTERM: where the checkpoint is and how to resume."""
+    checkpoint = getattr(args, "checkpoint", None)
+    if checkpoint and os.path.isfile(checkpoint):
+        return (f"interrupted; the levels finished so far are in the checkpoint '{checkpoint}': "
+                f"run the same command again to resume")
+    if checkpoint:
+        return (f"interrupted before the first level finished; nothing to resume from (the "
+                f"checkpoint '{checkpoint}' is written after each level)")
+    if getattr(args, "handler", None) is not None and hasattr(args, "overwrite"):
+        return "interrupted; nothing was written (--checkpoint FILE makes a long run resumable)"
+    return "interrupted"
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; return the exit code (0 ok, 2 user error, 130 interrupted)."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -52,14 +80,16 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help, --version and usage errors (argparse printed them)
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+    previous = _terminate_as_interrupt()
     try:
-        return args.handler(args, argv)
-    except ParameterError as exc:
-        return error(str(exc), OPTION_NAMES)
+        return guarded(args.handler, args, argv, OPTION_NAMES)
     except KeyboardInterrupt:
-        print(f"{PROG}: interrupted", file=sys.stderr)
+        print(f"{PROG}: {interrupted_message(args)}", file=sys.stderr)
         return 130
     except BrokenPipeError:  # e.g. 'npmrf3d info | head': stop quietly, as other tools do
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 1
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)

@@ -15,7 +15,8 @@ from ..errors import ParameterError
 from ..studies.catalog import STUDIES, STUDY_EXEMPLARS, get_study
 from ..studies.report import write_report
 from ..studies.runner import run_study
-from ._common import PROG, HelpFormatter, RunsProgress, error, say
+from ._common import (PROG, HelpFormatter, Parser, RunsProgress, guarded, non_negative_int,
+                      positive_int, say)
 from .synth import OPTION_NAMES
 
 __all__ = ["register", "study_main"]
@@ -35,31 +36,31 @@ def _add_study_options(parser: argparse.ArgumentParser) -> None:
                              "in this process one run after the other, an address such as "
                              "tcp://host:8786 uses an existing Dask scheduler (start one with "
                              "'dask scheduler' and 'dask worker ADDRESS')")
-    parser.add_argument("--workers", type=int, default=None, metavar="N",
+    parser.add_argument("--workers", type=positive_int, default=None, metavar="N",
                         help="worker processes of the local cluster (default: None = the number "
                              "of cores divided by --threads)")
-    parser.add_argument("--threads", type=int, default=None, metavar="T",
+    parser.add_argument("--threads", type=positive_int, default=None, metavar="T",
                         help="numba threads per run (default: None = cores / workers on a local "
                              "cluster, numba's default when serial, the workers' "
                              "NUMBA_NUM_THREADS on an existing scheduler); workers x threads "
                              "never exceeds the cores")
-    parser.add_argument("--seeds", type=int, nargs="+", default=None, metavar="S",
+    parser.add_argument("--seeds", type=non_negative_int, nargs="+", default=None, metavar="S",
                         help="seeds to run (default: None = the study's: 0 1 in full mode, "
                              "0 in quick mode)")
     parser.add_argument("--exemplars", nargs="+", default=None, metavar="NAME",
                         help="exemplars to run (default: None = the study's); bundled names, "
                              "'etr:NAME' for an installed Extreme Tux Racer terrain, or image "
                              f"files; the NP_K study's list is {' '.join(STUDY_EXEMPLARS)}")
-    parser.add_argument("--size", type=int, nargs="+", default=None, metavar="N",
+    parser.add_argument("--size", type=positive_int, nargs="+", default=None, metavar="N",
                         help="volume sides (default: None = the study's: 32 in full mode)")
-    parser.add_argument("--levels", type=int, default=None, metavar="L",
+    parser.add_argument("--levels", type=positive_int, default=None, metavar="L",
                         help="pyramid levels (default: None = the study's: 2 in full mode)")
     parser.add_argument("--volume", default=None, metavar="FILE",
                         help="real 3-D volume (.npy or .tif) for the groundtruth study "
                              "(default: None; required by groundtruth)")
     parser.add_argument("--slice-axis", type=int, default=0, choices=(0, 1, 2), metavar="A",
                         help="groundtruth: the exemplar is a slice across this axis of --volume")
-    parser.add_argument("--slice-index", type=int, default=None, metavar="I",
+    parser.add_argument("--slice-index", type=non_negative_int, default=None, metavar="I",
                         help="groundtruth: index of that slice (default: None = the middle)")
     parser.add_argument("--quiet", action="store_true",
                         help="no progress bar and no messages, only errors")
@@ -82,6 +83,12 @@ def _run(args: argparse.Namespace, name: str | None = None) -> int:
         progress.close()
     if echo is not None:
         say(f"report: npmrf3d report {outcome.study_dir}")
+    failed, total = outcome.counts.get("failed", 0), len(outcome.rows)
+    if failed:
+        which = "all" if failed == total else f"{failed} of"
+        say(f"{PROG} study: error: {which} {total} runs failed (see the 'error' column of "
+            f"{outcome.study_dir / 'results.csv'}); re-running the command retries them", error=True)
+        return 1
     return 0
 
 
@@ -136,7 +143,7 @@ def register(commands, formatter_class) -> None:
 def study_main(name: str, argv: list[str] | None = None) -> int:
     """Run study ``name`` with the ``npmrf3d study`` options (for ``studies/<name>.py``)."""
     study = get_study(name)
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog=f"{pathlib.Path(sys.argv[0]).name}",
         description=f"{study.title}. {study.question} (same as '{PROG} study {name}')",
         formatter_class=HelpFormatter,
@@ -147,9 +154,7 @@ def study_main(name: str, argv: list[str] | None = None) -> int:
     except SystemExit as exc:
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
     try:
-        return _run(args, name)
-    except ParameterError as exc:
-        return error(str(exc), OPTION_NAMES)
+        return guarded(lambda a, _: _run(a, name), args, argv, OPTION_NAMES)
     except KeyboardInterrupt:
         say(f"{PROG}: interrupted", error=True)
         return 130

@@ -23,7 +23,7 @@ from ..relax import RELAXATIONS
 from ..relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
 from ..runs import RUN_FILES
 from ..synthesis import METHOD
-from ._common import PROG, choices, default, parse_size, prepare_run, run_method, say, write_result
+from ._common import claim_output, dry_run, PROG, choices, default, parse_size, prepare_run, run_method, say, write_result
 
 __all__ = ["register", "run"]
 
@@ -233,6 +233,10 @@ def register(commands, formatter_class) -> None:
         help="print nothing but errors (no progress bars, no summary)",
     )
     run_group.add_argument(
+        "--dry-run", action="store_true",
+        help="print the memory (and rough time) the run needs and whether it fits; write nothing",
+    )
+    run_group.add_argument(
         "--checkpoint", default=None, metavar="PATH",
         help="a .npz file written after each level; if it exists and matches this run, synthesis "
              "resumes after its last finished level (default: none = no checkpoint)",
@@ -270,12 +274,14 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
         palette=args.palette, toroidal_exemplar=args.toroidal_exemplar, seed=args.seed,
     )
     out, checkpoint, per_view, sources = prepare_run(args, METHOD, config)
+    if args.dry_run:
+        return dry_run(METHOD, config, per_view)
     if not args.quiet and config.palette is None and config.grey_levels is None:
         _note_many_values(per_view)
-    result = run_method(args, METHOD, config, per_view, checkpoint=checkpoint, t_start=t_start)
-
-    title = (f"npmrf3d {config.heuristic}, variant {config.variant}, window {config.window}, "
-             f"{config.levels} levels, seed {config.seed}")
-    write_result(out, args, argv, "synth", result, per_view, sources, title,
-                 method=METHOD.name, labels=int(len(result.labels)))
+    with claim_output(out, args.overwrite):
+        result = run_method(args, METHOD, config, per_view, checkpoint=checkpoint, t_start=t_start)
+        title = (f"npmrf3d {config.heuristic}, variant {config.variant}, window {config.window}, "
+                 f"{config.levels} levels, seed {config.seed}")
+        write_result(out, args, argv, "synth", result, per_view, sources, title,
+                     method=METHOD.name, labels=int(len(result.labels)))
     return 0

@@ -13,6 +13,7 @@ timings and metrics), the study figures and one preview per run
 from __future__ import annotations
 
 import base64
+import csv
 import html
 import json
 import math
@@ -180,12 +181,26 @@ section { border-top: 2px solid #888; margin-top: 2em; }
 """
 
 
+def _checked_section(study_dir: pathlib.Path) -> str:
+    """:func:`_study_section`, with damaged or foreign files refused as a ParameterError."""
+    try:
+        return _study_section(study_dir)
+    except ParameterError:
+        raise
+    except (ValueError, KeyError, TypeError, IndexError, AttributeError, UnicodeError, OSError,
+            csv.Error) as exc:
+        reason = str(exc).splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ParameterError(
+            f"study results in '{study_dir}' cannot be read (results.csv or study.json is damaged "
+            f"or was not written by 'npmrf3d study'): {type(exc).__name__}: {reason}") from None
+
+
 def build_report(results_dir) -> str:
     """The HTML text of the report on every study under ``results_dir``."""
     studies = find_studies(results_dir)
     created = datetime.now(timezone.utc).isoformat(timespec="seconds")
     toc = "".join(f"<li><a href='#study-{_esc(p.name)}'>{_esc(p.name)}</a></li>" for p in studies)
-    sections = "\n".join(_study_section(p) for p in studies)
+    sections = "\n".join(_checked_section(p) for p in studies)
     title = "npmrf3d studies" if len(studies) > 1 else f"npmrf3d study {studies[0].name}"
     return (f"<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>"
             f"<title>{_esc(title)}</title><style>{_STYLE}</style></head><body>"

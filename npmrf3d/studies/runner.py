@@ -1,5 +1,9 @@
 """Run a study's grid on Dask (or serially) and write its runs, table and figures.
 
+(Why over 400 lines: besides the runner, the up-front checks that refuse a bad --workers,
+--threads, --scheduler address or study folder before anything is created live here, beside
+the only code that uses them.)
+
 Layout of the output (``OUT`` is ``--out``)::
 
     OUT/<study>/study.json            declaration, options, scheduler, versions, wall time
@@ -255,7 +259,11 @@ def _run_dask(pending, study_dir, scheduler, workers, threads, echo, bar):
         where = f"local cluster: {workers} workers x {threads} numba threads"
         task_threads = threads
     else:
-        client = Client(scheduler, timeout="30s")
+        try:
+            client = Client(scheduler, timeout=f"{CONNECT_TIMEOUT}s")
+        except (OSError, TimeoutError) as exc:
+            raise ParameterError(f"cannot connect to the Dask scheduler {scheduler}: "
+                                 f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
         where = f"scheduler {scheduler}"
         task_threads = threads  # None: the workers' own NUMBA_NUM_THREADS
     rows = {}
@@ -279,6 +287,59 @@ def _run_dask(pending, study_dir, scheduler, workers, threads, echo, bar):
         if cluster is not None:
             cluster.close()
     return rows, {"scheduler": where, "workers": workers, "threads": task_threads}
+
+#: Seconds to wait for an existing Dask scheduler before giving up.
+CONNECT_TIMEOUT = 5
+#: Address schemes of dask.distributed's communication back-ends.
+_SCHEMES = ("tcp", "tls", "ucx", "inproc", "ws", "wss")
+
+
+def check_scheduler(scheduler):
+    """None, ``local``, ``serial`` or ``SCHEME://HOST:PORT`` (ParameterError otherwise)."""
+    if scheduler is None or scheduler in ("local", "serial"):
+        return scheduler
+    text = str(scheduler)
+    scheme, sep, rest = text.partition("://")
+    host, colon, port = rest.rpartition(":")
+    if not sep or scheme not in _SCHEMES or not host or not colon or not port.isdigit() \
+            or not 0 < int(port) < 65536:
+        raise ParameterError(f"--scheduler must be 'local', 'serial' or a Dask scheduler address "
+                             f"such as tcp://HOST:8786; got {text!r}")
+    return text
+
+
+def probe_scheduler(address: str, timeout: float | None = None) -> None:
+    """Fail fast (ParameterError) when nothing listens at a ``tcp://`` or ``tls://`` address."""
+    scheme, _, rest = address.partition("://")
+    if scheme not in ("tcp", "tls"):
+        return
+    host, _, port = rest.rpartition(":")
+    host = host.strip("[]")
+    try:
+        with socket.create_connection((host, int(port)), timeout=timeout or CONNECT_TIMEOUT):
+            pass
+    except OSError as exc:
+        reason = exc.strerror or str(exc) or type(exc).__name__
+        raise ParameterError(f"cannot reach the Dask scheduler {address}: {reason}; start one "
+                             f"with 'dask scheduler' or use --scheduler local") from None
+
+
+def check_study_dir(out, name: str) -> pathlib.Path:
+    """``out/name`` as an absolute path, refused if it or an ancestor is a file or is not
+    writable (checked before anything is created)."""
+    if not str(out).strip():
+        raise ParameterError("--out must name a folder; got an empty string")
+    study_dir = pathlib.Path(out).absolute() / name
+    ancestor = study_dir
+    while not ancestor.exists():
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        where = "exists and is not a folder" if ancestor == study_dir else f"is inside the file '{ancestor}'"
+        raise ParameterError(f"study folder '{study_dir}' {where}; choose another --out")
+    if not os.access(ancestor, os.W_OK | os.X_OK):
+        raise ParameterError(f"study folder '{study_dir}' cannot be written: '{ancestor}' is not writable")
+    return study_dir
+
 
 def _run_serial(pending, study_dir, threads, echo, bar):
     echo("serial: one run after the other in this process")
@@ -341,6 +402,11 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
     """
     echo = echo or (lambda message: None)
     t_start = time.perf_counter()
+    for name, value in (("workers", workers), ("threads", threads)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
+            raise ParameterError(f"--{name} must be a positive integer; got {value!r}")
+    scheduler = check_scheduler(scheduler)
+    study_dir = check_study_dir(out, study.name)
     reference = None
     if volume is not None:
         reference = str(pathlib.Path(volume).absolute())
@@ -353,10 +419,13 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
                              f"--volume FILE (.npy or .tif)")
     specs = study.runs(mode, seeds=seeds, exemplars=exemplars, sizes=sizes, levels=levels,
                        reference=reference, slice_axis=slice_axis, slice_index=slice_index)
-    study_dir = pathlib.Path(out).absolute() / study.name
-    if study_dir.exists() and not study_dir.is_dir():
-        raise ParameterError(f"output '{study_dir}' exists and is not a folder")
-    study_dir.mkdir(parents=True, exist_ok=True)
+    if scheduler not in (None, "local", "serial"):
+        probe_scheduler(scheduler)
+    try:
+        study_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ParameterError(f"study folder '{study_dir}' cannot be created: "
+                             f"{exc.strerror or exc}") from None
     started = datetime.now(timezone.utc).isoformat(timespec="seconds")
 
     rows: dict[str, dict] = {}

@@ -1,0 +1,278 @@
+"""What a run will need, computed from its configuration before anything is allocated.
+
+Every method of :data:`npmrf3d.methods.METHODS` has a ``resources(config, exemplars)``
+hook that returns an :class:`Estimate`: the peak memory of the run, split into named parts, and
+where it can be guessed a rough wall time. The formulas of the two built-in methods are here, in
+one place, counted from the arrays their code allocates (numbers of bytes per voxel of the
+finest level and per exemplar patch) and checked against measured peaks
+(``tests/test_resources.py``: within a factor of 2 of ``tracemalloc``'s peak). A new method
+registers its own hook (``SynthesisMethod(resources=...)``); one without a hook gets
+:func:`generic_estimate` (the volume and a work copy).
+
+:func:`check_memory` refuses an estimate beyond the machine's available memory
+(:func:`available_memory`: ``MemAvailable`` of ``/proc/meminfo``, else ``os.sysconf``) with a
+:class:`ResourceError`, which the command line prints as one line with exit code 2.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import ParameterError
+from .parzen import KERNEL_TABLE_BYTES
+
+__all__ = ["Estimate", "ResourceError", "available_memory", "check_memory", "format_bytes",
+           "generic_estimate", "kopf_estimate", "npmrf_estimate", "patch_count"]
+
+#: Bytes per voxel of the finest level that the NP-MRF sampler keeps or builds (SPEC.md 4-5):
+#: the level state (volume 4C, labels 4, temperatures 4, inherited 1), the parent level (1/8 of
+#: that), the colour classes (three int64 coordinates, 24) and the peak of building them
+#: (sort keys, order and coordinate copies, 64 in all while the parent is alive).
+NPMRF_CLASS_BUILD = 64
+NPMRF_CLASSES = 24
+#: Bytes of one float32 value.
+F4 = 4
+#: NP_K: neighbourhood vectors gathered per KD-tree batch (mirrors _kopf_steps._CHUNK_BYTES).
+KOPF_CHUNK_BYTES = 48 * 2**20
+#: NP_K: voxels gathered per optimisation batch (mirrors _kopf_steps._SWEEP_CHUNK).
+KOPF_SWEEP_CHUNK = 1 << 15
+#: Rough throughputs on this project's 2-core machine (README, Performance), for time guesses:
+#: NP-MRF multiply-adds of the patch-distance loop per second; NP_K kd-tree queries per second
+#: of wall time with the optimisation phase included (the README's jobs: 64^3 ICM 89 s, guessed
+#: 2 min; 64^3 Metropolis annealing 7.3 min, guessed 11 min; NP_K 128^3 2.6 min, guessed 2.5 min).
+NPMRF_FLOPS = 1.3e10
+KOPF_QUERIES = 6.0e4
+#: ICM sweeps per level assumed by the time guess (the stop rule usually needs about 8).
+ICM_SWEEPS_GUESS = 10
+
+
+class ResourceError(ParameterError):
+    """A run needs more memory than the machine has available (a user-facing error)."""
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Peak memory of a run in bytes, by part, and a rough wall time in seconds (or None)."""
+
+    parts: dict[str, int] = field(default_factory=dict)
+    seconds: float | None = None
+
+    @property
+    def bytes(self) -> int:
+        return int(sum(self.parts.values()))
+
+    def describe(self) -> str:
+        """One line: total, the parts, the time guess."""
+        parts = ", ".join(f"{name} {format_bytes(n)}" for name, n in self.parts.items() if n)
+        text = f"needs about {format_bytes(self.bytes)} ({parts})"
+        if self.seconds is not None:
+            text += f" and roughly {format_seconds(self.seconds)} on 2 cores"
+        return text
+
+
+def format_bytes(n: float) -> str:
+    """``1536`` -> ``'1.5 KiB'``."""
+    n = float(n)
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if abs(n) < 1024 or unit == "PiB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.3g} {unit}"
+        n /= 1024
+    return f"{n:.3g} PiB"  # pragma: no cover
+
+
+def format_seconds(s: float) -> str:
+    if s < 90:
+        return f"{s:.0f} s"
+    if s < 5400:
+        return f"{s / 60:.0f} min"
+    if s < 3 * 86400:
+        return f"{s / 3600:.1f} h"
+    return f"{s / 86400:.0f} days"
+
+
+def available_memory() -> int | None:
+    """Bytes the machine can give a new process now: ``MemAvailable`` of ``/proc/meminfo``,
+    else free physical pages from ``os.sysconf``; None when neither is known."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as handle:
+            for line in handle:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def check_memory(estimate: Estimate, *, available: int | None = None,
+                 hint: str = "lower --size, --levels or the exemplar size") -> None:
+    """Raise :class:`ResourceError` when ``estimate`` exceeds the available memory."""
+    available = available_memory() if available is None else available
+    if available is None or estimate.bytes <= available:
+        return
+    biggest = max(estimate.parts, key=estimate.parts.get)
+    raise ResourceError(
+        f"this run needs about {format_bytes(estimate.bytes)} of memory (most of it for the "
+        f"{biggest}); {format_bytes(available)} are available; {hint}")
+
+
+# --------------------------------------------------------------------------- shapes
+
+
+def _voxels(size) -> int:
+    return int(math.prod(int(n) for n in size))
+
+
+def patch_count(height: int, width: int, window: int, level: int, toroidal: bool = False) -> int:
+    """Exemplar patches of one view at ``level``, summed over its ``4**level`` decimation
+    phases (:func:`npmrf3d.parzen.build_view_models`)."""
+    f = 2 ** level
+    total = 0
+    for a in range(min(f, height)):
+        rows = len(range(a, height, f))
+        for b in range(min(f, width)):
+            cols = len(range(b, width, f))
+            if toroidal:
+                total += rows * cols
+            elif min(rows, cols) >= window:
+                total += (rows - window + 1) * (cols - window + 1)
+    return total
+
+
+def _shapes(exemplars) -> dict:
+    """view -> (H, W, C) from view -> array or shape."""
+    out = {}
+    for v, a in exemplars.items():
+        shape = tuple(int(x) for x in getattr(a, "shape", a))
+        out[v] = shape if len(shape) > 2 else (*shape[:2], 1)
+    return out
+
+
+def _channels(exemplars) -> int:
+    shapes = list(_shapes(exemplars).values())
+    return shapes[0][2] if shapes else 1
+
+
+def _distinct(exemplars) -> list:
+    """The distinct exemplars (arrays by identity, shapes by value)."""
+    seen = {}
+    for a in exemplars.values():
+        seen.setdefault(id(a) if hasattr(a, "shape") else tuple(a), a)
+    return list(seen.values())
+
+
+def _label_bound(exemplars) -> int:
+    """At most how many labels the exemplars make: their distinct values when the arrays are
+    given (cheap: exemplars are small), else their pixel count."""
+    count = 0
+    for a in _distinct(exemplars):
+        if hasattr(a, "shape"):
+            rows = np.asarray(a).reshape(-1, a.shape[2] if a.ndim > 2 else 1)
+            count += len(np.unique(rows, axis=0))
+        else:
+            count += int(a[0]) * int(a[1])
+    return count
+
+
+def _pixels(exemplars) -> int:
+    return sum(int(s[0]) * int(s[1]) for s in
+               (getattr(a, "shape", a) for a in _distinct(exemplars)))
+
+
+# --------------------------------------------------------------------------- methods
+
+
+def generic_estimate(config, exemplars) -> Estimate:
+    """A method without its own formula: the float32 volume and one work copy of it."""
+    c = _channels(exemplars)
+    volume = _voxels(config.size) * c * F4
+    return Estimate({"volume": volume, "work arrays": volume})
+
+
+def npmrf_estimate(config, exemplars) -> Estimate:
+    """Peak memory (and a time guess) of the NP-MRF sampler, :func:`npmrf3d.synthesize`.
+
+    ``exemplars``: view -> each constrained view's exemplar (an array, or its (H, W, C) shape).
+    The label count ``K`` is bounded by the distinct values (the pixels when only shapes are
+    given, or the palette / grey levels); the label kernel tables by their cap
+    (:data:`npmrf3d.parzen.KERNEL_TABLE_BYTES`).
+    """
+    exemplar_shapes = _shapes(exemplars)
+    n = _voxels(config.size)
+    c = _channels(exemplar_shapes)
+    views = len(exemplar_shapes)
+    w = config.window
+    m = w * w - 1
+    state = (F4 * c + 9) * n
+    parent = state // 8
+    # the finest level: building the colour classes while the parent lives, then the state,
+    # the classes and the up-sampling draws (int64) together
+    prepare = parent + n * NPMRF_CLASSES // 8 + n * NPMRF_CLASS_BUILD
+    relax = parent + state + n * NPMRF_CLASSES + 8 * n
+    work = max(prepare, relax) - state
+    patches = 0
+    for level in range(config.levels):
+        per_view = [patch_count(s[0], s[1], w, level, config.toroidal_exemplar)
+                    for s in exemplar_shapes.values()]
+        # each view's patch matrix (P, M*C) and its concatenation, then the padded transposed table
+        level_bytes = (2 * sum(per_view) + views * max(per_view or [0])) * m * c * F4
+        patches = max(patches, level_bytes)
+    pixels = _pixels(exemplars)
+    k = _label_bound(exemplars)
+    if config.palette is not None:
+        k = min(k, config.palette)
+    if config.grey_levels is not None:
+        k = min(k, config.grey_levels ** c)
+    k = min(k, 65536)
+    tables = views * k * k * 8 if views * k * k * 8 <= KERNEL_TABLE_BYTES else 0
+    labels = 3 * pixels * max(c, 2) * 8 + views * k * 8 * 4
+    # time: per sweep, every voxel and view scans the level's patches (M*C multiply-adds each)
+    sweeps = ICM_SWEEPS_GUESS if config.relaxation == "icm" else config.proposals
+    flops = 0.0
+    for level in range(config.levels):
+        p = max(patch_count(s[0], s[1], w, level, config.toroidal_exemplar)
+                for s in exemplar_shapes.values())
+        flops += sweeps * (n / 8 ** level) * views * p * m * c
+    if config.relaxation == "anneal" and config.sampler == "heat-bath":
+        flops *= 1.0 + k / 256
+    return Estimate({"volume": state, "work arrays": work, "exemplar patch tables": patches,
+                     "label tables": tables + labels}, seconds=flops / NPMRF_FLOPS)
+
+
+def kopf_estimate(config, exemplars) -> Estimate:
+    """Peak memory (and a time guess) of NP_K, :func:`npmrf3d.baselines.kopf_synthesize`."""
+    exemplar_shapes = _shapes(exemplars)
+    n = _voxels(config.size)
+    c = _channels(exemplar_shapes)
+    views = len(config.views)
+    w, g = config.window, config.grid
+    volume = F4 * c * n
+    # per iteration: assign (int32) and omega (float32) per view, one view's pair while searching,
+    # the random order (int64, copied once), the histogram bins (float64 copies of the volume)
+    loop = 8 * views * n + 8 * n + 16 * n + 24 * c * n + volume // 8
+    # search: neighbourhood vectors of one batch, their centred copy, the matched patches, the
+    # differences and the padded planes
+    vectors = min(KOPF_CHUNK_BYTES, -(-n // (g * g)) * w * w * c * F4)
+    search = 4 * vectors + volume
+    sweep = min(KOPF_SWEEP_CHUNK, n) * views * (-(-w // g)) ** 2 * 16
+    work = loop + max(search, sweep)
+    pixels = _pixels(exemplars)
+    patches = 0
+    for s in {tuple(s) for s in exemplar_shapes.values()}:
+        p = max(0, s[0] - w + 1) * max(0, s[1] - w + 1)
+        patches += p * w * w * c * (F4 * 3 + 8)  # patches, projections, kd-tree, PCA work
+    if config.constrained:
+        volume_extra = 2 * volume + F4 * n
+    else:
+        volume_extra = 0
+    queries = sum(config.iterations[config.levels - 1 - level] * views * (n / 8 ** level) / (g * g)
+                  for level in range(config.levels))
+    return Estimate({"volume": volume, "work arrays": work + volume_extra,
+                     "exemplar patch tables": patches + 8 * pixels * c},
+                    seconds=queries / KOPF_QUERIES)
