@@ -33,6 +33,7 @@ from .baselines import chen_wang
 from .config import SynthesisMethod, SynthesisResult
 from .exemplar import resolve_exemplars
 from .neighborhood import VIEWS
+from .resources import check_memory, coherent_estimate
 
 __all__ = ["METHOD", "CoherentConfig", "HEURISTIC_CODES", "coherent_synthesize", "make_coherent_config", "run"]
 
@@ -127,6 +128,7 @@ def coherent_synthesize(exemplar=None, *, exemplars: Mapping | None = None, rng=
     config = make_coherent_config(seed=seed, **options)
     generator = check.rng(rng)
     per_view = resolve_exemplars(exemplar, exemplars, config.views, **chen_wang._fit(config))
+    check_memory(coherent_estimate(config, per_view))
     return coherent_method(per_view, config, generator, progress=progress, checkpoint=checkpoint,
                            t_start=t_start)
 
@@ -142,4 +144,5 @@ METHOD = SynthesisMethod(
     name="coherent", run=coherent_method, make_config=make_coherent_config,
     config_class=CoherentConfig, synthesize=coherent_synthesize, fit=chen_wang._fit,
     description="the coherent NP-MRF sampler: NP-MRF likelihood over coherent candidates (issue 12)",
+    resources=coherent_estimate,
 )

@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -195,14 +196,56 @@ def generic_estimate(config, exemplars) -> Estimate:
     return Estimate({"volume": volume, "work arrays": volume})
 
 
+class _Coherent(NamedTuple):
+    size: tuple
+    window: tuple
+    levels: int
+    views: tuple
+    iterations: tuple
+    k: int
+
+
+#: Coherent search sites (voxel x view) per second on the 2-core machine (Chen–Wang benchmark).
+COHERENT_SITES = 2.5e5
+
+
+def coherent_estimate(config, exemplars) -> Estimate:
+    """Peak memory (and a time guess) of the coherent methods (Chen–Wang and the coherent NP-MRF
+    sampler, :mod:`npmrf3d.baselines.chen_wang`, :mod:`npmrf3d.coherent`): the volume, per view
+    its sources, matches, weights (int32, int32, float32), the visiting order (int64) and a copy
+    of the volume; per exemplar level the PCA projections (float64, 20 dimensions), the
+    k-coherence sets and the patch matrix the PCA is computed from."""
+    exemplar_shapes = _shapes(exemplars)
+    n = _voxels(config.size)
+    c = _channels(exemplar_shapes)
+    views = len(config.views)
+    volume = F4 * c * n
+    work = 12 * views * n + 12 * n + volume
+    w = max(config.window)
+    tables = 0
+    for shape in {tuple(s) for s in exemplar_shapes.values()}:
+        pixels = shape[0] * shape[1]
+        tables += pixels * (20 * 8 + 4 * config.k + 2 * 8 * w * w * c)
+    sites = sum(config.iterations[config.levels - 1 - level] * views * (n / 8 ** level)
+                for level in range(config.levels))
+    return Estimate({"volume": volume, "work arrays": work, "exemplar patch tables": tables},
+                    seconds=sites / COHERENT_SITES)
+
+
 def npmrf_estimate(config, exemplars) -> Estimate:
     """Peak memory (and a time guess) of the NP-MRF sampler, :func:`npmrf3d.synthesize`.
 
     ``exemplars``: view -> each constrained view's exemplar (an array, or its (H, W, C) shape).
     The label count ``K`` is bounded by the distinct values (the pixels when only shapes are
     given, or the palette / grey levels); the label kernel tables by their cap
-    (:data:`npmrf3d.parzen.KERNEL_TABLE_BYTES`).
+    (:data:`npmrf3d.parzen.KERNEL_TABLE_BYTES`). The ``coherent`` variant: :func:`coherent_estimate`
+    with its window at every level and Chen–Wang's iterations.
     """
+    if getattr(config, "variant", None) == "coherent":
+        iterations = (4, 4, 3)
+        iterations = (iterations * config.levels)[-config.levels:] if config.levels > 3 else iterations[-config.levels:]
+        return coherent_estimate(_Coherent(config.size, (config.window,) * config.levels, config.levels,
+                                           config.views, iterations, 5), exemplars)
     exemplar_shapes = _shapes(exemplars)
     n = _voxels(config.size)
     c = _channels(exemplar_shapes)

@@ -24,7 +24,7 @@ def test_expected_sweeps_bounds():
 @pytest.mark.parametrize("size, window, levels", [(16, 5, 2), (12, 3, 1)])
 def test_icm_progress_counts_the_sweeps_the_stop_rule_needs(size, window, levels):
     calls = []
-    result = npmrf3d.synthesize(None, size=size, window=window, levels=levels, rng=0,
+    result = npmrf3d.synthesize(None, size=size, window=window, levels=levels, rng=0, variant="sharp",
                                 progress=lambda *a: calls.append(a))
     for index, level in enumerate(range(levels - 1, -1, -1)):
         done = result.stats["levels"][f"level_{level}"]["sweeps"]

@@ -74,6 +74,7 @@ from ..config import SynthesisMethod, SynthesisResult
 from ..exemplar import resolve_exemplars
 from ..neighborhood import VIEW_AXES, VIEWS
 from ..pyramid import level_shape
+from ..resources import check_memory, coherent_estimate
 
 __all__ = ["ChenWangConfig", "chen_wang_synthesize", "make_chen_wang_config", "run"]
 
@@ -302,6 +303,7 @@ def chen_wang_synthesize(
     generator = check.rng(rng)
     per_view = resolve_exemplars(exemplar, exemplars, config.views, **_fit(config))
     _check_exemplar_levels(config, per_view)
+    check_memory(coherent_estimate(config, per_view))
     return run(config, per_view, generator, progress=progress, checkpoint=checkpoint, t_start=t_start)
 
 
@@ -523,4 +525,5 @@ METHOD = SynthesisMethod(
     name="chen-wang", run=chen_wang_method, make_config=make_chen_wang_config,
     config_class=ChenWangConfig, synthesize=chen_wang_synthesize, fit=_fit,
     description="Chen & Wang 2010: k-coherence search, discrete solver, position and index histograms",
+    resources=coherent_estimate,
 )
