@@ -16,6 +16,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from scipy.spatial import cKDTree
 
 from .. import _validation as check
+from ..coherence import downsample_exemplar  # one box-average pyramid for every method
 from .._kernels import kopf as _k
 from ..neighborhood import VIEW_AXES
 from ..pyramid import LevelState
@@ -61,32 +62,6 @@ def _constraint_arrays(constraint, constraint_weight, size, channels):
 
 
 # --------------------------------------------------------------------------- building blocks
-
-
-def downsample_exemplar(exemplar: np.ndarray, level: int) -> np.ndarray:
-    """Box average over ``2^level x 2^level`` blocks (the mean of the decimation phases).
-
-    Parameters
-    ----------
-    exemplar : (H, W, C) float32 ndarray
-    level : int >= 0
-
-    Returns
-    -------
-    (H // 2^level, W // 2^level, C) float32 ndarray
-
-    Examples
-    --------
-    >>> downsample_exemplar(np.arange(16, dtype=np.float32).reshape(4, 4, 1), 1)[..., 0]
-    array([[ 2.5,  4.5],
-           [10.5, 12.5]], dtype=float32)
-    """
-    f = 2 ** level
-    if f == 1:
-        return np.ascontiguousarray(exemplar, dtype=np.float32)
-    h, w, c = exemplar.shape[0] // f, exemplar.shape[1] // f, exemplar.shape[2]
-    blocks = exemplar[: h * f, : w * f].astype(np.float64).reshape(h, f, w, f, c)
-    return np.ascontiguousarray(blocks.mean(axis=(1, 3)), dtype=np.float32)
 
 
 def exemplar_patches(exemplar: np.ndarray, window: int) -> np.ndarray:
