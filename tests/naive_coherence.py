@@ -192,8 +192,11 @@ def naive_votes(site, views, assign, omega, exemplars, window, grid, pos_hist, t
 
 
 def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, order, bounds,
-                pos_hist, theta, position_weight, position_boost=0.0, medoid=0, balance=False):
-    """Literal discrete solver; returns (volume, src, pos_hist, changed)."""
+                pos_hist, theta, position_weight, position_boost=0.0, medoid=0, balance=False,
+                likelihood=0, h2c=1.0, outlier=0.0):
+    """Literal discrete solver; returns (volume, src, pos_hist, changed). ``likelihood`` 1 or 2:
+    the coherent NP-MRF decision (per-view Parzen estimate of each candidate's colour, product or
+    minimum over views) instead of the medoid."""
     volume = volume.copy()
     src = src.copy()
     pos_hist = [h.astype(np.float64).copy() for h in pos_hist]
@@ -226,6 +229,25 @@ def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, o
                         ranked.append(q)
                 ranked = ranked[:medoid]
                 best, best_e = None, np.inf
+                if likelihood:
+                    totals = {}
+                    for m in votes:
+                        totals[m[1]] = totals.get(m[1], 0.0) + m[3]
+                    best_score = -np.inf
+                    for q in ranked:
+                        lik = {}
+                        for m in votes:
+                            dd = 0.0
+                            for ch in range(len(m[0])):
+                                diff = np.float32(votes[q][0][ch]) - np.float32(m[0][ch])
+                                dd += float(diff * diff)
+                            lik[m[1]] = lik.get(m[1], 0.0) + m[3] * np.exp(-dd / h2c)
+                        per_view = [(1.0 - outlier) * lik.get(v, 0.0) / totals[v] + outlier if totals.get(v, 0.0) > 0
+                                    else outlier for v in range(len(views))]
+                        score = sum(np.log(x) for x in per_view) if likelihood == 1 else min(per_view)
+                        if score > best_score:
+                            best, best_score = votes[q], score
+                    ranked = []
                 for q in ranked:
                     e_sum = sum(m[3] * float(np.sqrt(((votes[q][0] - m[0]) ** 2).sum())) for m in votes)
                     if e_sum < best_e:

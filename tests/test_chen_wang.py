@@ -215,9 +215,11 @@ def _solve_case(rng, views, window, channels, grid, shared=True):
 
 
 @pytest.mark.parametrize("views", [("front",), ("front", "top"), VIEWS3])
-@pytest.mark.parametrize("medoid,balance,boost", [(0, False, 0.0), (0, True, 2.0), (3, False, 0.0), (8, True, 5.0)])
+@pytest.mark.parametrize("medoid,balance,boost,likelihood", [
+    (0, False, 0.0, 0), (0, True, 2.0, 0), (3, False, 0.0, 0), (8, True, 5.0, 0),
+    (8, False, 0.0, 1), (3, True, 2.0, 2)])
 @pytest.mark.parametrize("grid,channels", [(1, 1), (2, 3)])
-def test_solve_matches_twin(rng, views, medoid, balance, boost, grid, channels):
+def test_solve_matches_twin(rng, views, medoid, balance, boost, likelihood, grid, channels):
     window = 4
     exemplars, models, assign, omega, src, volume = _solve_case(rng, views, window, channels, grid,
                                                                 shared=len(views) != 2)
@@ -230,12 +232,13 @@ def test_solve_matches_twin(rng, views, medoid, balance, boost, grid, channels):
     want_vol, want_src, want_hist, want_changed = naive_solve(
         volume, src, assign, omega, views, exemplars, window=window, grid=grid, order=order,
         bounds=bounds, pos_hist=pos_hist, theta=theta, position_weight=3.0, position_boost=boost, medoid=medoid,
-        balance=balance)
+        balance=balance, likelihood=likelihood, h2c=0.05, outlier=0.01)
     got_vol, got_src = volume.copy(), src.copy()
     got_hist = np.concatenate(pos_hist)
     changed = _k.solve(got_vol, got_src, assign, omega, np.array([VIEW_AXES[v] for v in views]),
                        packed, ex_off, np.full(len(views), 10), window, coh.anchor(window), grid,
-                       order, bounds, got_hist, hist_off, theta, 3.0, boost, medoid, balance, 7)
+                       order, bounds, got_hist, hist_off, theta, 3.0, boost, medoid, balance, 7,
+                       likelihood, 0.05, 0.01)
     np.testing.assert_array_equal(got_vol, want_vol)
     np.testing.assert_array_equal(got_src, want_src)
     np.testing.assert_array_equal(got_hist, np.concatenate(want_hist))
