@@ -86,6 +86,7 @@ def test_level_model_k_coherence_sets_equal_brute_force_in_pca_space(rng):
     np.testing.assert_array_equal(m.kcoh[flat], want)
 
 
+@pytest.mark.kernels
 def test_candidate_set_equals_its_definition(rng):
     ex = random_exemplar(rng, 12, 11)
     m = coh.build_level_model(ex, 4, dims=5, k=2)
@@ -111,6 +112,7 @@ def test_candidate_set_by_hand():
     assert got.tolist() == sorted({centre, int(m.kcoh[centre, 0])})
 
 
+@pytest.mark.kernels
 def test_upsample_sources_matches_twin(rng):
     src = rng.integers(0, 6 * 7, size=(3, 4, 2)).astype(np.int32)
     for view in VIEW_AXES:
@@ -137,6 +139,7 @@ def _search_case(rng, view, window, channels, grid):
     return ex, m, vol, src, assign
 
 
+@pytest.mark.kernels
 @pytest.mark.parametrize("view", VIEWS3)
 @pytest.mark.parametrize("window,channels,grid,batches,n_random", [(3, 1, 1, 1, 0), (4, 3, 2, 3, 4), (4, 1, 1, 2, 0)])
 def test_search_view_matches_twin(rng, view, window, channels, grid, batches, n_random):
@@ -168,6 +171,7 @@ def test_search_view_matches_twin(rng, view, window, channels, grid, batches, n_
     np.testing.assert_array_equal(got_hist, want_hist)
 
 
+@pytest.mark.kernels
 def test_volume_patch_projection_is_the_models(rng):
     """A volume slice that copies the exemplar coherently finds the copied centre at distance 0."""
     ex = random_exemplar(rng, 16, 16)
@@ -218,6 +222,7 @@ def _solve_case(rng, views, window, channels, grid, shared=True):
 @pytest.mark.parametrize("medoid,balance,boost,likelihood", [
     (0, False, 0.0, 0), (0, True, 2.0, 0), (3, False, 0.0, 0), (8, True, 5.0, 0),
     (8, False, 0.0, 1), (3, True, 2.0, 2)])
+@pytest.mark.kernels
 @pytest.mark.parametrize("grid,channels", [(1, 1), (2, 3)])
 def test_solve_matches_twin(rng, views, medoid, balance, boost, likelihood, grid, channels):
     window = 4
@@ -407,6 +412,7 @@ def test_exemplar_too_small_for_a_level_window():
                              window=4, levels=1, iterations=1)
 
 
+@pytest.mark.kernels
 def test_solve_does_not_depend_on_the_order_within_a_batch(rng):
     """The run visits each batch in memory order (faster); only the batches' order matters."""
     views = VIEWS3
