@@ -45,8 +45,9 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
         mark = "  (default)" if name == data.DEFAULT_EXEMPLAR else ""
         say(f"  {BUNDLED_PREFIX}{name}{mark}")
     say("methods:")
+    width = max(len(name) for name in METHODS)
     for name, method in METHODS.items():
-        say(f"  {name:<6} {method.description}")
+        say(f"  {name:<{width}}  {method.description}")
     say("heuristics:")
     for h in HEURISTICS.values():
         kind = "objective" if h.objective else "no objective"
