@@ -1,6 +1,6 @@
 """Chen & Wang 2010 (npmrf3d.coherence, npmrf3d.baselines.chen_wang) against literal twins.
 
-Kernels against ``tests/naive_coherence.py``; k-coherence sets against brute force; the candidate
+Kernels against ``tests/naive.py``; k-coherence sets against brute force; the candidate
 set of a site against its definition; discrete copies only; the position histogram spreading a
 skewed usage; thread-count independence; a periodic exemplar; user errors; checkpoints.
 Everything is tiny (exemplars up to 32x32, volumes 8^3 to 16^3).
@@ -20,7 +20,7 @@ from npmrf3d.config import SynthesisResult
 from npmrf3d.errors import ParameterError
 from npmrf3d.neighborhood import VIEW_AXES
 
-from tests.naive_coherence import (
+from tests.naive import (
     naive_candidates,
     naive_exemplar_patch,
     naive_k_coherence,
