@@ -331,9 +331,6 @@ def naive_kopf_update(volume, assign, omega, views, exemplars, window, order, *,
 # ``a = (w-1)//2``; the volume wraps around, the exemplar does not; sources and centres are flat
 # ``row * W + col``.
 
-#: view -> (volume axis of the exemplar row, volume axis of the exemplar column)
-NAIVE_VIEW_AXES = {"front": (0, 1), "right": (1, 2), "top": (0, 2)}
-
 
 def naive_anchor(window):
     return (window - 1) // 2
