@@ -59,6 +59,21 @@ def real(parameter: str, value, *, low: float | None = None, high: float | None 
     return value
 
 
+def per_level(name: str, value, levels: int, *, low: int | None = None,
+              high: int | None = None) -> tuple[int, ...]:
+    """One integer for every level, or one per level (coarsest first), each in [low, high]."""
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+        value = (int(value),) * levels
+    try:
+        value = tuple(value)
+    except TypeError:
+        fail(f"{name} must be a positive integer or one per level; got {value!r}")
+    if len(value) != levels:
+        fail(f"{name} must be one integer or {levels} integers (one per level, coarsest "
+             f"first); got {len(value)}: {value!r}")
+    return tuple(integer(name, v, low=low, high=high) for v in value)
+
+
 def window(value) -> int:
     w = integer("window", value)
     if w % 2 == 0 or not WINDOW_MIN <= w <= WINDOW_MAX:

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import time
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -134,7 +135,7 @@ def upsample(parent: LevelState, mode: str, labels: np.ndarray, label_freq: np.n
 # --------------------------------------------------------------------------- the level loop
 
 
-class Levels:
+class Levels(ABC):
     """What a multi-scale method tells :func:`run_pyramid` (override every method).
 
     Attributes
@@ -156,31 +157,31 @@ class Levels:
     def prepare(self, level: int, shape: tuple[int, int, int]) -> None:
         """Per-level set-up that draws no random numbers (models, exemplar pyramids)."""
 
+    @abstractmethod
     def initial(self, shape: tuple[int, int, int], rng: np.random.Generator) -> Any:
         """The coarsest level's starting state."""
-        raise NotImplementedError
 
+    @abstractmethod
     def upsample(self, state: Any, rng: np.random.Generator) -> Any:
         """The finer level's starting state from the relaxed coarser ``state``."""
-        raise NotImplementedError
 
+    @abstractmethod
     def start(self, level: int, state: Any) -> tuple[int, float]:
         """(steps expected, the level quantity before the first step) for progress; ``relax``
         may correct the expected steps as it goes (``on_step(step, value, expected)``)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def relax(self, level: int, state: Any, rng: np.random.Generator,
               on_step: Callable[[int, float], None]) -> tuple[Any, list[float], dict]:
         """Relax one level: (state, history of the level quantity, level statistics)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def to_arrays(self, state: Any) -> dict[str, np.ndarray]:
         """The state as named arrays (for a checkpoint)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def from_arrays(self, arrays: dict[str, np.ndarray]) -> Any:
         """Inverse of :meth:`to_arrays`."""
-        raise NotImplementedError
 
 
 @dataclass

@@ -19,7 +19,6 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, field
-from typing import NamedTuple
 
 import numpy as np
 
@@ -196,15 +195,6 @@ def generic_estimate(config, exemplars) -> Estimate:
     return Estimate({"volume": volume, "work arrays": volume})
 
 
-class _Coherent(NamedTuple):
-    size: tuple
-    window: tuple
-    levels: int
-    views: tuple
-    iterations: tuple
-    k: int
-
-
 #: Coherent search sites (voxel x view) per second on the 2-core machine (Chen–Wang benchmark).
 COHERENT_SITES = 2.5e5
 
@@ -238,14 +228,10 @@ def npmrf_estimate(config, exemplars) -> Estimate:
     ``exemplars``: view -> each constrained view's exemplar (an array, or its (H, W, C) shape).
     The label count ``K`` is bounded by the distinct values (the pixels when only shapes are
     given, or the palette / grey levels); the label kernel tables by their cap
-    (:data:`npmrf3d.parzen.KERNEL_TABLE_BYTES`). The ``coherent`` variant: :func:`coherent_estimate`
-    with its window at every level and Chen–Wang's iterations.
+    (:data:`npmrf3d.parzen.KERNEL_TABLE_BYTES`).
+    (The ``coherent`` variant is estimated by :func:`coherent_estimate` on its own options, see
+    :func:`npmrf3d.synthesis.npmrf_resources`.)
     """
-    if getattr(config, "variant", None) == "coherent":
-        iterations = (4, 4, 3)
-        iterations = (iterations * config.levels)[-config.levels:] if config.levels > 3 else iterations[-config.levels:]
-        return coherent_estimate(_Coherent(config.size, (config.window,) * config.levels, config.levels,
-                                           config.views, iterations, 5), exemplars)
     exemplar_shapes = _shapes(exemplars)
     n = _voxels(config.size)
     c = _channels(exemplar_shapes)

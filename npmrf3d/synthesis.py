@@ -22,7 +22,7 @@ from .pyramid import INHERIT, UPSAMPLING, Levels, LevelState, random_state, run_
 from .relax import RELAXATIONS
 from .relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
 from .relax.icm import expected_sweeps
-from .resources import check_memory, npmrf_estimate
+from .resources import check_memory, coherent_estimate, npmrf_estimate
 
 __all__ = ["METHOD", "make_config", "npmrf_method", "run", "synthesize"]
 
@@ -226,7 +226,7 @@ def synthesize(
     generator = check.rng(rng)
     per_view = resolve_exemplars(exemplar, exemplars, config.views, window=config.window,
                                  levels=config.levels, toroidal=config.toroidal_exemplar)
-    check_memory(npmrf_estimate(config, per_view))
+    check_memory(npmrf_resources(config, per_view))
     return npmrf_method(per_view, config, generator, progress=progress, checkpoint=checkpoint,
                         t_start=t_start)
 
@@ -342,6 +342,23 @@ def npmrf_method(per_view: dict[str, np.ndarray], config: SynthesisConfig, rng: 
     return run(config, per_view, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
 
 
+def _coherent_options(config: SynthesisConfig) -> coherent.CoherentConfig:
+    """The coherent sampler's options for a ``coherent``-variant configuration: its window at
+    every level, its levels, views, heuristic, centre bandwidth and outlier share."""
+    return coherent.make_coherent_config(
+        size=config.size, window=(config.window,) * config.levels, levels=config.levels,
+        views=config.views, heuristic=config.heuristic, centre_bandwidth=config.rule.centre_bandwidth,
+        outlier=config.rule.outlier, seed=config.seed)
+
+
+def npmrf_resources(config: SynthesisConfig, per_view):
+    """The memory estimate of a run: the coherent sampler's for the ``coherent`` variant, the
+    full-Parzen sampler's otherwise."""
+    if config.variant == "coherent":
+        return coherent_estimate(_coherent_options(config), per_view)
+    return npmrf_estimate(config, per_view)
+
+
 def _run_coherent(per_view, config: SynthesisConfig, rng, *, progress, checkpoint, t_start) -> SynthesisResult:
     """The ``coherent`` variant: :mod:`npmrf3d.coherent` with this configuration's window (at every
     level), levels, views, heuristic, centre bandwidth and outlier share; the exemplars reduced to
@@ -352,11 +369,7 @@ def _run_coherent(per_view, config: SynthesisConfig, rng, *, progress, checkpoin
                                      palette=config.palette, rng=rng)
         reduced = {key: labels[image] for key, image in zip(distinct, images)}
         per_view = {v: reduced[id(a)] for v, a in per_view.items()}
-    options = coherent.make_coherent_config(
-        size=config.size, window=(config.window,) * config.levels, levels=config.levels,
-        views=config.views, heuristic=config.heuristic, centre_bandwidth=config.rule.centre_bandwidth,
-        outlier=config.rule.outlier, seed=config.seed)
-    result = coherent.coherent_method(per_view, options, rng, progress=progress, checkpoint=checkpoint,
+    result = coherent.coherent_method(per_view, _coherent_options(config), rng, progress=progress, checkpoint=checkpoint,
                                       t_start=t_start)
     return dataclasses.replace(result, config=config)
 
@@ -366,6 +379,6 @@ METHOD = SynthesisMethod(
     name="npmrf", run=npmrf_method, make_config=make_config, config_class=SynthesisConfig,
     synthesize=synthesize,
     fit=lambda c: {"window": c.window, "levels": c.levels, "toroidal": c.toroidal_exemplar},
-    resources=npmrf_estimate,
+    resources=npmrf_resources,
     description="the NP-MRF sampler (ICM or annealing; SPEC.md sections 2-5)",
 )

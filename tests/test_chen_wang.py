@@ -8,7 +8,11 @@ Everything is tiny (exemplars up to 32x32, volumes 8^3 to 16^3).
 
 from __future__ import annotations
 
-import numba
+import os
+import subprocess
+import sys
+import textwrap
+
 import numpy as np
 import pytest
 
@@ -327,22 +331,27 @@ def test_an_exemplar_per_view(rng):
     assert set(np.unique(res.volume)) <= {0.0, 1.0}
 
 
-def test_same_seed_same_volume_at_one_and_two_threads():
-    if numba.config.NUMBA_NUM_THREADS < 2:
-        pytest.skip("needs NUMBA_NUM_THREADS >= 2")
-    ex = np.random.default_rng(3).random((24, 24, 3)).astype(np.float32)
-    before = numba.get_num_threads()
-    out = {}
-    try:
-        for threads in (1, 2):
-            numba.set_num_threads(threads)
-            for solver in CW.SOLVERS:
-                out[threads, solver] = chen_wang_synthesize(
-                    ex, size=16, window=(4, 4), levels=2, iterations=2, solver=solver, rng=7).volume
-    finally:
-        numba.set_num_threads(before)
-    for solver in CW.SOLVERS:
-        np.testing.assert_array_equal(out[1, solver], out[2, solver])
+def test_same_seed_same_volume_at_one_and_two_threads(tmp_path):
+    # each thread count in its own process: numba's pool size is fixed at start-up
+    script = textwrap.dedent(
+        """
+        import sys, numba, numpy as np
+        from npmrf3d.baselines import chen_wang
+        assert numba.get_num_threads() == int(sys.argv[2])
+        ex = np.random.default_rng(3).random((24, 24, 3)).astype(np.float32)
+        vols = [chen_wang.chen_wang_synthesize(ex, size=16, window=(4, 4), levels=2, iterations=2,
+                                               solver=solver, rng=7).volume
+                for solver in chen_wang.SOLVERS]
+        np.save(sys.argv[1], np.stack(vols))
+        """
+    )
+    volumes = []
+    for threads in (1, 2):
+        out = tmp_path / f"v{threads}.npy"
+        env = {**os.environ, "NUMBA_NUM_THREADS": str(threads)}
+        subprocess.run([sys.executable, "-c", script, str(out), str(threads)], check=True, env=env)
+        volumes.append(np.load(out))
+    np.testing.assert_array_equal(volumes[0], volumes[1])
 
 
 def test_periodic_exemplar_pattern_appears_in_the_constrained_slices():

@@ -119,19 +119,6 @@ class ChenWangConfig:
 DEFAULTS = ChenWangConfig()
 
 
-def _per_level(name, value, levels, *, low, high=None):
-    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
-        value = (int(value),) * levels
-    try:
-        value = tuple(value)
-    except TypeError:
-        check.fail(f"{name} must be a positive integer or one per level; got {value!r}")
-    if len(value) != levels:
-        check.fail(f"{name} must be one integer or {levels} integers (one per level, coarsest "
-                   f"first); got {len(value)}: {value!r}")
-    return tuple(check.integer(name, v, low=low, high=high) for v in value)
-
-
 def make_chen_wang_config(
     *, size=DEFAULTS.size, window=DEFAULTS.window, levels=DEFAULTS.levels, views=DEFAULTS.views,
     iterations=DEFAULTS.iterations, k=DEFAULTS.k, pca_dims=DEFAULTS.pca_dims, r=DEFAULTS.r,
@@ -151,7 +138,7 @@ def make_chen_wang_config(
         window = (DEFAULTS.window * levels)[-levels:] if levels > 3 else DEFAULTS.window[-levels:]
     if iterations is DEFAULTS.iterations and levels != len(DEFAULTS.iterations):
         iterations = (DEFAULTS.iterations * levels)[-levels:] if levels > 3 else DEFAULTS.iterations[-levels:]
-    window = _per_level("window", window, levels, low=2, high=32)
+    window = check.per_level("window", window, levels, low=2, high=32)
     dims = check.size(size, levels=levels, window=1)
     grid = check.integer("grid", grid, low=1, high=min(window))
     for li, w in enumerate(window):
@@ -165,7 +152,7 @@ def make_chen_wang_config(
             if side % grid:
                 check.fail(f"size {n} does not suit grid {grid} with {levels} levels: level {level} "
                            f"has {side} voxels per side, not a multiple of {grid}")
-    iterations = _per_level("iterations", iterations, levels, low=1)
+    iterations = check.per_level("iterations", iterations, levels, low=1)
     k = check.integer("k", k, low=1, high=64)
     pca_dims = check.integer("pca_dims", pca_dims, low=1)
     r = check.real("r", r, low=0.0, high=2.0, low_open=True)

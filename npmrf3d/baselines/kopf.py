@@ -155,16 +155,7 @@ def make_kopf_config(
             check.fail(f"size {n} is too small for window {window} with {levels} levels: the "
                        f"coarsest level has {n // f} voxels per side, needs at least {window}; "
                        f"use a larger size, a smaller window or fewer levels")
-    if isinstance(iterations, (int, np.integer)) and not isinstance(iterations, bool):
-        iterations = (int(iterations),) * levels
-    try:
-        iterations = tuple(iterations)
-    except TypeError:
-        check.fail(f"iterations must be a positive integer or one per level; got {iterations!r}")
-    if len(iterations) != levels:
-        check.fail(f"iterations must be one integer or {levels} integers (one per level, coarsest "
-                   f"first); got {len(iterations)}: {iterations!r}")
-    iterations = tuple(check.integer("iterations", it, low=1) for it in iterations)
+    iterations = check.per_level("iterations", iterations, levels, low=1)
     r = check.real("r", r, low=0.0, high=2.0, low_open=True)
     eps = check.real("eps", eps, low=0.0)
     variance = check.real("variance", variance, low=0.0, high=1.0, low_open=True)

@@ -115,8 +115,11 @@ def choices(names) -> str:
 
 
 def say(text: str, *, error: bool = False) -> None:
-    """Write one line of command-line output (stdout, or stderr for diagnostics)."""
-    print(text, file=sys.stderr if error else sys.stdout)
+    """Write one line of command-line output (stdout, or stderr for diagnostics): the one place
+    the package writes to the terminal (bars aside); library code reports through callbacks."""
+    stream = sys.stderr if error else sys.stdout
+    stream.write(f"{text}\n")
+    stream.flush()
 
 
 def error(message: str, option_names=()) -> int:
@@ -125,7 +128,7 @@ def error(message: str, option_names=()) -> int:
     for name in option_names:
         if line.startswith(f"{name} must "):
             line = "--" + name.replace("_", "-") + line[len(name):]
-    print(f"{PROG}: error: {line or 'invalid input'}", file=sys.stderr)
+    say(f"{PROG}: error: {line or 'invalid input'}", error=True)
     return 2
 
 

@@ -22,7 +22,7 @@ import threading
 
 from .. import __version__
 from . import baseline, coherent, info, metrics, study, synth
-from ._common import PROG, HelpFormatter, Parser, guarded
+from ._common import PROG, HelpFormatter, Parser, guarded, say
 
 __all__ = ["COMMANDS", "build_parser", "main"]
 
@@ -84,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return guarded(args.handler, args, argv, OPTION_NAMES)
     except KeyboardInterrupt:
-        print(f"{PROG}: {interrupted_message(args)}", file=sys.stderr)
+        say(f"{PROG}: {interrupted_message(args)}", error=True)
         return 130
     except BrokenPipeError:  # e.g. 'npmrf3d info | head': stop quietly, as other tools do
         devnull = os.open(os.devnull, os.O_WRONLY)
