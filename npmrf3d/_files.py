@@ -31,7 +31,6 @@ import pathlib
 import platform
 import secrets
 import sys
-import tempfile
 from collections.abc import Callable, Mapping
 from typing import Any
 

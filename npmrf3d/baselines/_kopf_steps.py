@@ -16,7 +16,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from scipy.spatial import cKDTree
 
 from .. import _validation as check
-from ..coherence import downsample_exemplar  # one box-average pyramid for every method
+from ..coherence import downsample_exemplar  # noqa: F401 (one box-average pyramid for every method; kopf.py re-exports it)
 from .._kernels import kopf as _k
 from ..neighborhood import VIEW_AXES
 from ..pyramid import LevelState

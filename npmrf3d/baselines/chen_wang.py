@@ -312,7 +312,6 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
     views = config.views
     per_view = {v: np.ascontiguousarray(per_view_exemplars[v], dtype=np.float32) for v in views}
     distinct = list({id(a): a for a in per_view.values()}.values())
-    first_of = {id(a): next(v for v in views if per_view[v] is a) for a in distinct}
     channels = distinct[0].shape[2]
     pooled = np.concatenate([a.reshape(-1, channels) for a in distinct])
     labels = np.unique(pooled, axis=0).astype(np.float32)

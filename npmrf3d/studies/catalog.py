@@ -22,9 +22,7 @@ Names resolve with :func:`load_exemplar`:
 
 from __future__ import annotations
 
-import pathlib
 
-import numpy as np
 
 from npmrf3d.errors import ParameterError
 from npmrf3d.exemplar import ETR_DIR, etr_available, named_exemplar  # noqa: F401 (re-exported)

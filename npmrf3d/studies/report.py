@@ -21,7 +21,6 @@ import pathlib
 from datetime import datetime, timezone
 from typing import Any
 
-import numpy as np
 
 from npmrf3d.errors import ParameterError
 from npmrf3d.io import atomic_write
