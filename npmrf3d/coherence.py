@@ -1,5 +1,9 @@
 """k-coherence machinery: per-level exemplar models, source maps and histograms (issue 11).
 
+Why one module of ~470 lines: these are the model-layer pieces that Chen–Wang and the coherent
+NP-MRF sampler share, each small; the per-level model, the source maps, the matches and the
+histograms all speak in the same flat exemplar indices and window geometry.
+
 The model layer of Chen & Wang 2010 ("High quality solid texture synthesis using position and
 index histogram matching"), kept apart from the method so that other samplers can reuse it:
 
@@ -11,6 +15,10 @@ index histogram matching"), kept apart from the method so that other samplers ca
   ``row * W + col``): :func:`random_sources`, :func:`upsample_sources` (``2 * parent + offset``).
 * **candidate sets** -- :func:`candidate_set`, the union over a site's 3 x 3 in-plane neighbours
   of their coherent shifts and the shifts' k-coherence sets.
+* **global matches** -- :func:`global_matches`: the worst-matched sites of a view also search
+  all exemplar neighbourhoods (``cKDTree``) and take the global match where it is clearly better
+  than the coherent one (Hertzmann et al. 2001's coherence rule), so that a structure no
+  coherent candidate proposes -- a sparse bright spot -- can still be matched.
 * **position / index histograms** -- :func:`position_histogram`, :func:`histogram_factor`
   (``1 + strength * max(0, H / even - 1)``, the paper's eq. 4 and 6 in units of the even share).
 
@@ -32,10 +40,12 @@ from .neighborhood import VIEW_AXES
 
 __all__ = [
     "LevelModel",
+    "ValueHistogram",
     "anchor",
     "build_level_model",
     "candidate_set",
     "downsample_exemplar",
+    "global_matches",
     "histogram_factor",
     "k_coherence_sets",
     "pca_project",
@@ -64,6 +74,11 @@ class LevelModel(NamedTuple):
         Projection of the neighbourhood of every valid centre (rows of other pixels are 0).
     kcoh : (H * W, k) int32 ndarray
         k-coherence set of every valid centre, most similar first (rows of other pixels -1).
+    valid : (n,) int64 ndarray
+        Flat indices of the valid centres, row-major.
+    tree : scipy.spatial.cKDTree
+        The valid centres' projections (rows of ``proj[valid]``), for global searches
+        (:func:`global_matches`).
     """
 
     exemplar: np.ndarray
@@ -74,6 +89,8 @@ class LevelModel(NamedTuple):
     basis: np.ndarray
     proj: np.ndarray
     kcoh: np.ndarray
+    valid: np.ndarray
+    tree: cKDTree
 
     @property
     def pixels(self) -> int:
@@ -159,7 +176,7 @@ def pca_project(patches: np.ndarray, dims: int = 20) -> tuple[np.ndarray, np.nda
 
 
 def k_coherence_sets(points: np.ndarray, k: int = 5, *, exclude: float = 0.0,
-                     coords: np.ndarray | None = None) -> np.ndarray:
+                     coords: np.ndarray | None = None, tree: cKDTree | None = None) -> np.ndarray:
     """Indices of the ``k`` nearest other points of every point (``scipy.spatial.cKDTree``).
 
     Parameters
@@ -172,13 +189,16 @@ def k_coherence_sets(points: np.ndarray, k: int = 5, *, exclude: float = 0.0,
         (its own shifted copies) are skipped, so the sets point to other places of the exemplar.
     coords : (n, 2) ndarray, optional
         Pixel coordinates of the points (needed with ``exclude``).
+    tree : cKDTree, optional
+        A tree of ``points`` already built.
 
     Returns
     -------
     (n, k) int64 ndarray, nearest first; a point is never in its own set. Ties are broken as
     ``cKDTree.query`` breaks them (exact Euclidean distances).
     """
-    tree = cKDTree(np.asarray(points, dtype=np.float64))
+    if tree is None:
+        tree = cKDTree(np.asarray(points, dtype=np.float64))
     n = len(points)
     want = min(n, k + 1 if exclude <= 0 else max(4 * k, k + 1 + int((2 * exclude + 1) ** 2)))
     out = np.empty((n, k), dtype=np.int64)
@@ -234,16 +254,18 @@ def build_level_model(exemplar: np.ndarray, window: int, *, dims: int = 20, k: i
     proj = np.zeros((h * w, basis.shape[1]), dtype=np.float64)
     proj[flat] = projected
     kcoh = np.full((h * w, k), -1, dtype=np.int32)
+    tree = cKDTree(projected)
     if k_eff > 0:
         sets = k_coherence_sets(projected, k_eff, exclude=exclude,
-                                coords=np.stack([rows.ravel(), cols.ravel()], axis=1))
+                                coords=np.stack([rows.ravel(), cols.ravel()], axis=1), tree=tree)
         sets = flat[sets]
         if k_eff < k:
             sets = np.concatenate([sets, np.repeat(sets[:, -1:], k - k_eff, axis=1)], axis=1)
         kcoh[flat] = sets
     else:
         kcoh[flat] = flat[:, None]
-    return LevelModel(exemplar, int(window), anchor(window), bounds, mean, basis, proj, kcoh)
+    return LevelModel(exemplar, int(window), anchor(window), bounds, mean, basis, proj, kcoh,
+                      flat.astype(np.int64), tree)
 
 
 # --------------------------------------------------------------------------- source maps
@@ -301,7 +323,125 @@ def candidate_set(src_v: np.ndarray, view: str, site: tuple[int, int, int], mode
     return np.unique(out[:count])
 
 
+def global_matches(volume: np.ndarray, view: str, model: LevelModel, assign_v: np.ndarray,
+                   omega_v: np.ndarray, index_hist: np.ndarray, *, share: float, bias: float,
+                   phi: float, index_weight: float, r: float, floor: float) -> tuple[int, float]:
+    """Give the worst-matched sites of one view a global search; update their matches in place.
+
+    The ``ceil(share * sites)`` sites with the largest match distance (ties: the lower flat
+    index first) project their neighbourhoods (:func:`npmrf3d._kernels.coherence.project_sites`)
+    and query the ``min(4, centres)`` nearest valid centres in the PCA space (``model.tree``);
+    among those the one with the smallest distance times the index-histogram factor
+    ``1 + index_weight * max(0, index_hist / phi - 1)`` is the global match (the first on ties).
+    It replaces the coherent match when its distance times ``1 + bias`` is below the coherent
+    distance (Hertzmann et al. 2001, "Image analogies": keep the coherent match unless the
+    global one is clearly better). Replaced sites get the new centre in ``assign_v``, the IRLS
+    weight ``max(dist, floor) ** (r - 2)`` in ``omega_v`` and their counts moved in
+    ``index_hist``.
+
+    Parameters
+    ----------
+    volume : (N1, N2, N3, C) float32
+    view : the view of ``assign_v`` (its plane axes)
+    model : the view's exemplar at this level
+    assign_v : (N1, N2, N3) int32, the centre matched at every site (-1 where no site)
+    omega_v : (N1, N2, N3) float32, IRLS weights ``max(dist, floor) ** (r - 2)`` of the matches
+    index_hist : (H * W,) float64 counts of sites per centre
+    share : float in [0, 1]
+    bias, phi, index_weight, r, floor : as above; ``r < 2``
+
+    Returns
+    -------
+    (replaced, energy_change) : the number of sites re-matched and the change of ``sum dist ** r``
+    (distances below ``floor`` count as ``floor``)
+    """
+    sites = np.flatnonzero(assign_v.ravel() >= 0).astype(np.int64)
+    take = min(len(sites), int(np.ceil(share * len(sites))))
+    if take == 0:
+        return 0, 0.0
+    weights = omega_v.ravel()[sites].astype(np.float64)
+    worst = sites[np.argsort(weights, kind="stable")[:take]]  # lowest weight = largest distance
+    old_dist = omega_v.ravel()[worst].astype(np.float64) ** (1.0 / (r - 2.0))
+    ra, ca = VIEW_AXES[view]
+    y = np.empty((take, model.basis.shape[1]), dtype=np.float64)
+    _k.project_sites(volume, ra, ca, model.window, model.anchor, model.mean, model.basis, worst, y)
+    nearest = min(4, len(model.valid))
+    dist, idx = model.tree.query(y, k=nearest)
+    dist = np.asarray(dist, dtype=np.float64).reshape(take, nearest)
+    centres = model.valid[np.asarray(idx, dtype=np.int64).reshape(take, nearest)]
+    excess = index_hist[centres] / phi - 1.0
+    cost = dist ** 2 * np.where(excess > 0.0, 1.0 + index_weight * excess, 1.0)
+    pick = np.argmin(cost, axis=1)
+    new_centre = centres[np.arange(take), pick]
+    new_dist = np.maximum(dist[np.arange(take), pick], floor)
+    better = new_dist * (1.0 + bias) < old_dist
+    if not better.any():
+        return 0, 0.0
+    chosen = worst[better]
+    flat_assign = assign_v.reshape(-1)
+    np.subtract.at(index_hist, flat_assign[chosen].astype(np.int64), 1.0)
+    np.add.at(index_hist, new_centre[better], 1.0)
+    flat_assign[chosen] = new_centre[better]
+    omega_v.reshape(-1)[chosen] = (new_dist[better] ** (r - 2.0)).astype(np.float32)
+    change = float((new_dist[better] ** r - old_dist[better] ** r).sum())
+    return int(better.sum()), change
+
+
 # --------------------------------------------------------------------------- histograms
+
+
+class ValueHistogram(NamedTuple):
+    """Per-channel value histograms of a level for the solver's histogram matching.
+
+    Attributes
+    ----------
+    lo, scale : (C,) float64
+        Bin of value ``x`` of channel ``c``: ``floor((x - lo[c]) * scale[c])`` clamped to
+        ``0..bins - 1`` (:func:`npmrf3d._kernels.coherence.value_bin`).
+    ex_bins : (G, C) int64
+        Bins of every packed exemplar texel.
+    hist : (C, bins) float64
+        The volume's histogram, in units of ``unit`` voxels (an even bin's share); the solver
+        updates it.
+    target : (C, bins) float64
+        The exemplars' histogram (views pooled, each view's exemplar weighted equally), same units.
+    unit : float
+        Voxels per even bin, ``N / bins``.
+    """
+
+    lo: np.ndarray
+    scale: np.ndarray
+    ex_bins: np.ndarray
+    hist: np.ndarray
+    target: np.ndarray
+    unit: float
+
+    @classmethod
+    def build(cls, exemplars, ex_flat: np.ndarray, volume: np.ndarray, *, bins: int,
+              lo: np.ndarray, span: np.ndarray) -> "ValueHistogram":
+        """Histograms of ``volume`` (N1, N2, N3, C) and of ``exemplars`` (one (H, W, C) array per
+        view) over ``bins`` bins spanning ``lo .. lo + span`` per channel; ``ex_flat`` the packed
+        texels (:func:`npmrf3d.baselines.chen_wang._pack`)."""
+        channels = volume.shape[3]
+        lo = np.asarray(lo, dtype=np.float64)
+        span = np.asarray(span, dtype=np.float64)
+        scale = np.where(span > 0, bins / np.where(span > 0, span, 1.0), 0.0)
+
+        def counts(values):
+            b = np.empty(values.shape, dtype=np.int64)
+            _k.value_bins(np.ascontiguousarray(values, dtype=np.float32), lo, scale, bins, b)
+            return b, np.stack([np.bincount(b[:, c], minlength=bins) for c in range(channels)]).astype(np.float64)
+
+        ex_bins, _ = counts(ex_flat)
+        n = volume.shape[0] * volume.shape[1] * volume.shape[2]
+        _, hist = counts(volume.reshape(n, channels))
+        target = np.zeros((channels, bins), dtype=np.float64)
+        for ex in exemplars:
+            _, h = counts(ex.reshape(-1, channels))
+            target += h / h.sum(axis=1, keepdims=True)
+        unit = n / bins
+        return cls(lo, scale, ex_bins, hist / unit, target * bins / len(exemplars), float(unit))
+
 
 
 def position_histogram(src_v: np.ndarray, pixels: int) -> np.ndarray:

@@ -60,6 +60,11 @@ class CoherentConfig:
     position_weight: float = _CW.position_weight
     position_boost: float = _CW.position_boost
     random_candidates: int = _CW.random_candidates
+    global_share: float = _CW.global_share
+    coherence_bias: float = _CW.coherence_bias
+    value_weight: float = _CW.value_weight
+    value_prior: float = _CW.value_prior
+    value_bins: int = _CW.value_bins
     seed: int | None = None
 
     def to_dict(self) -> dict:
@@ -69,7 +74,8 @@ class CoherentConfig:
 
 DEFAULTS = CoherentConfig()
 _SHARED = ("size", "window", "levels", "views", "iterations", "k", "index_weight", "position_weight",
-           "position_boost", "random_candidates", "seed")
+           "position_boost", "random_candidates", "global_share", "coherence_bias", "value_weight",
+           "value_prior", "value_bins", "seed")
 
 
 def make_coherent_config(
@@ -77,14 +83,19 @@ def make_coherent_config(
     iterations=DEFAULTS.iterations, heuristic=DEFAULTS.heuristic,
     centre_bandwidth=DEFAULTS.centre_bandwidth, outlier=DEFAULTS.outlier, k=DEFAULTS.k,
     index_weight=DEFAULTS.index_weight, position_weight=DEFAULTS.position_weight,
-    position_boost=DEFAULTS.position_boost, random_candidates=DEFAULTS.random_candidates, seed=None,
+    position_boost=DEFAULTS.position_boost, random_candidates=DEFAULTS.random_candidates,
+    global_share=DEFAULTS.global_share, coherence_bias=DEFAULTS.coherence_bias,
+    value_weight=DEFAULTS.value_weight, value_prior=DEFAULTS.value_prior, value_bins=DEFAULTS.value_bins,
+    seed=None,
 ) -> CoherentConfig:
     """Validate plain keyword arguments into a frozen :class:`CoherentConfig` (the shared
     coherence fields are validated as Chen–Wang's)."""
     cw = chen_wang.make_chen_wang_config(
         size=size, window=window, levels=levels, views=views, iterations=iterations, k=k,
         index_weight=index_weight, position_weight=position_weight, position_boost=position_boost,
-        random_candidates=random_candidates, seed=seed)
+        random_candidates=random_candidates, global_share=global_share,
+        coherence_bias=coherence_bias, value_weight=value_weight, value_prior=value_prior,
+        value_bins=value_bins, seed=seed)
     heuristic = check.choice("heuristic", heuristic, tuple(HEURISTIC_CODES))
     centre_bandwidth = check.real("centre_bandwidth", centre_bandwidth, low=0.0, low_open=True)
     outlier = check.real("outlier", outlier, low=0.0, high=1.0, high_open=True)

@@ -479,9 +479,17 @@ def naive_search_view(volume, src_v, view, model, *, grid, batches, index_hist, 
     return assign, omega, energy, hist
 
 
+def naive_value_bin(x, lo, scale, bins):
+    """Bin of one value: floor((x - lo) * scale), clamped to 0..bins-1."""
+    return int(min(max(np.floor((float(x) - lo) * scale), 0), bins - 1))
+
+
 def naive_votes(site, views, assign, omega, exemplars, window, grid, pos_hist, theta, position_weight,
-                position_boost=0.0):
-    """Votes (texel colour, view, local texel index, weight) for one voxel, in the kernel's order."""
+                position_boost=0.0, values=None):
+    """Votes (texel colour, view, local texel index, weight) for one voxel, in the kernel's order.
+    ``values``: None, or a dict with the value histogram (``hist``, ``target`` per channel and
+    bin, ``weight``, ``lo``, ``scale``) that divides each weight by
+    ``1 + weight * sum_c max(0, hist[c][b_c] - target[c][b_c])``."""
     a = naive_anchor(window)
     votes = []
     for vi, view in enumerate(views):
@@ -505,16 +513,25 @@ def naive_votes(site, views, assign, omega, exemplars, window, grid, pos_hist, t
                 else:
                     weight *= 1.0 + position_boost * (-excess)
                 colour = exemplars[vi].reshape(-1, exemplars[vi].shape[2])[local].astype(np.float64)
+                if values is not None and values["weight"] > 0:
+                    over = 0.0
+                    for ch in range(len(colour)):
+                        b = naive_value_bin(colour[ch], values["lo"][ch], values["scale"][ch],
+                                            len(values["hist"][ch]))
+                        over += max(0.0, values["hist"][ch][b] - values["target"][ch][b])
+                    weight /= 1.0 + values["weight"] * over
                 votes.append([colour, vi, local, weight])
     return votes
 
 
 def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, order, bounds,
                 pos_hist, theta, position_weight, position_boost=0.0, medoid=0, balance=False,
-                likelihood=0, h2c=1.0, outlier=0.0):
+                likelihood=0, h2c=1.0, outlier=0.0, values=None):
     """Literal discrete solver; returns (volume, src, pos_hist, changed). ``likelihood`` 1 or 2:
     the coherent NP-MRF decision (per-view Parzen estimate of each candidate's colour, product or
-    minimum over views) instead of the medoid."""
+    minimum over views) instead of the medoid. ``values`` (see :func:`naive_votes`, plus
+    ``unit``): the value histogram, which follows every changed voxel between batches (updated
+    in place)."""
     volume = volume.copy()
     src = src.copy()
     pos_hist = [h.astype(np.float64).copy() for h in pos_hist]
@@ -522,10 +539,11 @@ def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, o
     changed = 0
     for b in range(len(bounds) - 1):
         updates = []
+        binned = []
         for flat in order[bounds[b]:bounds[b + 1]]:
             site = (flat // (n1 * n2), (flat // n2) % n1, flat % n2)
             votes = naive_votes(site, views, assign, omega, exemplars, window, grid, pos_hist, theta,
-                                position_weight, position_boost)
+                                position_weight, position_boost, values)
             new = [int(src[vi][site]) for vi in range(len(views))]
             if not votes:
                 updates.append((site, new, False))
@@ -563,6 +581,15 @@ def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, o
                         per_view = [(1.0 - outlier) * lik.get(v, 0.0) / totals[v] + outlier if totals.get(v, 0.0) > 0
                                     else outlier for v in range(len(views))]
                         score = sum(np.log(x) for x in per_view) if likelihood == 1 else min(per_view)
+                        if values is not None and values.get("prior", 0.0) > 0:
+                            eps = 1.0 / values["unit"]
+                            prior = 0.0
+                            for ch in range(len(votes[q][0])):
+                                bq = naive_value_bin(votes[q][0][ch], values["lo"][ch], values["scale"][ch],
+                                                     len(values["hist"][ch]))
+                                prior += values["prior"] * np.log((values["target"][ch][bq] + eps)
+                                                                  / (max(values["hist"][ch][bq], 0.0) + eps))
+                            score = score + prior if likelihood == 1 else score * np.exp(prior)
                         if score > best_score:
                             best, best_score = votes[q], score
                     ranked = []
@@ -576,6 +603,12 @@ def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, o
                 best = min(votes, key=lambda v: ((v[0] - mean) ** 2).sum())
             colour = best[0]
             flag = bool(np.any(volume[site] != colour.astype(np.float32)))
+            if flag and values is not None:
+                old = volume[site].copy()
+                binned.append([(naive_value_bin(old[ch], values["lo"][ch], values["scale"][ch],
+                                                len(values["hist"][ch])),
+                                naive_value_bin(colour[ch], values["lo"][ch], values["scale"][ch],
+                                                len(values["hist"][ch]))) for ch in range(len(colour))])
             for vi in range(len(views)):
                 if vi == best[1]:
                     new[vi] = best[2]
@@ -585,6 +618,10 @@ def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, o
                     new[vi] = min(own, key=lambda v: ((v[0] - colour) ** 2).sum())[2]
             volume[site] = colour
             updates.append((site, new, flag))
+        for pairs in binned:
+            for ch, (old_b, new_b) in enumerate(pairs):
+                values["hist"][ch][old_b] -= 1.0 / values["unit"]
+                values["hist"][ch][new_b] += 1.0 / values["unit"]
         for site, new, flag in updates:
             changed += flag
             for vi in range(len(views)):

@@ -31,6 +31,7 @@ from tests.naive import (
     naive_search_view,
     naive_solve,
     naive_upsample_sources,
+    naive_value_bin,
     naive_volume_patch,
 )
 
@@ -197,6 +198,108 @@ def test_volume_patch_projection_is_the_models(rng):
     assert assign[3, 3, 0] == 6 * 16 + 7  # interior site: the exact copy
 
 
+@pytest.mark.kernels
+@pytest.mark.parametrize("view", VIEWS3)
+@pytest.mark.parametrize("channels", [1, 3])
+def test_project_sites_matches_twin(rng, view, channels):
+    ex = random_exemplar(rng, 12, 12, channels)
+    m = coh.build_level_model(ex, 3, dims=5, k=2)
+    vol = rng.random((5, 6, 7, channels)).astype(np.float32)
+    sites = rng.choice(5 * 6 * 7, size=20, replace=False).astype(np.int64)
+    got = np.empty((20, m.basis.shape[1]))
+    ra, ca = VIEW_AXES[view]
+    _k.project_sites(vol, ra, ca, 3, m.anchor, m.mean, m.basis, sites, got)
+    for i, flat in enumerate(sites):
+        site = np.unravel_index(flat, vol.shape[:3])
+        want = (naive_volume_patch(vol, view, site, 3) - m.mean) @ m.basis
+        np.testing.assert_allclose(got[i], want, rtol=1e-12, atol=1e-12)
+
+
+def test_global_matches_take_the_brute_force_nearest_centre_where_clearly_better(rng):
+    """The worst-matched share of sites is re-matched with its nearest valid centre in the PCA
+    space (brute force here) when that is more than (1 + bias) times closer; counts follow."""
+    ex = random_exemplar(rng, 12, 12)
+    m = coh.build_level_model(ex, 3, dims=9, k=2)
+    vol = rng.random((6, 6, 4, 1)).astype(np.float32)
+    shape = vol.shape[:3]
+    assign = rng.choice(m.valid, size=shape).astype(np.int32)
+    omega = (rng.random(shape) + 0.5).astype(np.float32)
+    hist = np.bincount(assign.ravel(), minlength=m.pixels).astype(np.float64)
+    before_assign, before_omega, before_hist = assign.copy(), omega.copy(), hist.copy()
+    r, floor, share, bias = 0.8, 1e-6, 0.25, 0.1
+    replaced, change = coh.global_matches(vol, "front", m, assign, omega, hist, share=share, bias=bias,
+                                          phi=1e9, index_weight=0.0, r=r, floor=floor)
+    flat_w = before_omega.ravel()
+    worst = np.argsort(flat_w, kind="stable")[:int(np.ceil(share * flat_w.size))]
+    expect_changed = 0
+    for flat in range(flat_w.size):
+        site = np.unravel_index(flat, shape)
+        if flat not in worst:
+            assert assign[site] == before_assign[site] and omega[site] == before_omega[site]
+            continue
+        y = (naive_volume_patch(vol, "front", site, 3) - m.mean) @ m.basis
+        d = np.sqrt(((m.proj[m.valid] - y) ** 2).sum(axis=1))
+        best = int(np.argmin(d))
+        old = float(before_omega[site]) ** (1.0 / (r - 2.0))
+        if max(d[best], floor) * (1 + bias) < old:
+            assert assign[site] == m.valid[best]
+            np.testing.assert_allclose(omega[site], max(d[best], floor) ** (r - 2.0), rtol=1e-5)
+            expect_changed += 1
+        else:
+            assert assign[site] == before_assign[site]
+    assert replaced == expect_changed > 0
+    np.testing.assert_array_equal(hist, np.bincount(assign.ravel(), minlength=m.pixels))
+    assert before_hist.sum() == hist.sum()
+    assert change < 0  # every replacement lowers the energy
+
+
+def test_value_histogram_counts_in_even_bin_units(rng):
+    ex = rng.random((10, 12, 2)).astype(np.float32)
+    vol = rng.random((4, 5, 6, 2)).astype(np.float32)
+    lo, span = ex.reshape(-1, 2).min(axis=0), np.ptp(ex.reshape(-1, 2), axis=0)
+    vh = coh.ValueHistogram.build([ex], ex.reshape(-1, 2), vol, bins=8, lo=lo, span=span)
+    scale = 8 / span.astype(np.float64)
+    for c in range(2):
+        want = np.bincount([naive_value_bin(x, float(lo[c]), scale[c], 8) for x in vol[..., c].ravel()],
+                           minlength=8)
+        np.testing.assert_allclose(vh.hist[c] * vh.unit, want)
+        want_ex = np.bincount([naive_value_bin(x, float(lo[c]), scale[c], 8) for x in ex[..., c].ravel()],
+                              minlength=8)
+        np.testing.assert_allclose(vh.target[c], want_ex / want_ex.sum() * 8)
+        np.testing.assert_array_equal(vh.ex_bins[:, c], [naive_value_bin(x, float(lo[c]), scale[c], 8)
+                                                         for x in ex[..., c].ravel()])
+    assert vh.unit == 4 * 5 * 6 / 8
+
+
+@pytest.mark.parametrize("weight,prior,likelihood", [(32.0, 0.0, 0), (32.0, 3.0, 0), (32.0, 3.0, 1)])
+def test_value_histogram_pulls_the_solver_towards_the_exemplars_histogram(weight, prior, likelihood):
+    """Every voxel is voted for by dark and bright texels, dark ones in the majority (the
+    exemplar is one bright column in three): without histogram matching the solver copies dark
+    almost everywhere; with it the bright share comes close to the exemplar's third, and the
+    histogram the solver tracks is the volume's."""
+    ex = np.where(np.arange(12) % 3 == 0, 0.9, 0.1).astype(np.float32)[None, :].repeat(12, 0)[..., None]
+    m = coh.build_level_model(ex, 4, dims=3, k=2)
+    shape, n = (8, 8, 8), 512
+    share = {}
+    for w in (0.0, weight):
+        gen = np.random.default_rng(0)
+        assign = gen.choice(m.valid, size=(1, *shape)).astype(np.int32)
+        vol = np.full((*shape, 1), 0.1, dtype=np.float32)
+        src = np.zeros((1, *shape), dtype=np.int32)
+        hist = np.bincount(src.ravel(), minlength=144).astype(np.float64)
+        vh = coh.ValueHistogram.build([ex], ex.reshape(-1, 1), vol, bins=4, lo=np.array([0.1]),
+                                      span=np.array([0.8]))
+        _k.solve(vol, src, assign, np.ones((1, *shape), dtype=np.float32), np.array([[0, 1]]),
+                 ex.reshape(-1, 1), np.zeros(1, np.int64), np.array([12]), 4, m.anchor, 1,
+                 gen.permutation(n).astype(np.int64), np.linspace(0, n, 17).astype(np.int64), hist,
+                 np.zeros(1, np.int64), np.array([n / 144.0]), 0.0, 0.0, 8, False, 16, likelihood, 0.01,
+                 0.01, vh.ex_bins, vh.hist, vh.target, w, prior if w else 0.0, vh.lo, vh.scale, vh.unit)
+        share[w] = float((vol > 0.5).mean())
+        np.testing.assert_allclose(vh.hist[0] * vh.unit, [np.sum(vol < 0.5), 0, 0, np.sum(vol > 0.5)])
+    assert share[0.0] < 0.15
+    assert 0.25 < share[weight] < 0.42
+
+
 def _solve_case(rng, views, window, channels, grid, shared=True):
     exemplars = [random_exemplar(rng, 11, 10, channels)]
     for _ in views[1:]:
@@ -222,16 +325,36 @@ def _solve_case(rng, views, window, channels, grid, shared=True):
     return exemplars, models, assign, omega, src, volume
 
 
+def _values(exemplars, models, volume, bins=5):
+    """The value histograms of a solver case (views' distinct exemplars pooled)."""
+    packed, _, _ = CW._pack(models)
+    distinct = list({id(e): e for e in exemplars}.values())
+    pooled = np.concatenate([e.reshape(-1, e.shape[2]) for e in distinct]).astype(np.float64)
+    return coh.ValueHistogram.build(exemplars, packed, volume, bins=bins, lo=pooled.min(axis=0),
+                                    span=pooled.max(axis=0) - pooled.min(axis=0))
+
+
+def _no_values(packed):
+    """The solver's value-histogram arguments with the histogram matching off."""
+    channels = packed.shape[1]
+    zeros = np.zeros((channels, 2))
+    return (np.zeros(packed.shape, np.int64), zeros, zeros, 0.0, 0.0, np.zeros(channels), np.zeros(channels), 1.0)
+
+
 @pytest.mark.parametrize("views", [("front",), ("front", "top"), VIEWS3])
-@pytest.mark.parametrize("medoid,balance,boost,likelihood", [
-    (0, False, 0.0, 0), (0, True, 2.0, 0), (3, False, 0.0, 0), (8, True, 5.0, 0),
-    (8, False, 0.0, 1), (3, True, 2.0, 2)])
+@pytest.mark.parametrize("medoid,balance,boost,likelihood,value_weight", [
+    (0, False, 0.0, 0, 0.0), (0, True, 2.0, 0, 4.0), (3, False, 0.0, 0, 0.0), (8, True, 5.0, 0, 4.0),
+    (8, False, 0.0, 1, 4.0), (3, True, 2.0, 2, 0.0), (3, False, 2.0, 2, 4.0)])
 @pytest.mark.kernels
 @pytest.mark.parametrize("grid,channels", [(1, 1), (2, 3)])
-def test_solve_matches_twin(rng, views, medoid, balance, boost, likelihood, grid, channels):
+def test_solve_matches_twin(rng, views, medoid, balance, boost, likelihood, value_weight, grid, channels):
     window = 4
     exemplars, models, assign, omega, src, volume = _solve_case(rng, views, window, channels, grid,
                                                                 shared=len(views) != 2)
+    vh = _values(exemplars, models, volume)
+    values = {"hist": vh.hist.tolist(), "target": vh.target.tolist(), "weight": value_weight,
+              "prior": 2.0 * (likelihood > 0 and value_weight > 0),
+              "lo": vh.lo.tolist(), "scale": vh.scale.tolist(), "unit": vh.unit}
     packed, ex_off, hist_off = CW._pack(models)
     n = volume.shape[0] * volume.shape[1] * volume.shape[2]
     order = rng.permutation(n).astype(np.int64)
@@ -241,14 +364,16 @@ def test_solve_matches_twin(rng, views, medoid, balance, boost, likelihood, grid
     want_vol, want_src, want_hist, want_changed = naive_solve(
         volume, src, assign, omega, views, exemplars, window=window, grid=grid, order=order,
         bounds=bounds, pos_hist=pos_hist, theta=theta, position_weight=3.0, position_boost=boost, medoid=medoid,
-        balance=balance, likelihood=likelihood, h2c=0.05, outlier=0.01)
+        balance=balance, likelihood=likelihood, h2c=0.05, outlier=0.01, values=values)
     got_vol, got_src = volume.copy(), src.copy()
     got_hist = np.concatenate(pos_hist)
     changed = _k.solve(got_vol, got_src, assign, omega, np.array([VIEW_AXES[v] for v in views]),
                        packed, ex_off, np.full(len(views), 10), window, coh.anchor(window), grid,
                        order, bounds, got_hist, hist_off, theta, 3.0, boost, medoid, balance, 7,
-                       likelihood, 0.05, 0.01)
+                       likelihood, 0.05, 0.01, vh.ex_bins, vh.hist, vh.target, value_weight,
+                       values["prior"], vh.lo, vh.scale, vh.unit)
     np.testing.assert_array_equal(got_vol, want_vol)
+    np.testing.assert_allclose(vh.hist, np.array(values["hist"]), atol=1e-12)
     np.testing.assert_array_equal(got_src, want_src)
     np.testing.assert_array_equal(got_hist, np.concatenate(want_hist))
     assert changed == want_changed
@@ -262,7 +387,7 @@ def test_solve_copies_only_voted_exemplar_texels(rng):
     hist = np.concatenate([np.bincount(s.ravel(), minlength=110) for s in src]).astype(np.float64)
     _k.solve(volume, src, assign, omega, np.array([VIEW_AXES[v] for v in views]), packed, ex_off,
              np.full(3, 10), 4, 1, 1, np.arange(n, dtype=np.int64), np.array([0, n]), hist,
-             hist_off, np.full(3, n / 110), 1.0, 0.0, 0, False, 64)
+             hist_off, np.full(3, n / 110), 1.0, 0.0, 0, False, 64, 0, 1.0, 0.0, *_no_values(packed))
     colours = {tuple(c) for c in exemplars[0].reshape(-1, 3).tolist()}
     assert {tuple(c) for c in volume.reshape(-1, 3).tolist()} <= colours
     # every view's source is a pixel whose colour is a voted texel of that view
@@ -290,7 +415,7 @@ def test_position_histogram_flattens_a_skewed_usage(medoid):
         _k.solve(vol, src, assign, omega, np.array([[0, 1]]), m.exemplar.reshape(-1, 1),
                  np.zeros(1, np.int64), np.array([10]), 4, m.anchor, 1, order,
                  np.linspace(0, n, 65).astype(np.int64), hist, np.zeros(1, np.int64),
-                 np.array([n / 100.0]), weight, 0.0, medoid, False, 16)
+                 np.array([n / 100.0]), weight, 0.0, medoid, False, 16, 0, 1.0, 0.0, *_no_values(m.exemplar.reshape(-1, 1)))
         counts = np.bincount(src.ravel(), minlength=100)
         used[weight] = (int((counts > 0).sum()), int(counts.max()))
     assert used[0.0] == (1, n)  # skewed: one texel everywhere
@@ -440,7 +565,7 @@ def test_solve_does_not_depend_on_the_order_within_a_batch(rng):
         hist = np.concatenate([np.bincount(x.ravel(), minlength=110) for x in src]).astype(np.float64)
         _k.solve(vol, s, assign, omega, np.array([VIEW_AXES[v] for v in views]), packed, ex_off,
                  np.full(3, 10), 4, 1, 1, o, bounds, hist, hist_off, np.full(3, n / 110), 3.0, 4.0, 8,
-                 False, 16)
+                 False, 16, 0, 1.0, 0.0, *_no_values(packed))
         out.append((vol, s, hist))
     for a, b in zip(*out):
         np.testing.assert_array_equal(a, b)

@@ -48,6 +48,92 @@ def mix(x):
 
 
 @jit
+def project(volume, ra, ca, n, u_r, u_c, window, anchor, mean, basis, vec, y):
+    """PCA projection of the neighbourhood of the site at plane position ``(u_r, u_c)`` of
+    slice ``n`` (view axes ``ra``, ``ca``; toroidal volume) into ``y`` (``vec``: scratch of
+    ``window**2 * C``). The neighbourhood is read in (row, column, channel) order minus ``mean``,
+    then ``y = vec @ basis`` accumulated in that order."""
+    na = 3 - ra - ca
+    nr = volume.shape[ra]
+    nc = volume.shape[ca]
+    channels = volume.shape[3]
+    dims = basis.shape[1]
+    m = 0
+    for wr in range(window):
+        x_r = (u_r - anchor + wr) % nr
+        for wc in range(window):
+            x_c = (u_c - anchor + wc) % nc
+            q0 = n if na == 0 else (x_r if ra == 0 else x_c)
+            q1 = n if na == 1 else (x_r if ra == 1 else x_c)
+            q2 = n if na == 2 else (x_r if ra == 2 else x_c)
+            for ch in range(channels):
+                vec[m] = volume[q0, q1, q2, ch] - mean[m]
+                m += 1
+    for j in range(dims):
+        y[j] = 0.0
+    for m in range(vec.shape[0]):
+        xm = vec[m]
+        for j in range(dims):
+            y[j] += xm * basis[m, j]
+
+
+@jit_parallel
+def project_sites(volume, ra, ca, window, anchor, mean, basis, sites, out):
+    """PCA projections of the neighbourhoods of the listed sites of one view.
+
+    Parameters
+    ----------
+    volume : (N0, N1, N2, C) float32
+    ra, ca : volume axes of the exemplar row and column
+    window, anchor : window side and anchor
+    mean : (d,) float64, basis : (d, D) float64
+    sites : (m,) int64 flat voxel indices ``(p0 * N1 + p1) * N2 + p2``
+    out : (m, D) float64, out: the projection of each site (as :func:`project`)
+    """
+    n1 = volume.shape[1]
+    n2 = volume.shape[2]
+    na = 3 - ra - ca
+    d = window * window * volume.shape[3]
+    for i in prange(sites.shape[0]):
+        vec = np.empty(d, dtype=np.float64)
+        y = np.empty(basis.shape[1], dtype=np.float64)
+        flat = sites[i]
+        p = (flat // (n1 * n2), (flat // n2) % n1, flat % n2)
+        project(volume, ra, ca, p[na], p[ra], p[ca], window, anchor, mean, basis, vec, y)
+        for j in range(basis.shape[1]):
+            out[i, j] = y[j]
+
+
+@jit
+def value_bin(x, lo, scale, bins):
+    """Histogram bin of the value ``x``: ``floor((x - lo) * scale)`` clamped to ``0..bins - 1``."""
+    b = int(np.floor((np.float64(x) - lo) * scale))
+    return min(max(b, 0), bins - 1)
+
+
+@jit
+def value_prior(ex_bins, g, val_hist, val_target, val_unit, kappa):
+    """Histogram prior of copying texel ``g``: ``kappa * sum_c log((T_c(b) + e) / (H_c(b) + e))`` over its
+    bins ``b = ex_bins[g, c]`` (``H`` the volume's, ``T`` the exemplars' histogram in units of an
+    even bin, ``e = 1 / val_unit``: one voxel). Positive for under-represented values, zero when
+    the histograms agree."""
+    e = 1.0 / val_unit
+    prior = 0.0
+    for ch in range(ex_bins.shape[1]):
+        b = ex_bins[g, ch]
+        prior += kappa * np.log((val_target[ch, b] + e) / (max(val_hist[ch, b], 0.0) + e))
+    return prior
+
+
+@jit
+def value_bins(values, lo, scale, bins, out):
+    """Bins of every row of ``values`` (n, C) per channel (:func:`value_bin`) into ``out`` (n, C)."""
+    for i in range(values.shape[0]):
+        for ch in range(values.shape[1]):
+            out[i, ch] = value_bin(values[i, ch], lo[ch], scale[ch], bins)
+
+
+@jit
 def random_centres(salt, site, n_random, lo_r, hi_r, lo_c, hi_c, ewidth, out, start):
     """Append ``n_random`` valid centres drawn from ``mix(salt + site * n_random + t)`` to ``out``
     at ``start``; return the new count (``salt < 2**31``)."""
@@ -157,24 +243,7 @@ def search_view(volume, src_v, ra, ca, window, anchor, grid, ewidth, lo_r, hi_r,
                     p0 = n if na == 0 else (u_r if ra == 0 else u_c)
                     p1 = n if na == 1 else (u_r if ra == 1 else u_c)
                     p2 = n if na == 2 else (u_r if ra == 2 else u_c)
-                    # the neighbourhood, (row, col, channel) order
-                    m = 0
-                    for wr in range(window):
-                        x_r = (u_r - anchor + wr) % nr
-                        for wc in range(window):
-                            x_c = (u_c - anchor + wc) % nc
-                            q0 = n if na == 0 else (x_r if ra == 0 else x_c)
-                            q1 = n if na == 1 else (x_r if ra == 1 else x_c)
-                            q2 = n if na == 2 else (x_r if ra == 2 else x_c)
-                            for ch in range(channels):
-                                vec[m] = volume[q0, q1, q2, ch] - mean[m]
-                                m += 1
-                    for j in range(dims):
-                        y[j] = 0.0
-                    for m in range(d):
-                        xm = vec[m]
-                        for j in range(dims):
-                            y[j] += xm * basis[m, j]
+                    project(volume, ra, ca, n, u_r, u_c, window, anchor, mean, basis, vec, y)
                     count = candidates(src_v, ra, ca, p0, p1, p2, ewidth, lo_r, hi_r, lo_c, hi_c,
                                        kcoh, cand)
                     if n_random > 0:
@@ -221,14 +290,18 @@ def search_view(volume, src_v, ra, ca, window, anchor, grid, ewidth, lo_r, hi_r,
 
 @jit
 def _votes(p0, p1, p2, assign, omega, view_axes, ex_off, ewidth, window, anchor, grid, pos_hist,
-           hist_off, theta, position_weight, position_boost, out_g, out_v, out_w):
+           hist_off, theta, position_weight, position_boost, ex_bins, val_hist, val_target, val_weight,
+           out_g, out_v, out_w):
     """Texels voted for voxel ``(p0, p1, p2)`` by every overlapping neighbourhood of every view.
 
     A neighbourhood at site ``u`` matched with centre ``e`` votes for the texel ``e + (x - u)``
     (plane offsets) with weight ``omega[u] / (1 + position_weight * max(0, H(texel) / theta - 1))``
     (paper eq. 4 with a strength); with ``position_boost > 0`` an under-used texel's weight is
     multiplied by ``1 + position_boost * (1 - H(texel) / theta)`` (this project's addition).
-    Votes are enumerated view by view, then by row offset
+    With ``val_weight > 0`` the weight is further divided by the **value-histogram** factor
+    ``1 + val_weight * sum_c max(0, val_hist[c, b_c] - val_target[c, b_c])`` (``b_c`` =
+    ``ex_bins[texel, c]``; histograms in units of an even bin's share, this project's addition
+    after Kopf et al. 2007's histogram matching). Votes are enumerated view by view, then by row offset
     ``x_r - u_r`` from ``-anchor`` to ``window - 1 - anchor``, then by column offset; texels are
     written as packed rows ``ex_off[v] + local``. Returns the number of votes.
     """
@@ -275,6 +348,14 @@ def _votes(p0, p1, p2, assign, omega, view_axes, ex_off, ewidth, window, anchor,
                     weight = weight / (1.0 + position_weight * excess)
                 elif position_boost > 0.0:
                     weight = weight * (1.0 - position_boost * excess)
+                if val_weight > 0.0:
+                    over = 0.0
+                    for ch in range(ex_bins.shape[1]):
+                        b = ex_bins[ex_off[v] + local, ch]
+                        gap = val_hist[ch, b] - val_target[ch, b]
+                        if gap > 0.0:
+                            over += gap
+                    weight = weight / (1.0 + val_weight * over)
                 out_g[count] = ex_off[v] + local
                 out_v[count] = v
                 out_w[count] = weight
@@ -285,7 +366,8 @@ def _votes(p0, p1, p2, assign, omega, view_axes, ex_off, ewidth, window, anchor,
 @jit_parallel
 def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window, anchor, grid,
           order, batch_bounds, pos_hist, hist_off, theta, position_weight, position_boost, medoid, balance, chunk,
-          likelihood=0, h2c=1.0, outlier=0.0):
+          likelihood, h2c, outlier, ex_bins, val_hist, val_target, val_weight, val_prior, val_lo, val_scale,
+          val_unit):
     """Discrete solver (paper section 4.2 with eq. 4), one pass over all voxels.
 
     Voxels are visited in ``order`` (flat indices), cut into batches at ``batch_bounds``. Within a
@@ -304,6 +386,17 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
     ``L_v(p) = sum_{q in v} w_q exp(-||e_p - e_q||^2 / h2c) / sum_{q in v} w_q``, mixed with an
     ``outlier`` share; the views are combined by the product (1) or the minimum (2) and the
     highest score wins (first on ties).
+
+    Value histograms (``val_weight > 0``): ``val_hist`` (C, bins) holds the volume's per-channel
+    histogram in units of ``val_unit`` voxels (an even bin's share), ``val_target`` the
+    exemplars' in the same units, ``ex_bins`` (rows of ``ex_flat``, C) every texel's bins (by
+    :func:`value_bins` with ``val_lo``, ``val_scale``); votes are weighted down by the excess of
+    their texel's bins (:func:`_votes`) and ``val_hist`` follows the changed voxels between
+    batches, so the volume's histogram is pulled towards the exemplars'. With the NP-MRF rule the
+    score of a candidate also gets the histogram prior :func:`value_prior` with strength
+    ``val_prior`` (0 = off; added to the ML_H2b
+    log-score, a factor ``exp(prior)`` on the ML_H2a score), which vanishes when the histograms
+    agree.
     """
     n_views = assign.shape[0]
     n0, n1, n2, channels = volume.shape
@@ -314,6 +407,8 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
         m = batch_bounds[b + 1] - start
         new_src = np.empty((m, n_views), dtype=np.int32)
         flags = np.zeros(m, dtype=np.int64)
+        old_bins = np.zeros((m, channels), dtype=np.int64)
+        new_bins = np.zeros((m, channels), dtype=np.int64)
         n_chunks = (m + chunk - 1) // chunk
         for c in prange(n_chunks):
             vg = np.empty(cap, dtype=np.int64)
@@ -331,7 +426,7 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
                 p2 = flat % n2
                 count = _votes(p0, p1, p2, assign, omega, view_axes, ex_off, ewidth, window,
                                anchor, grid, pos_hist, hist_off, theta, position_weight, position_boost,
-                               vg, vv, vw)
+                               ex_bins, val_hist, val_target, val_weight, vg, vv, vw)
                 for v in range(n_views):
                     new_src[t, v] = src[v, p0, p1, p2]
                 if count == 0:
@@ -387,6 +482,9 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
                                     score += np.log(lv)
                                 else:
                                     score = min(score, lv)
+                            if val_prior > 0.0:
+                                prior = value_prior(ex_bins, vg[q], val_hist, val_target, val_unit, val_prior)
+                                score = score + prior if likelihood == 1 else score * np.exp(prior)
                             if -score < best_e:
                                 best_e = -score
                                 best = q
@@ -398,6 +496,8 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
                                 diff = ex_flat[vg[q], ch] - ex_flat[vg[q2], ch]
                                 dd += diff * diff
                             e_sum += vw[q2] * np.sqrt(dd)
+                        if val_prior > 0.0:
+                            e_sum *= np.exp(-value_prior(ex_bins, vg[q], val_hist, val_target, val_unit, val_prior))
                         if e_sum < best_e:
                             best_e = e_sum
                             best = q
@@ -424,6 +524,12 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
                 for ch in range(channels):
                     if volume[p0, p1, p2, ch] != ex_flat[g, ch]:
                         flags[t] = 1
+                if flags[t]:
+                    for ch in range(channels):
+                        old_bins[t, ch] = value_bin(volume[p0, p1, p2, ch], val_lo[ch], val_scale[ch],
+                                                    val_hist.shape[1])
+                        new_bins[t, ch] = ex_bins[g, ch]
+                for ch in range(channels):
                     volume[p0, p1, p2, ch] = ex_flat[g, ch]
                 for v in range(n_views):
                     if v == vv[best]:
@@ -450,6 +556,10 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
             p1 = (flat // n2) % n1
             p2 = flat % n2
             changed += flags[t]
+            if flags[t]:
+                for ch in range(channels):
+                    val_hist[ch, old_bins[t, ch]] -= 1.0 / val_unit
+                    val_hist[ch, new_bins[t, ch]] += 1.0 / val_unit
             for v in range(n_views):
                 old = src[v, p0, p1, p2]
                 new = new_src[t, v]

@@ -49,9 +49,13 @@ Choices where the paper is silent (also in ``docs/chen_wang.md``)
 * IRLS distances are the PCA-space distances of the match, floored at
   ``1e-3 * sigma * sqrt(d)``.
 * This project's additions (defaults chosen by measurement, 0 = the paper): ``position_boost``
-  (votes for under-used pixels weigh more) and ``random_candidates`` (hashed random valid
+  (votes for under-used pixels weigh more), ``random_candidates`` (hashed random valid
   centres join each candidate set, so the index histogram can reach parts of the exemplar the
-  coherent candidates never propose -- sparse bright spots).
+  coherent candidates never propose), ``value_weight`` and ``value_prior`` (histogram matching
+  of the voxel values, after Kopf et al. 2007: votes for over-used value bins weigh less and
+  under-used values get a prior, so sparse bright spots survive; the position histogram, spread
+  over thousands of pixels, cannot see that 1 % of the exemplar is missing) and
+  ``global_share`` (the worst-matched sites also get a global k-d tree search; off by default).
 """
 
 from __future__ import annotations
@@ -106,6 +110,11 @@ class ChenWangConfig:
     position_boost: float = 16.0
     coherence_exclude: float = 0.0
     random_candidates: int = 8
+    global_share: float = 0.0
+    coherence_bias: float = 0.0
+    value_weight: float = 32.0
+    value_prior: float = 3.0
+    value_bins: int = 16
     batches: int = 8
     solver: str = "medoid"
     balance_views: bool = False
@@ -125,6 +134,8 @@ def make_chen_wang_config(
     grid=DEFAULTS.grid, index_weight=DEFAULTS.index_weight,
     position_weight=DEFAULTS.position_weight, position_boost=DEFAULTS.position_boost,
     coherence_exclude=DEFAULTS.coherence_exclude, random_candidates=DEFAULTS.random_candidates,
+    global_share=DEFAULTS.global_share, coherence_bias=DEFAULTS.coherence_bias,
+    value_weight=DEFAULTS.value_weight, value_prior=DEFAULTS.value_prior, value_bins=DEFAULTS.value_bins,
     batches=DEFAULTS.batches, solver=DEFAULTS.solver, balance_views=DEFAULTS.balance_views,
     seed=None,
 ) -> ChenWangConfig:
@@ -161,6 +172,11 @@ def make_chen_wang_config(
     position_boost = check.real("position_boost", position_boost, low=0.0)
     coherence_exclude = check.real("coherence_exclude", coherence_exclude, low=0.0)
     random_candidates = check.integer("random_candidates", random_candidates, low=0, high=256)
+    global_share = check.real("global_share", global_share, low=0.0, high=1.0)
+    coherence_bias = check.real("coherence_bias", coherence_bias, low=0.0)
+    value_weight = check.real("value_weight", value_weight, low=0.0)
+    value_prior = check.real("value_prior", value_prior, low=0.0)
+    value_bins = check.integer("value_bins", value_bins, low=2, high=256)
     batches = check.integer("batches", batches, low=1, high=1024)
     solver = check.choice("solver", solver, SOLVERS)
     views = check.views(views, VIEWS)
@@ -170,7 +186,9 @@ def make_chen_wang_config(
                           iterations=iterations, k=k, pca_dims=pca_dims, r=r, grid=grid,
                           index_weight=index_weight, position_weight=position_weight,
                           position_boost=position_boost, coherence_exclude=coherence_exclude,
-                          random_candidates=random_candidates, batches=batches, solver=solver,
+                          random_candidates=random_candidates, global_share=global_share,
+                          coherence_bias=coherence_bias, value_weight=value_weight,
+                          value_prior=value_prior, value_bins=value_bins, batches=batches, solver=solver,
                           balance_views=bool(balance_views), seed=seed)
 
 
@@ -197,8 +215,10 @@ def chen_wang_synthesize(
     position_weight: float = DEFAULTS.position_weight,
     position_boost: float = DEFAULTS.position_boost,
     coherence_exclude: float = DEFAULTS.coherence_exclude,
-    random_candidates: int = DEFAULTS.random_candidates, batches: int = DEFAULTS.batches,
-    solver: str = DEFAULTS.solver, balance_views: bool = DEFAULTS.balance_views, rng=None,
+    random_candidates: int = DEFAULTS.random_candidates,
+    global_share: float = DEFAULTS.global_share, coherence_bias: float = DEFAULTS.coherence_bias,
+    value_weight: float = DEFAULTS.value_weight, value_prior: float = DEFAULTS.value_prior,
+    value_bins: int = DEFAULTS.value_bins, batches: int = DEFAULTS.batches, solver: str = DEFAULTS.solver, balance_views: bool = DEFAULTS.balance_views, rng=None,
     progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
 ) -> SynthesisResult:
     """Synthesize a solid texture with Chen & Wang's method (2010; issue 11).
@@ -241,6 +261,31 @@ def chen_wang_synthesize(
         This project's addition: that many uniformly random valid centres join every site's
         candidate set (drawn per site from a hash of the seed, so thread-independent; 0 = the
         paper). They let the index histogram reach exemplar parts the coherent candidates miss.
+    global_share : float in [0, 1]
+        This project's addition: after each view's search, that share of its sites -- the worst
+        matched -- also search all exemplar neighbourhoods (``cKDTree``), and take the global
+        match where it is clearly better (:func:`npmrf3d.coherence.global_matches`; 0 = the
+        paper). A structure that no coherent candidate proposes (a sparse bright spot) can then
+        be matched, so it survives.
+    coherence_bias : float >= 0
+        A global match replaces the coherent one only if its distance times
+        ``1 + coherence_bias`` is smaller (Hertzmann et al. 2001's coherence parameter).
+    value_weight : float >= 0
+        This project's addition after Kopf et al. 2007's histogram matching: the solver divides
+        each vote's weight by ``1 + value_weight * sum_c max(0, H_c(b) - T_c(b))``, ``H_c`` the
+        volume's histogram of channel ``c`` and ``T_c`` the exemplars' (``value_bins`` bins over
+        the exemplars' range, in units of an even bin's share), ``b`` the voted texel's bin; the
+        histogram follows the solver between batches. It keeps the exemplar's share of rare
+        values (sparse bright spots) that the position histogram, spread over thousands of
+        pixels, cannot see (0 = off, the paper).
+    value_prior : float >= 0
+        The histogram prior ``P = value_prior * sum_c log(T_c(b) / H_c(b))`` of each candidate
+        texel, positive for under-represented values and zero once the histograms agree: the
+        medoid solver divides a candidate's energy by ``exp(P)``, the coherent NP-MRF decision
+        (:mod:`npmrf3d.coherent`) adds ``P`` to its ML_H2b log-score (0 = off; the mean solver
+        ignores it).
+    value_bins : int
+        Bins per channel of those histograms.
     batches : int
         Histogram updates per pass (search: interleaved slice groups; solver: parts of a random
         voxel order). More batches track the histograms more closely, fewer run more in parallel.
@@ -285,8 +330,9 @@ def chen_wang_synthesize(
         size=size, window=window, levels=levels, views=views, iterations=iterations, k=k,
         pca_dims=pca_dims, r=r, grid=grid, index_weight=index_weight,
         position_weight=position_weight, position_boost=position_boost,
-        coherence_exclude=coherence_exclude, random_candidates=random_candidates, batches=batches,
-        solver=solver, balance_views=balance_views, seed=seed)
+        coherence_exclude=coherence_exclude, random_candidates=random_candidates,
+        global_share=global_share, coherence_bias=coherence_bias, value_weight=value_weight,
+        value_prior=value_prior, value_bins=value_bins, batches=batches, solver=solver, balance_views=balance_views, seed=seed)
     generator = check.rng(rng)
     per_view = resolve_exemplars(exemplar, exemplars, config.views, **_fit(config))
     _check_exemplar_levels(config, per_view)
@@ -316,6 +362,8 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
     pooled = np.concatenate([a.reshape(-1, channels) for a in distinct])
     labels = np.unique(pooled, axis=0).astype(np.float32)
     sigma = float(pooled.astype(np.float64).std()) or 1.0
+    value_lo = pooled.min(axis=0).astype(np.float64)
+    value_span = pooled.max(axis=0).astype(np.float64) - value_lo
     view_axes = np.array([VIEW_AXES[v] for v in views], dtype=np.int64)
     n_views = len(views)
     timings = {"setup": time.perf_counter() - t_start}
@@ -351,6 +399,8 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
                             for vi, v in enumerate(views)])
         volume = initial_colours(src, [m.exemplar for m in vmodels])
         ex_flat, ex_off, hist_off = _pack(vmodels)
+        values = coh.ValueHistogram.build([m.exemplar for m in vmodels], ex_flat, volume,
+                                          bins=config.value_bins, lo=value_lo, span=value_span)
         ewidth = np.array(widths, dtype=np.int64)
         pos_hist = np.concatenate([coh.position_histogram(src[vi], m.pixels) for vi, m in enumerate(vmodels)])
         theta = np.array([volume.shape[0] * volume.shape[1] * volume.shape[2] / m.pixels for m in vmodels])
@@ -365,13 +415,14 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
         bounds = np.linspace(0, n_vox, min(config.batches, n_vox) + 1).astype(np.int64)
         if progress is not None:
             progress(level, 0, n_iter, float("nan"))
-        level_history, changed = [], []
+        level_history, changed, global_counts = [], [], []
         t_search = t_solve = 0.0
         sites = 0
         for it in range(n_iter):
             ts = time.perf_counter()
             energy_sum = 0.0
             sites = 0
+            global_count = 0
             for vi, v in enumerate(views):
                 m = vmodels[vi]
                 ra, ca = VIEW_AXES[v]
@@ -386,7 +437,15 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
                                config.index_weight, config.r, floor, config.random_candidates,
                                int(rng.integers(0, 2**31)), assign[vi], fresh, omega[vi], energy)
                 energy_sum += float(energy.sum())
+                if config.global_share > 0.0:
+                    n_global, change = coh.global_matches(
+                        volume, v, m, assign[vi], omega[vi], index_hist[vi], share=config.global_share,
+                        bias=config.coherence_bias, phi=phi, index_weight=config.index_weight,
+                        r=config.r, floor=floor)
+                    energy_sum += change
+                    global_count += n_global
                 sites += n_sites
+            global_counts.append(global_count)
             t_search += time.perf_counter() - ts
             ts = time.perf_counter()
             order = rng.permutation(n_vox).astype(np.int64)
@@ -399,7 +458,9 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
                                         hist_off, theta, config.position_weight, config.position_boost,
                                         _MEDOID_CANDIDATES if config.solver == "medoid" or decision[0] else 0,
                                         config.balance_views, _SOLVE_CHUNK, decision[0],
-                                        2.0 * (decision[1] * sigma) ** 2 or 1.0, decision[2])))
+                                        2.0 * (decision[1] * sigma) ** 2 or 1.0, decision[2],
+                                        values.ex_bins, values.hist, values.target, config.value_weight,
+                                        config.value_prior, values.lo, values.scale, values.unit)))
             t_solve += time.perf_counter() - ts
             level_history.append(energy_sum / max(1, sites))
             if progress is not None:
@@ -414,6 +475,7 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
             "pca_dims": {v: int(vmodels[vi].basis.shape[1]) for vi, v in enumerate(views)},
             "centres": {v: int(vmodels[vi].centres) for vi, v in enumerate(views)},
             "search_seconds": t_search, "solve_seconds": t_solve, "changed": changed,
+            "global_matches": global_counts,
             "exemplar_pixels_used": {v: used[vi] for vi, v in enumerate(views)},
         }
         if checkpoint is not None:

@@ -162,6 +162,16 @@ CHEN_WANG_HELP = {
     "coherence_exclude": "k-coherence sets skip centres within this many pixels of the query (0 = off)",
     "random_candidates": "this project's addition: random valid centres added to each site's candidates "
                          "(0 = the paper)",
+    "global_share": "this project's addition: share of each view's worst-matched sites that also search "
+                    "all exemplar neighbourhoods (k-d tree) and take the global match where it is clearly "
+                    "better, in [0, 1] (0 = the paper)",
+    "coherence_bias": "a global match replaces the coherent one only if its distance times 1 + B is smaller, >= 0",
+    "value_weight": "this project's addition: histogram matching of the voxel values -- votes for texels "
+                    "whose value bins the volume over-uses weigh 1 + W * excess less, >= 0 (0 = the paper); "
+                    "keeps sparse bright features",
+    "value_prior": "strength of the histogram prior log(exemplar share / volume share) on each "
+                   "candidate's score, >= 0 (0 = off; the mean solver ignores it)",
+    "value_bins": "bins per channel of the value histograms",
     "batches": "histogram updates per pass (more track the histograms closer, fewer run more in parallel)",
     "solver": "how a voxel picks among its voted texels: medoid (weighted medoid of the 8 heaviest, "
               "chosen by measurement) or mean (nearest to the weighted mean, the paper's practice)",

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from ..coherent import METHOD
 from ._generic import add_method_parser
+from .baseline import CHEN_WANG_HELP
 
 __all__ = ["register", "FIELD_HELP"]
 
@@ -26,6 +27,8 @@ FIELD_HELP = {
     "position_weight": "strength of the position-histogram re-weighting of the votes, >= 0 (0 = off)",
     "position_boost": "votes for under-used exemplar pixels weigh up to 1 + B times more, >= 0 (0 = off)",
     "random_candidates": "random valid centres added to each site's candidates (reach sparse features)",
+    **{name: CHEN_WANG_HELP[name] for name in ("global_share", "coherence_bias", "value_weight",
+                                               "value_prior", "value_bins")},
 }
 
 
