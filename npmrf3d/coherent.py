@@ -62,8 +62,10 @@ class CoherentConfig:
     random_candidates: int = _CW.random_candidates
     global_share: float = _CW.global_share
     coherence_bias: float = _CW.coherence_bias
-    value_weight: float = _CW.value_weight
-    value_prior: float = _CW.value_prior
+    # measured (docs/quality.md): the histogram prior alone keeps hubble's spots and leaves
+    # gravel as it was; the vote weighting (Chen–Wang's default) cost gravel's grain here
+    value_weight: float = 0.0
+    value_prior: float = 3.0
     value_bins: int = _CW.value_bins
     seed: int | None = None
 

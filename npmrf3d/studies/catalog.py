@@ -82,6 +82,10 @@ def _m(name: str, algorithm: str = "npmrf", **params) -> Method:
     return Method(name, algorithm, tuple(params.items()))
 
 
+#: synth's default (ICM, the coherent NP-MRF sampler, full colours): the studies that compare the
+#: paper's full-Parzen settings show it beside them (issue 12).
+_DEFAULT = _m("default", relaxation="icm", variant="coherent", palette=None)
+
 HEURISTICS = Study(
     name="heuristics",
     title="Heuristics compared: ML_H1a, ML_H1b, ML_H2a, ML_H2b",
@@ -172,13 +176,15 @@ COLOUR = Study(
     question="Does annealing with ML_H2b reproduce colour textures (SPEC.md section 4 measured "
              "it close to an exact crop on two of four photographs)?",
     notes="ML_H2b, 7x7, 64-colour palette (k-means), geometric schedule, 8 proposals per voxel "
-          "and level; Metropolis and heat-bath sampling, with ICM as the reference.",
+          "and level; Metropolis and heat-bath sampling, with ICM as the reference. 'default' is "
+          "synth's default (the coherent NP-MRF sampler, ICM) on the full colours, no palette.",
     common=(("heuristic", "ML_H2b"), ("window", 7), ("palette", 64)),
     methods=(
         Method("anneal-metropolis", "npmrf", _ANNEAL),
         Method("anneal-heat-bath", "npmrf",
                tuple((k, "heat-bath" if k == "sampler" else v) for k, v in _ANNEAL)),
         _m("ICM", relaxation="icm", max_sweeps=30),
+        _DEFAULT,
     ),
     full=Scale(exemplars=COLOUR_EXEMPLARS, **_FULL),
     quick=Scale(**{**_QUICK, "exemplars": ("ihc64",),
@@ -220,12 +226,16 @@ VIEWS = Study(
     notes="The exemplars' layers run along the image rows, i.e. along axis i in the front "
           "(i, j) and top (i, k) views; the right view (j, k) would ask for layers along j too. "
           "ML_H2b, ICM, default rule, 7x7, 64-colour palette (the colour photographs have "
-          "thousands of distinct colours). Metrics are computed on the constrained views only.",
+          "thousands of distinct colours). Metrics are computed on the constrained views only. "
+          "The '-default' methods are synth's default (the coherent NP-MRF sampler) on the full "
+          "colours.",
     common=(("relaxation", "icm"), ("heuristic", "ML_H2b"), ("window", 7), ("max_sweeps", 30),
             ("palette", 64)),
     methods=(
         _m("3views", views="front,right,top"),
         _m("2views", views="front,top"),
+        _m("3views-default", views="front,right,top", variant="coherent", palette=None),
+        _m("2views-default", views="front,top", variant="coherent", palette=None),
     ),
     full=Scale(exemplars=LAYERED_EXEMPLARS, **_FULL),
     quick=Scale(**{**_QUICK, "exemplars": ("stripes",)}),
@@ -240,12 +250,15 @@ GROUNDTRUTH = Study(
     notes="The exemplar is one slice of --volume (default: the middle slice across axis 0), "
           "used for all three views. 'real' is a crop of the real volume (the floor set by "
           "finite size); 'control' draws voxels independently from the exemplar. Slice "
-          "metrics compare each view's slices with the real volume's middle slice in that view.",
+          "metrics compare each view's slices with the real volume's middle slice in that view. "
+          "'default' is synth's default (the coherent NP-MRF sampler).",
     common=(("heuristic", "ML_H2b"), ("window", 7), ("max_sweeps", 30)),
     methods=(
         _m("ML_H2b-icm", relaxation="icm"),
         Method("ML_H2b-anneal", "npmrf", _ANNEAL),
         _m("NP_K", "kopf", window=8),
+        _DEFAULT,
+        _m("chen-wang", "chen-wang"),
         _m("control", "control"),
         _m("real", "real"),
     ),
