@@ -16,7 +16,7 @@ How an array is recognised (:func:`interpret`; ``docs/volume.md``)
 * An array without axes (``.npy``, in memory): 2-D is an image; 4-D is a volume with channels
   last; 3-D is an image with channels when the last axis is at most
   :data:`MAX_IMAGE_CHANNELS` (grey+alpha, RGB, RGBA) or a side is shorter than
-  :data:`MIN_VOLUME_SIDE` (too small to be a useful volume), a volume when its three sides are
+  :data:`MIN_VOLUME_SIDE` (too small to be a useful volume; only where an image is expected), a volume when its three sides are
   within a factor :data:`CUBE_RATIO` of each other (a ``48 x 48 x 48`` crop), and otherwise
   ambiguous (``64 x 64 x 16``): refused, naming ``exemplar_kind``.
 * ``exemplar_kind="image"`` or ``"volume"`` overrides every guess.
@@ -78,8 +78,8 @@ def _canonical(array: np.ndarray, axes: str, kind: str, name: str) -> tuple[str,
     return ("volume" if depth else "image"), out
 
 
-def interpret(array, *, axes: str | None = None, kind: str = "auto",
-              name: str = "exemplar") -> tuple[str, np.ndarray]:
+def interpret(array, *, axes: str | None = None, kind: str = "auto", name: str = "exemplar",
+              expect: str = "image") -> tuple[str, np.ndarray]:
     """Decide whether ``array`` is an image or a volume (rules in the module docstring).
 
     Parameters
@@ -92,6 +92,10 @@ def interpret(array, *, axes: str | None = None, kind: str = "auto",
         ``exemplar_kind``: guess, or say which is meant.
     name : str
         How the array is called in messages.
+    expect : {"image", "volume"}
+        What the caller's method takes. The :data:`MIN_VOLUME_SIDE` rule (a small 3-D array is an
+        image with channels) applies only when an image is expected; a 3D method reads a small
+        cube as a small volume (and :func:`volume_fits` judges its size).
 
     Returns
     -------
@@ -123,7 +127,8 @@ def interpret(array, *, axes: str | None = None, kind: str = "auto",
                        f"has two (H, W) or three (H, W, C)")
         return "volume", a
     if kind == "auto":
-        if a.shape[2] <= MAX_IMAGE_CHANNELS or min(a.shape) < MIN_VOLUME_SIDE:
+        small = expect == "image" and min(a.shape) < MIN_VOLUME_SIDE
+        if a.shape[2] <= MAX_IMAGE_CHANNELS or small:
             kind = "image"
         elif max(a.shape) <= CUBE_RATIO * min(a.shape):
             kind = "volume"
@@ -192,7 +197,7 @@ def load_volume_exemplar(source, *, exemplar_kind: str = "auto", spacing=None,
         check_spacing(spacing)
     elif file_spacing is not None:
         check_spacing(file_spacing, name=f"voxel spacing recorded in {name}")
-    kind, array = interpret(array, axes=axes, kind=exemplar_kind, name=name)
+    kind, array = interpret(array, axes=axes, kind=exemplar_kind, name=name, expect="volume")
     if kind != "volume":
         check.fail(f"{name} of shape {array.shape[:2] if array.shape[2] == 1 else array.shape} is "
                    f"a 2D image, and this method needs a volume (D, H, W[, C]): give a 3D "
