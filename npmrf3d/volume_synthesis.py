@@ -292,8 +292,7 @@ def volume_synthesize(exemplar, *, size=DEFAULTS.size, levels: int = DEFAULTS.le
     -------
     SynthesisResult
         ``volume`` (N1, N2, N3, C) float32 exemplar values; ``history`` the mean matching distance
-        per pass, per level; ``stats['coordinates']`` the final exemplar coordinates
-        ``(N1, N2, N3, 3)``.
+        per pass, per level; ``stats`` per level: shape, spacing, model seconds, PCA dimensions.
 
     Examples
     --------
@@ -366,14 +365,14 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
                 progress(level, p + 1, config.passes, mean_cost)
         history.append(level_history)
         timings[f"level_{level}"] = time.perf_counter() - t0
-        stats["levels"][f"level_{level}"] = {"shape": list(shape), "spacing": h,
-                                             "model_seconds": t_model, "pca_dims": int(feat.shape[3])}
+        stats["levels"][f"level_{level}"] = {"shape": list(shape), "spacing": h, "model_seconds": t_model,
+                                             "correction_seconds": time.perf_counter() - t0 - t_model,
+                                             "pca_dims": int(feat.shape[3])}
         if checkpoint is not None:
             save_checkpoint(checkpoint, config=key, coords=coords, level=level,
                             rng_state=json.dumps(rng.bit_generator.state), history=json.dumps(history),
                             timings=json.dumps(timings), stats=json.dumps(stats))
     out = np.ascontiguousarray(exemplar[coords[..., 0], coords[..., 1], coords[..., 2]], dtype=np.float32)
-    stats["coordinates"] = coords.astype(np.int32)
     timings["total"] = time.perf_counter() - t_start
     labels = np.unique(exemplar.reshape(-1, exemplar.shape[3]), axis=0) if exemplar.size <= 1 << 22 else np.empty((0, exemplar.shape[3]))
     return SynthesisResult(volume=out, history=history, config=config, timings=timings,

@@ -37,6 +37,8 @@ def similarity_sets(neighbours, coords, k, exclude, out):
         out[q, 0] = neighbours[q, 0]
         count = 1
         for t in range(1, m):
+            if count == k:
+                break
             cand = neighbours[q, t]
             ok = True
             for s in range(count):
@@ -50,8 +52,6 @@ def similarity_sets(neighbours, coords, k, exclude, out):
             if ok:
                 out[q, count] = cand
                 count += 1
-                if count == k:
-                    break
         t = 1
         while count < k:  # too few far-apart neighbours: nearest ones, in order
             out[q, count] = neighbours[q, min(t, m - 1)]
@@ -78,12 +78,15 @@ def _offset(frames, single, i, j, k, offsets, d, out):
 
 
 @jit
-def _distance(feat, a, b, c, h, offsets, neigh, shape):
+def _distance(feat, a, b, c, h, offsets, neigh, shape, bound):
     """``sum_D ||feat[(a, b, c) + h D] - neigh[D]||^2`` over ``offsets`` (positions clamped to
-    the exemplar)."""
+    the exemplar); stops early once the partial sum reaches ``bound`` (it can then only be
+    ``>= bound``, and a candidate must be strictly better to win, so the choice is unchanged)."""
     total = 0.0
     dims = feat.shape[3]
     for d in range(offsets.shape[0]):
+        if total >= bound:
+            return total
         x = _clamp(a + h * offsets[d, 0], 0, shape[0] - 1)
         y = _clamp(b + h * offsets[d, 1], 0, shape[1] - 1)
         z = _clamp(c + h * offsets[d, 2], 0, shape[2] - 1)
@@ -132,7 +135,7 @@ def correct(coords, out, frames, feat, kset, h, lo, hi, offsets, parity, cost):
             for e in range(dims):
                 neigh[d, e] = feat[src[d, 0], src[d, 1], src[d, 2], e]
         ba, bb, bc = coords[i, j, kk, 0], coords[i, j, kk, 1], coords[i, j, kk, 2]
-        best = _distance(feat, ba, bb, bc, h, offsets, neigh, shape)
+        best = _distance(feat, ba, bb, bc, h, offsets, neigh, shape, np.inf)
         for d in range(n_off):
             flat = (src[d, 0] * shape[1] + src[d, 1]) * shape[2] + src[d, 2]
             for s in range(k):
@@ -143,7 +146,7 @@ def correct(coords, out, frames, feat, kset, h, lo, hi, offsets, parity, cost):
                 ua = _clamp(qa - h * offsets[d, 0], lo[0], hi[0])
                 ub = _clamp(qb - h * offsets[d, 1], lo[1], hi[1])
                 uc = _clamp(qc - h * offsets[d, 2], lo[2], hi[2])
-                dist = _distance(feat, ua, ub, uc, h, offsets, neigh, shape)
+                dist = _distance(feat, ua, ub, uc, h, offsets, neigh, shape, best)
                 if dist < best:
                     best = dist
                     ba, bb, bc = ua, ub, uc
