@@ -184,24 +184,6 @@ def test_refusals_name_the_problem(tmp_path):
         make_volume_config(size=30, levels=3)
 
 
-def test_resume_from_checkpoint(tmp_path):
-    path = tmp_path / "run.npz"
-    full = volume_synthesize(layers(), size=16, levels=2, rng=5).volume
-
-    class Stop(Exception):
-        pass
-
-    def interrupt(level, step, steps, value):
-        if level == 0 and step == 1:
-            raise Stop
-
-    with pytest.raises(Stop):
-        volume_synthesize(layers(), size=16, levels=2, rng=5, progress=interrupt, checkpoint=path)
-    np.testing.assert_array_equal(volume_synthesize(layers(), size=16, levels=2, rng=5, checkpoint=path).volume, full)
-    with pytest.raises(ParameterError, match="different configuration"):
-        volume_synthesize(layers(), size=16, levels=2, rng=5, checkpoint=path, passes=1)
-
-
 def test_cli_writes_a_run_and_refuses_an_image(tmp_path):
     np.save(tmp_path / "crop.npy", (layers() * 255).astype(np.uint8))
     np.save(tmp_path / "image.npy", np.zeros((24, 24, 3), dtype=np.uint8))
