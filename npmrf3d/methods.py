@@ -16,7 +16,7 @@ methods (they make no volume from an exemplar); they stay in :mod:`npmrf3d.studi
 from __future__ import annotations
 
 from . import _validation as check
-from . import coherent, resources, synthesis, volume_synthesis
+from . import coherent, resources, synthesis, volume_npmrf, volume_synthesis
 from .baselines import chen_wang, kopf
 from .config import SynthesisMethod
 
@@ -30,6 +30,7 @@ METHODS: dict[str, SynthesisMethod] = {
         kopf.METHOD,
         chen_wang.METHOD,
         volume_synthesis.METHOD,
+        volume_npmrf.METHOD,
     )
 }
 

@@ -137,9 +137,7 @@ def appearance_space(exemplar: np.ndarray, level: int, window: int, dims: int,
     the ``dims`` leading principal directions of :data:`PCA_SAMPLES` random voxels' vectors.
     """
     h = 2 ** level
-    ex = exemplar.astype(np.float64)
-    if h > 1:
-        ex = ndimage.gaussian_filter(ex, sigma=(h / 2, h / 2, h / 2, 0), mode="nearest")
+    ex = smoothed(exemplar, level)
     shape = ex.shape[:3]
     r = window // 2
     offsets = [(a, b, c) for a in range(-r, r + 1) for b in range(-r, r + 1) for c in range(-r, r + 1)]
@@ -226,6 +224,36 @@ def correction_pass(coords: np.ndarray, frames: np.ndarray, feat: np.ndarray, ks
     for parity in np.ndindex(2, 2, 2):
         out = coords.copy()
         _k.correct(coords, out, frames, feat, kset, h, lo, hi, offsets, np.array(parity, dtype=np.int64), cost)
+        coords = out
+    return coords, float(cost.mean())
+
+
+def smoothed(exemplar: np.ndarray, level: int) -> np.ndarray:
+    """The exemplar of a level: Gaussian-smoothed by ``sigma = 2**level / 2`` (none at level 0),
+    float64, borders by nearest values (as :func:`appearance_space` sees it)."""
+    h = 2 ** level
+    ex = exemplar.astype(np.float64)
+    if h > 1:
+        ex = ndimage.gaussian_filter(ex, sigma=(h / 2, h / 2, h / 2, 0), mode="nearest")
+    return np.ascontiguousarray(ex)
+
+
+def window_offsets(window: int) -> np.ndarray:
+    """The ``window^3 - 1`` offsets of a cube without its centre, lexicographic."""
+    r = window // 2
+    return np.array([o for o in np.ndindex(window, window, window) if o != (r, r, r)], dtype=np.int64) - r
+
+
+def parzen_pass(coords, frames, feat, values, kset, h: int, lo, hi, offsets, window: int,
+                adaptive: float, centre_h2: float) -> tuple[np.ndarray, float]:
+    """:func:`correction_pass` with the Parzen decision (:func:`_kernels.volume.correct_parzen`)."""
+    coords = np.ascontiguousarray(coords, dtype=np.int64)
+    cost = np.zeros(coords.shape[:3])
+    woff = window_offsets(window)
+    for parity in np.ndindex(2, 2, 2):
+        out = coords.copy()
+        _k.correct_parzen(coords, out, frames, feat, values, kset, h, lo, hi, offsets, woff,
+                          np.array(parity, dtype=np.int64), adaptive, centre_h2, cost)
         coords = out
     return coords, float(cost.mean())
 
@@ -319,8 +347,14 @@ def volume_synthesize(exemplar, *, size=DEFAULTS.size, levels: int = DEFAULTS.le
 
 def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
         progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
-        t_start: float | None = None, vector_field: np.ndarray | None = None) -> SynthesisResult:
-    """The method on a validated configuration and ``{"volume": (D, H, W, C) float32}``."""
+        t_start: float | None = None, vector_field: np.ndarray | None = None,
+        parzen: tuple[float, float] | None = None) -> SynthesisResult:
+    """The method on a validated configuration and ``{"volume": (D, H, W, C) float32}``.
+
+    ``parzen = (adaptive, centre_bandwidth)`` decides every correction by the Parzen LCPDF of
+    full ``window^3`` neighbourhoods of the level's smoothed exemplar values
+    (:func:`npmrf3d._kernels.volume.correct_parzen`; the ``npmrf-3d`` method,
+    :mod:`npmrf3d.volume_npmrf`); None: seed 002's nearest candidate in appearance space."""
     t_start = time.perf_counter() if t_start is None else t_start
     exemplar = _exemplar(per_view, config)
     if config.vector_field in ("array",) or config.vector_field.startswith("file:"):
@@ -330,7 +364,8 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
         if vector_field is None:
             check.fail("vector_field 'array' needs the frames array (vector_field=...)")
     lo, hi = _valid_box(exemplar.shape[:3], config.window)
-    key = _key(config, exemplar, vector_field)
+    key = _key(config, exemplar, vector_field) + (f"|parzen={list(parzen)}" if parzen else "")
+    sigma = float(exemplar.astype(np.float64).std()) or 1.0
     timings = {"setup": time.perf_counter() - t_start}
     history: list[list[float]] = []
     stats: dict = {"threads": _jit.thread_count(), "levels": {}}
@@ -358,8 +393,15 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
         if progress is not None:
             progress(level, 0, config.passes, float("nan"))
         level_history = []
+        values = None if parzen is None else smoothed(exemplar, level)
         for p in range(config.passes):
-            coords, mean_cost = correction_pass(coords, frames, feat, kset, h, lo, hi, NEIGHBOURHOODS[config.neighbourhood])
+            if parzen is None:
+                coords, mean_cost = correction_pass(coords, frames, feat, kset, h, lo, hi,
+                                                    NEIGHBOURHOODS[config.neighbourhood])
+            else:
+                coords, mean_cost = parzen_pass(coords, frames, feat, values, kset, h, lo, hi,
+                                                NEIGHBOURHOODS[config.neighbourhood], config.window,
+                                                parzen[0], (parzen[1] * sigma) ** 2)
             level_history.append(mean_cost)
             if progress is not None:
                 progress(level, p + 1, config.passes, mean_cost)

@@ -671,3 +671,34 @@ def naive_correct(coords, frames, feat, kset, h, lo, hi, offsets, parity):
         out[p] = candidates[best]
         cost[p] = dists[best]
     return out, cost
+
+
+def naive_correct_parzen(coords, frames, values, kset, h, lo, hi, offsets, window_offsets, parity,
+                         adaptive, centre_h2):
+    """The NP-MRF sub-pass with one 3D view, from the kernel's docstring: (new coords, costs)."""
+    out = coords.copy()
+    cost = np.zeros(coords.shape[:3])
+    shape = np.array(values.shape[:3])
+    n = coords.shape[:3]
+    for p in itertools.product(*[range(parity[a], n[a], 2) for a in range(3)]):
+        r = (frames[0, 0, 0] if frames.shape[0] == 1 else frames[p]).astype(np.float64)
+
+        def at(o):
+            return tuple((np.array(p) + np.floor(r @ o + 0.5).astype(int)) % n)
+
+        candidates = [coords[p].copy()]
+        for d in offsets:
+            for q in kset[np.ravel_multi_index(tuple(coords[at(d)]), tuple(shape))]:
+                u = np.array(np.unravel_index(q, tuple(shape))) - h * d
+                candidates.append(np.minimum(np.maximum(u, lo), hi))
+        neigh = np.stack([values[tuple(coords[at(o)])] for o in window_offsets])
+        dist = np.array([sum(((values[tuple(np.clip(u + h * o, 0, shape - 1))] - neigh[t]) ** 2).sum()
+                             for t, o in enumerate(window_offsets)) for u in candidates])
+        a = -dist / (adaptive * max(dist.min(), 1e-12))
+        centres = np.stack([values[tuple(u)] for u in candidates])
+        scores = [logsumexp(a - ((centres - centres[u]) ** 2).sum(axis=1) / (2 * centre_h2))
+                  for u in range(len(candidates))]
+        best = int(np.argmax(scores))
+        out[p] = candidates[best]
+        cost[p] = dist[best]
+    return out, cost

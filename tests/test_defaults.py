@@ -21,6 +21,7 @@ from npmrf3d.config import DEFAULT_SIZE, SynthesisConfig
 from npmrf3d.methods import METHODS, get_method
 from npmrf3d.relax import RELAXATIONS
 from npmrf3d.synthesis import make_config
+from npmrf3d.volume_npmrf import NpmrfVolumeConfig, make_npmrf_volume_config, npmrf_volume_synthesize
 from npmrf3d.volume_synthesis import VolumeConfig, make_volume_config, volume_synthesize
 
 
@@ -62,6 +63,7 @@ CASES = {
     "chen-wang": (("baseline", "chen-wang"), chen_wang_synthesize, make_chen_wang_config, ChenWangConfig),
     "coherent": (("coherent",), coherent_synthesize, make_coherent_config, CoherentConfig),
     "volume-lh": (("volume",), volume_synthesize, make_volume_config, VolumeConfig),
+    "npmrf-3d": (("volume-npmrf",), npmrf_volume_synthesize, make_npmrf_volume_config, NpmrfVolumeConfig),
 }
 
 
@@ -131,6 +133,6 @@ def test_every_registered_method_has_the_common_signature():
 def test_unknown_method_lists_the_registered_ones():
     from npmrf3d.errors import ParameterError
 
-    with pytest.raises(ParameterError, match="method must be one of npmrf, coherent, kopf, chen-wang, volume-lh; got 'nope'"):
+    with pytest.raises(ParameterError, match="method must be one of npmrf, coherent, kopf, chen-wang, volume-lh, npmrf-3d; got 'nope'"):
         get_method("nope")
     assert get_method("np_k") is METHODS["kopf"]

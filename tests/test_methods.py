@@ -22,9 +22,10 @@ CASES = {
     "chen-wang": ("chen-wang", dict(size=16, window=(4, 4), levels=2, iterations=(2, 2))),
     "coherent": ("coherent", dict(size=16, window=(4, 4), levels=2, iterations=(2, 2))),
     "volume-lh": ("volume-lh", dict(size=16, levels=2)),
+    "npmrf-3d": ("npmrf-3d", dict(size=16, levels=2, passes=1)),
 }
 #: Methods that take a 3D exemplar (run on ``tiny_volume`` instead of ``tiny_grey``).
-VOLUME_METHODS = ("volume-lh",)
+VOLUME_METHODS = ("volume-lh", "npmrf-3d")
 
 
 @pytest.fixture

@@ -199,3 +199,40 @@ def test_cli_writes_a_run_and_refuses_an_image(tmp_path):
                          capture_output=True, text=True, timeout=300)
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "is a 2D image" in bad.stderr
     assert not (tmp_path / "bad").exists()
+
+
+# --------------------------------------------------------------------------- npmrf-3d
+
+
+@pytest.mark.kernels
+@pytest.mark.parametrize(("window", "channels", "twisted"), [(3, 1, False), (3, 2, True), (5, 1, False)])
+def test_correct_parzen_matches_naive(rng, window, channels, twisted):
+    from npmrf3d.volume_synthesis import window_offsets
+
+    shape, n, h = (7, 6, 8), (4, 4, 6), 1
+    values = rng.random(shape + (channels,))
+    feat = rng.normal(size=shape + (2,))
+    lo, hi = np.array([1, 1, 1]), np.array([5, 4, 6])
+    coords = np.stack([rng.integers(lo[a], hi[a] + 1, size=n) for a in range(3)], axis=-1).astype(np.int64)
+    kset = rng.integers(0, np.prod(shape), size=(np.prod(shape), 2)).astype(np.int64)
+    frames = (fields.level_frames("twist", None, n, 0, 60.0) if twisted
+              else np.eye(3, dtype=np.float32).reshape(1, 1, 1, 3, 3))
+    offsets, woff = NEIGHBOURHOODS["faces"], window_offsets(window)
+    out, cost = coords.copy(), np.zeros(n)
+    _k.correct_parzen(coords, out, frames, feat, values, kset, h, lo, hi, offsets, woff,
+                      np.array([0, 1, 0]), 0.3, 0.01, cost)
+    want, want_cost = naive.naive_correct_parzen(coords, frames, values, kset, h, lo, hi, offsets, woff,
+                                                 (0, 1, 0), 0.3, 0.01)
+    np.testing.assert_array_equal(out, want)
+    np.testing.assert_allclose(cost, want_cost, rtol=1e-10)
+
+
+def test_npmrf_3d_keeps_the_layers_and_refuses_a_field():
+    from npmrf3d.volume_npmrf import make_npmrf_volume_config, npmrf_volume_synthesize
+
+    res = npmrf_volume_synthesize(layers(), size=16, levels=2, window=3, rng=1)
+    v = res.volume[..., 0]
+    assert set(np.unique(v).tolist()) == {0.0, 1.0} and abs(v.mean() - 0.5) < 0.15
+    assert np.mean(np.diff(v, axis=0) == 0) > 0.9 and np.mean(np.diff(v, axis=1) == 0) < 0.8
+    with pytest.raises(ParameterError, match="vector_field must be 'none' for npmrf-3d"):
+        make_npmrf_volume_config(vector_field="twist")

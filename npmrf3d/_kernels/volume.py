@@ -5,6 +5,9 @@ Private: called with validated arrays only; nothing here raises a user-facing er
 * :func:`similarity_sets` (parallel over exemplar voxels): from each voxel's nearest neighbours
   in appearance space, the ``k`` most similar voxels with every later one outside the
   ``exclude``-neighbourhood (Chebyshev) of all earlier ones; the first is the voxel itself.
+* :func:`project` (parallel over exemplar slices): appearance-space vectors of every voxel.
+* :func:`correct_parzen`: the same sub-pass decided by the Parzen LCPDF of full ``w^3``
+  neighbourhoods (the NP-MRF with one 3D view, ``npmrf-3d``).
 * :func:`correct` (parallel over the voxels of one parity class): one voxel-correction sub-pass.
   Reads coordinates from ``coords`` and writes the corrected ones to ``out`` (Jacobi within the
   sub-pass), so a voxel's result depends on the inputs only, never on the thread count.
@@ -184,3 +187,96 @@ def project(ex, h, radius, mean, basis, out):
                             acc[e] += v * basis[row, e]
                 for e in range(dims):
                     out[x, y, z, e] = acc[e]
+
+
+@jit_parallel
+def correct_parzen(coords, out, frames, feat, values, kset, h, lo, hi, offsets, window_offsets,
+                   parity, adaptive, centre_h2, cost):
+    """One sub-pass of the NP-MRF with one 3D view (``npmrf-3d``): the same coherent candidates
+    as :func:`correct`, decided by the Parzen LCPDF over full ``w^3`` neighbourhoods.
+
+    For voxel ``p`` with candidates ``u`` (the current coordinate first): the neighbourhood
+    distance ``D_u = sum_r ||values[coords[p + R r]] - values[u + h r]||^2`` over
+    ``window_offsets`` (the ``w^3`` offsets without the centre; positions clamped to the
+    exemplar), log-weights ``a_u = -D_u / (adaptive * max(min D, 1e-12))``, and for each candidate
+    centre value ``y_u = values[u]`` the log-LCPDF ``log sum_v exp(a_v - ||y_u - y_v||^2 /
+    (2 centre_h2))``; the candidate with the largest (first on ties) is written to ``out[p]``
+    and its ``D_u`` to ``cost[p]``.
+    """
+    n1, n2, n3 = coords.shape[0], coords.shape[1], coords.shape[2]
+    shape = np.array([feat.shape[0], feat.shape[1], feat.shape[2]], dtype=np.int64)
+    single = frames.shape[0] == 1
+    channels = values.shape[3]
+    k = kset.shape[1]
+    n_off = offsets.shape[0]
+    n_win = window_offsets.shape[0]
+    n_cand = 1 + n_off * k
+    c1 = (n2 - parity[1] + 1) // 2
+    c2 = (n3 - parity[2] + 1) // 2
+    count = ((n1 - parity[0] + 1) // 2) * c1 * c2
+    for t in prange(count):
+        i = parity[0] + 2 * (t // (c1 * c2))
+        j = parity[1] + 2 * ((t // c2) % c1)
+        kk = parity[2] + 2 * (t % c2)
+        off = np.empty(3, dtype=np.int64)
+        cand = np.empty((n_cand, 3), dtype=np.int64)
+        cand[0, 0], cand[0, 1], cand[0, 2] = coords[i, j, kk, 0], coords[i, j, kk, 1], coords[i, j, kk, 2]
+        for d in range(n_off):
+            _offset(frames, single, i, j, kk, offsets, d, off)
+            qi = (i + off[0]) % n1
+            qj = (j + off[1]) % n2
+            qk = (kk + off[2]) % n3
+            flat = (coords[qi, qj, qk, 0] * shape[1] + coords[qi, qj, qk, 1]) * shape[2] + coords[qi, qj, qk, 2]
+            for s in range(k):
+                q = kset[flat, s]
+                row = 1 + d * k + s
+                cand[row, 0] = _clamp(q // (shape[1] * shape[2]) - h * offsets[d, 0], lo[0], hi[0])
+                cand[row, 1] = _clamp((q // shape[2]) % shape[1] - h * offsets[d, 1], lo[1], hi[1])
+                cand[row, 2] = _clamp(q % shape[2] - h * offsets[d, 2], lo[2], hi[2])
+        neigh = np.empty((n_win, channels), dtype=np.float64)
+        for r in range(n_win):
+            _offset(frames, single, i, j, kk, window_offsets, r, off)
+            qi = (i + off[0]) % n1
+            qj = (j + off[1]) % n2
+            qk = (kk + off[2]) % n3
+            for ch in range(channels):
+                neigh[r, ch] = values[coords[qi, qj, qk, 0], coords[qi, qj, qk, 1], coords[qi, qj, qk, 2], ch]
+        dist = np.empty(n_cand, dtype=np.float64)
+        dmin = np.inf
+        for u in range(n_cand):
+            total = 0.0
+            for r in range(n_win):
+                x = _clamp(cand[u, 0] + h * window_offsets[r, 0], 0, shape[0] - 1)
+                y = _clamp(cand[u, 1] + h * window_offsets[r, 1], 0, shape[1] - 1)
+                z = _clamp(cand[u, 2] + h * window_offsets[r, 2], 0, shape[2] - 1)
+                for ch in range(channels):
+                    diff = values[x, y, z, ch] - neigh[r, ch]
+                    total += diff * diff
+            dist[u] = total
+            if total < dmin:
+                dmin = total
+        scale = adaptive * max(dmin, 1e-12)
+        best_score = -np.inf
+        best = 0
+        for u in range(n_cand):
+            top = -np.inf
+            terms = np.empty(n_cand, dtype=np.float64)
+            for v in range(n_cand):
+                c = 0.0
+                for ch in range(channels):
+                    diff = values[cand[u, 0], cand[u, 1], cand[u, 2], ch] - values[cand[v, 0], cand[v, 1], cand[v, 2], ch]
+                    c += diff * diff
+                terms[v] = -dist[v] / scale - c / (2.0 * centre_h2)
+                if terms[v] > top:
+                    top = terms[v]
+            acc = 0.0
+            for v in range(n_cand):
+                acc += np.exp(terms[v] - top)
+            score = top + np.log(acc)
+            if score > best_score:
+                best_score = score
+                best = u
+        out[i, j, kk, 0] = cand[best, 0]
+        out[i, j, kk, 1] = cand[best, 1]
+        out[i, j, kk, 2] = cand[best, 2]
+        cost[i, j, kk] = dist[best]
