@@ -81,7 +81,7 @@ def load_exemplar(source=None, *, name: str = "exemplar", exemplar_kind: str = "
         name = f"{name} '{source}'"
     else:
         array = np.asarray(source)
-    if array.ndim in (3, 4) and array.dtype != object:
+    if array.ndim in (3, 4) and array.dtype != object and array.size:
         kind, shaped = interpret(array, axes=axes, kind=exemplar_kind, name=name)
         if kind == "volume":
             dims = "x".join(map(str, shaped.shape[:3]))
