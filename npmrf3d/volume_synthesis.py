@@ -78,7 +78,7 @@ class VolumeConfig:
     pca_dims: int = 8
     k: int = 3
     exclude: int = 3
-    passes: int = 2
+    passes: int = 4
     neighbourhood: str = "faces"
     jitter: float = 0.7
     fine_jitter: float = 0.0

@@ -131,11 +131,11 @@ def test_run_copies_exemplar_voxels_and_keeps_the_layers():
 
 def test_same_seed_same_volume_and_registry_form():
     ex = layers(axis=2)
-    a = volume_synthesize(ex, size=16, levels=2, rng=4, vector_field="bend", angle=60)
-    b = volume_synthesize(ex, size=16, levels=2, rng=4, vector_field="bend", angle=60)
+    a = volume_synthesize(ex, size=16, levels=2, passes=2, rng=4, vector_field="bend", angle=60)
+    b = volume_synthesize(ex, size=16, levels=2, passes=2, rng=4, vector_field="bend", angle=60)
     np.testing.assert_array_equal(a.volume, b.volume)
     method = get_method("volume-lh")
-    config = make_volume_config(size=16, levels=2, vector_field="bend", angle=60, seed=4)
+    config = make_volume_config(size=16, levels=2, passes=2, vector_field="bend", angle=60, seed=4)
     common = method.run({"volume": ex[..., None]}, config, np.random.default_rng(4))
     np.testing.assert_array_equal(common.volume, a.volume)
     assert get_method("seed002") is method
@@ -147,7 +147,7 @@ from npmrf3d._kernels import _jit
 _jit.use_threads(int(sys.argv[1]))
 from npmrf3d.volume_synthesis import volume_synthesize
 ex = (np.arange(24)[:, None, None] % 6 < 3) * np.ones((24, 24, 24))
-res = volume_synthesize(ex.astype(np.float32), size=16, levels=2, rng=9, vector_field="twist")
+res = volume_synthesize(ex.astype(np.float32), size=16, levels=2, passes=2, rng=9, vector_field="twist")
 sys.stdout.write(hashlib.sha256(res.volume.tobytes()).hexdigest())
 """
 
@@ -188,7 +188,7 @@ def test_cli_writes_a_run_and_refuses_an_image(tmp_path):
     np.save(tmp_path / "crop.npy", (layers() * 255).astype(np.uint8))
     np.save(tmp_path / "image.npy", np.zeros((24, 24, 3), dtype=np.uint8))
     cmd = [sys.executable, "-m", "npmrf3d", "volume"]
-    ok = subprocess.run([*cmd, str(tmp_path / "crop.npy"), "--size", "16", "--levels", "2", "--quiet",
+    ok = subprocess.run([*cmd, str(tmp_path / "crop.npy"), "--size", "16", "--levels", "2", "--passes", "1", "--quiet",
                          "--vector-field", "twist", "--out", str(tmp_path / "out")],
                         capture_output=True, text=True, timeout=300)
     assert ok.returncode == 0, ok.stderr
