@@ -46,6 +46,7 @@ __all__ = [
     "load_checkpoint",
     "package_versions",
     "read_array",
+    "read_stack",
     "read_volume",
     "save_checkpoint",
     "to_jsonable",
@@ -144,6 +145,51 @@ def read_array(path: str | os.PathLike[str], *, what: str = "input file") -> np.
     except Exception as exc:  # any decoder failure is a user-facing unreadable file
         cause = exc.__cause__ if exc.__cause__ is not None else exc
         raise ParameterError(f"{what} '{path}' cannot be read: {_reason(cause)}") from exc
+
+
+def read_stack(path: str | os.PathLike[str], *, what: str = "input file") -> tuple[np.ndarray, dict]:
+    """Like :func:`read_array`, plus what the file says about its axes.
+
+    Returns
+    -------
+    array : numpy.ndarray
+        As stored (a TIFF's first series).
+    info : dict
+        ``axes``: tifffile's axes string of a TIFF's first series (``"ZYX"``, ``"QYX"`` for a plain
+        multi-page stack, ``"YXS"`` for an RGB page, ``"ZCYX"`` for an ImageJ hyperstack, ...), None
+        for other files; ``spacing``: ``(z, y, x)`` voxel size from ImageJ metadata (``spacing``
+        and the X/Y resolution tags) when the file records it, else None.
+    """
+    path = _existing_file(path, what)
+    suffix = _suffix(path, _READABLE_EXTENSIONS, what)
+    if suffix not in TIFF_EXTENSIONS:
+        return read_array(path, what=what), {"axes": None, "spacing": None}
+    try:
+        import tifffile
+
+        with tifffile.TiffFile(path) as tif:
+            series = tif.series[0]
+            array, axes = series.asarray(), series.axes
+            spacing = _imagej_spacing(tif)
+    except Exception as exc:  # any decoder failure is a user-facing unreadable file
+        raise ParameterError(f"{what} '{path}' cannot be read: {_reason(exc)}") from exc
+    return array, {"axes": axes, "spacing": spacing}
+
+
+def _imagej_spacing(tif) -> tuple[float, float, float] | None:
+    """(z, y, x) voxel size of an ImageJ TIFF that records a z spacing, else None."""
+    meta = tif.imagej_metadata if tif.is_imagej else None
+    if not meta or "spacing" not in meta:
+        return None
+    tags = tif.pages[0].tags
+
+    def size(tag):  # pixels per unit -> unit per pixel
+        if tag not in tags:
+            return 1.0
+        num, den = tags[tag].value
+        return float(den) / float(num) if num else 1.0
+
+    return (float(meta["spacing"]), size("YResolution"), size("XResolution"))
 
 
 def _tiff_volume(path: pathlib.Path) -> np.ndarray:

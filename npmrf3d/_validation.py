@@ -92,6 +92,22 @@ def exemplar_array(array, *, name: str = "exemplar") -> np.ndarray:
         fail(f"{name} is empty; got an array of shape {a.shape}")
     if a.ndim == 2:
         a = a[:, :, None]
+    return _scaled(a, name)
+
+
+def volume_array(array, *, name: str = "exemplar") -> np.ndarray:
+    """Validate and convert a volume exemplar ``(D, H, W, C)`` to float32, scaled as
+    :func:`exemplar_array` scales images."""
+    a = np.asarray(array)
+    if a.dtype == object or not (np.issubdtype(a.dtype, np.number) or a.dtype == bool):
+        fail(f"{name} must hold numbers; got dtype {a.dtype}")
+    if a.ndim != 4 or a.size == 0:
+        fail(f"{name} must be a non-empty volume (D, H, W, C); got an array of shape {a.shape}")
+    return _scaled(a, name)
+
+
+def _scaled(a: np.ndarray, name: str) -> np.ndarray:
+    """float32 copy: uint8 / 255, uint16 / 65535, bool 0/1, other numbers unchanged; no NaN/Inf."""
     if a.dtype == bool:
         out = a.astype(np.float32)
     elif a.dtype == np.uint8:

@@ -22,8 +22,9 @@ from scipy.cluster.vq import kmeans2, vq
 from . import _validation as check
 from . import data
 from .errors import ParameterError
-from ._files import read_array
+from ._files import read_stack
 from .neighborhood import window_offsets
+from .volume import interpret
 
 __all__ = [
     "BUNDLED_PREFIX",
@@ -46,7 +47,7 @@ ETR_PREFIX = "etr:"
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".gif", ".tif", ".tiff", ".npy")
 
 
-def load_exemplar(source=None, *, name: str = "exemplar") -> np.ndarray:
+def load_exemplar(source=None, *, name: str = "exemplar", exemplar_kind: str = "auto") -> np.ndarray:
     """Load an exemplar as a float32 ``(H, W, C)`` array.
 
     Parameters
@@ -56,6 +57,10 @@ def load_exemplar(source=None, *, name: str = "exemplar") -> np.ndarray:
         bundled default exemplar (:data:`npmrf3d.data.DEFAULT_EXEMPLAR`).
     name : str
         How the exemplar is called in error messages (e.g. ``"exemplar for view top"``).
+    exemplar_kind : {"auto", "image", "volume"}
+        ``auto``: an array or file recognised as a volume (a ``48 x 48 x 48`` crop, a TIFF stack;
+        rules in :mod:`npmrf3d.volume`) is refused, since these methods take a 2D image;
+        ``image`` reads any 3-D array as ``(H, W, C)``.
 
     Returns
     -------
@@ -69,11 +74,23 @@ def load_exemplar(source=None, *, name: str = "exemplar") -> np.ndarray:
     """
     if source is None:
         source = data.path(data.DEFAULT_EXEMPLAR)
+    axes = None
     if isinstance(source, (str, Path)):
-        array = read_array(source, what="exemplar file")
+        array, info = read_stack(source, what="exemplar file")
+        axes = info["axes"]
         name = f"{name} '{source}'"
     else:
         array = np.asarray(source)
+    if array.ndim in (3, 4) and array.dtype != object and array.size:
+        kind, shaped = interpret(array, axes=axes, kind=exemplar_kind, name=name)
+        if kind == "volume":
+            dims = "x".join(map(str, shaped.shape[:3]))
+            check.fail(f"{name} of shape {array.shape} is a volume ({dims} voxels, "
+                       f"{shaped.shape[3]} channel(s)), and this method makes a volume from a 2D "
+                       f"image: for a 3D exemplar use the volume-lh method (npmrf3d volume "
+                       f"FILE)" + ("" if array.ndim == 4 else ", or read it as an image with "
+                                   "exemplar_kind='image' (command line: --exemplar-kind image)"))
+        array = shaped
     return check.exemplar_array(array, name=name)
 
 
@@ -172,7 +189,8 @@ def exemplar_slice(volume: np.ndarray, axis: int = 0, index: int | None = None) 
 
 
 def resolve_exemplars(exemplar, exemplars: Mapping | None, views: tuple[str, ...], *,
-                      window: int, levels: int, toroidal: bool = False) -> dict[str, np.ndarray]:
+                      window: int, levels: int, toroidal: bool = False,
+                      exemplar_kind: str = "auto") -> dict[str, np.ndarray]:
     """One float32 (H, W, C) exemplar per constrained view, validated against the window.
 
     Parameters
@@ -186,10 +204,12 @@ def resolve_exemplars(exemplar, exemplars: Mapping | None, views: tuple[str, ...
         Every exemplar must hold a whole window at the coarsest level.
     toroidal : bool
         Whether exemplar patches may wrap around (relaxes the size requirement).
+    exemplar_kind : {"auto", "image"}
+        How 3-D arrays are read (:func:`load_exemplar`); ``auto`` refuses volumes.
 
     Views given the same source share one array (so the label set is built once per source).
-    A method that takes 3D exemplars will add a volume branch here (a ``(D, H, W, C)`` source
-    giving each view its slices); today every source is a 2D image.
+    Every source is a 2D image; 3D exemplars are loaded by :func:`npmrf3d.volume.load_volume_exemplar`
+    (the ``volume-lh`` method).
     """
     exemplars = dict(exemplars or {})
     unknown = set(exemplars) - set(views)
@@ -201,7 +221,8 @@ def resolve_exemplars(exemplar, exemplars: Mapping | None, views: tuple[str, ...
         source = exemplars.get(v, exemplar)
         key = id(source) if not isinstance(source, (str, Path)) else str(source)
         if key not in cache:
-            cache[key] = load_exemplar(source, name=f"exemplar for view {v}" if v in exemplars else "exemplar")
+            cache[key] = load_exemplar(source, name=f"exemplar for view {v}" if v in exemplars else "exemplar",
+                                       exemplar_kind=exemplar_kind)
         out[v] = cache[key]
     channels = {a.shape[2] for a in out.values()}
     if len(channels) > 1:

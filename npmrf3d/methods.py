@@ -16,7 +16,7 @@ methods (they make no volume from an exemplar); they stay in :mod:`npmrf3d.studi
 from __future__ import annotations
 
 from . import _validation as check
-from . import coherent, resources, synthesis
+from . import coherent, resources, synthesis, volume_npmrf, volume_synthesis
 from .baselines import chen_wang, kopf
 from .config import SynthesisMethod
 
@@ -29,12 +29,15 @@ METHODS: dict[str, SynthesisMethod] = {
         coherent.METHOD,
         kopf.METHOD,
         chen_wang.METHOD,
+        volume_synthesis.METHOD,
+        volume_npmrf.METHOD,
     )
 }
 
 #: Other spellings accepted for a registered name.
 ALIASES: dict[str, str] = {"np-mrf": "npmrf", "np_k": "kopf", "npk": "kopf", "chen_wang": "chen-wang",
-                           "cw": "chen-wang", "npmrf-coherent": "coherent"}
+                           "cw": "chen-wang", "npmrf-coherent": "coherent",
+                           "seed002": "volume-lh"}
 
 
 def get_method(name: str) -> SynthesisMethod:

@@ -641,3 +641,101 @@ def naive_upsample_sources(src, view, coarse_width, fine_shape):
         c = min(2 * (s % coarse_width) + x[ca] % 2, fine_shape[1] - 1)
         out[x] = r * fine_shape[1] + c
     return out
+
+
+# --------------------------------------------------------------------------- 3D exemplars (seed 002)
+
+
+def naive_project(ex: np.ndarray, h: int, radius: int, mean: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """Appearance-space vectors: each voxel's (2r+1)^3 neighbourhood every h voxels (clamped),
+    offset-major with channels inside, minus ``mean``, times ``basis``."""
+    shape = ex.shape[:3]
+    out = np.zeros(shape + (basis.shape[1],))
+    offsets = list(itertools.product(range(-radius, radius + 1), repeat=3))
+    for x in itertools.product(*[range(n) for n in shape]):
+        vec = []
+        for o in offsets:
+            p = tuple(min(max(x[a] + h * o[a], 0), shape[a] - 1) for a in range(3))
+            vec.extend(ex[p].tolist())
+        out[x] = (np.array(vec) - mean) @ basis
+    return out
+
+
+def naive_similarity_sets(neighbours: np.ndarray, coords: np.ndarray, k: int, exclude: int) -> np.ndarray:
+    """Greedy k-sets: first entry, then each neighbour farther than ``exclude`` (Chebyshev) from all
+    chosen; short sets filled with the nearest neighbours after the first, in order."""
+    out = np.empty((len(neighbours), k), dtype=np.int64)
+    for q, row in enumerate(neighbours):
+        chosen = [int(row[0])]
+        for cand in row[1:]:
+            if len(chosen) == k:
+                break
+            if all(np.abs(coords[cand] - coords[c]).max() > exclude for c in chosen):
+                chosen.append(int(cand))
+        t = 1
+        while len(chosen) < k:
+            chosen.append(int(row[min(t, len(row) - 1)]))
+            t += 1
+        out[q] = chosen
+    return out
+
+
+def naive_correct(coords, frames, feat, kset, h, lo, hi, offsets, parity):
+    """One correction sub-pass, straight from the docstring of the kernel: (new coords, costs)."""
+    out = coords.copy()
+    cost = np.zeros(coords.shape[:3])
+    shape = feat.shape[:3]
+    n = coords.shape[:3]
+
+    def clamp_box(u):
+        return np.minimum(np.maximum(u, lo), hi)
+
+    def exemplar_neighbourhood(u):
+        return np.stack([feat[tuple(np.clip(u + h * d, 0, np.array(shape) - 1))] for d in offsets])
+
+    for p in itertools.product(*[range(parity[a], n[a], 2) for a in range(3)]):
+        r = frames[0, 0, 0] if frames.shape[0] == 1 else frames[p]
+        warped = [tuple((np.array(p) + np.floor(r.astype(np.float64) @ d + 0.5).astype(int)) % n)
+                  for d in offsets]
+        sources = [coords[w] for w in warped]
+        neigh = np.stack([feat[tuple(s)] for s in sources])
+        candidates = [coords[p]]
+        for d, s in zip(offsets, sources):
+            for q in kset[np.ravel_multi_index(tuple(s), shape)]:
+                candidates.append(clamp_box(np.array(np.unravel_index(q, shape)) - h * d))
+        dists = [((exemplar_neighbourhood(np.asarray(u)) - neigh) ** 2).sum() for u in candidates]
+        best = int(np.argmin(dists))
+        out[p] = candidates[best]
+        cost[p] = dists[best]
+    return out, cost
+
+
+def naive_correct_parzen(coords, frames, values, kset, h, lo, hi, offsets, window_offsets, parity,
+                         adaptive, centre_h2):
+    """The NP-MRF sub-pass with one 3D view, from the kernel's docstring: (new coords, costs)."""
+    out = coords.copy()
+    cost = np.zeros(coords.shape[:3])
+    shape = np.array(values.shape[:3])
+    n = coords.shape[:3]
+    for p in itertools.product(*[range(parity[a], n[a], 2) for a in range(3)]):
+        r = (frames[0, 0, 0] if frames.shape[0] == 1 else frames[p]).astype(np.float64)
+
+        def at(o):
+            return tuple((np.array(p) + np.floor(r @ o + 0.5).astype(int)) % n)
+
+        candidates = [coords[p].copy()]
+        for d in offsets:
+            for q in kset[np.ravel_multi_index(tuple(coords[at(d)]), tuple(shape))]:
+                u = np.array(np.unravel_index(q, tuple(shape))) - h * d
+                candidates.append(np.minimum(np.maximum(u, lo), hi))
+        neigh = np.stack([values[tuple(coords[at(o)])] for o in window_offsets])
+        dist = np.array([sum(((values[tuple(np.clip(u + h * o, 0, shape - 1))] - neigh[t]) ** 2).sum()
+                             for t, o in enumerate(window_offsets)) for u in candidates])
+        a = -dist / (adaptive * max(dist.min(), 1e-12))
+        centres = np.stack([values[tuple(u)] for u in candidates])
+        scores = [logsumexp(a - ((centres - centres[u]) ** 2).sum(axis=1) / (2 * centre_h2))
+                  for u in range(len(candidates))]
+        best = int(np.argmax(scores))
+        out[p] = candidates[best]
+        cost[p] = dist[best]
+    return out, cost

@@ -21,6 +21,8 @@ from npmrf3d.config import DEFAULT_SIZE, SynthesisConfig
 from npmrf3d.methods import METHODS, get_method
 from npmrf3d.relax import RELAXATIONS
 from npmrf3d.synthesis import make_config
+from npmrf3d.volume_npmrf import NpmrfVolumeConfig, make_npmrf_volume_config, npmrf_volume_synthesize
+from npmrf3d.volume_synthesis import VolumeConfig, make_volume_config, volume_synthesize
 
 
 def _sub_parser(*path):
@@ -60,6 +62,8 @@ CASES = {
     "kopf": (("baseline", "kopf"), kopf_synthesize, make_kopf_config, KopfConfig),
     "chen-wang": (("baseline", "chen-wang"), chen_wang_synthesize, make_chen_wang_config, ChenWangConfig),
     "coherent": (("coherent",), coherent_synthesize, make_coherent_config, CoherentConfig),
+    "volume-lh": (("volume",), volume_synthesize, make_volume_config, VolumeConfig),
+    "npmrf-3d": (("volume-npmrf",), npmrf_volume_synthesize, make_npmrf_volume_config, NpmrfVolumeConfig),
 }
 
 
@@ -129,6 +133,6 @@ def test_every_registered_method_has_the_common_signature():
 def test_unknown_method_lists_the_registered_ones():
     from npmrf3d.errors import ParameterError
 
-    with pytest.raises(ParameterError, match="method must be one of npmrf, coherent, kopf, chen-wang; got 'nope'"):
+    with pytest.raises(ParameterError, match="method must be one of npmrf, coherent, kopf, chen-wang, volume-lh, npmrf-3d; got 'nope'"):
         get_method("nope")
     assert get_method("np_k") is METHODS["kopf"]

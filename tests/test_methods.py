@@ -21,7 +21,22 @@ CASES = {
     "kopf": ("kopf", dict(size=16, window=4, levels=2, iterations=2)),
     "chen-wang": ("chen-wang", dict(size=16, window=(4, 4), levels=2, iterations=(2, 2))),
     "coherent": ("coherent", dict(size=16, window=(4, 4), levels=2, iterations=(2, 2))),
+    "volume-lh": ("volume-lh", dict(size=16, levels=2)),
+    "npmrf-3d": ("npmrf-3d", dict(size=16, levels=2, passes=1)),
 }
+#: Methods that take a 3D exemplar (run on ``tiny_volume`` instead of ``tiny_grey``).
+VOLUME_METHODS = ("volume-lh", "npmrf-3d")
+
+
+@pytest.fixture
+def tiny_volume() -> np.ndarray:
+    """A 24^3 volume of layers, period 6 along axis 1."""
+    profile = (np.arange(24) % 6 < 3).astype(np.float32)
+    return np.broadcast_to(profile[None, :, None], (24, 24, 24)).copy()
+
+
+def _exemplar_for(name, request):
+    return request.getfixturevalue("tiny_volume" if name in VOLUME_METHODS else "tiny_grey")
 
 
 def test_every_registered_method_has_a_case():
@@ -29,20 +44,25 @@ def test_every_registered_method_has_a_case():
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
-def test_common_signature_equals_the_public_function(case, tiny_grey):
+def test_common_signature_equals_the_public_function(case, request):
     name, kwargs = CASES[case]
     method = METHODS[name]
-    public = method.synthesize(tiny_grey, rng=3, **kwargs)
+    exemplar = _exemplar_for(name, request)
+    public = method.synthesize(exemplar, rng=3, **kwargs)
     config = method.make_config(**kwargs, seed=3)
-    per_view = resolve_exemplars(tiny_grey, None, config.views, **method.fit(config))
+    if name in VOLUME_METHODS:
+        per_view = {"volume": exemplar[..., None]}
+    else:
+        per_view = resolve_exemplars(exemplar, None, config.views, **method.fit(config))
     common = method.run(per_view, config, np.random.default_rng(3))
     np.testing.assert_array_equal(public.volume, common.volume)
     assert common.config == public.config
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
-def test_resume_from_checkpoint_gives_the_uninterrupted_result(case, tmp_path, tiny_grey):
+def test_resume_from_checkpoint_gives_the_uninterrupted_result(case, tmp_path, request):
     name, kwargs = CASES[case]
+    tiny_grey = _exemplar_for(name, request)
     synthesize = METHODS[name].synthesize
     path = tmp_path / "run.npz"
     full = synthesize(tiny_grey, rng=5, **kwargs).volume

@@ -83,7 +83,7 @@ def test_non_finite_exemplar(bad):
 
 
 def test_four_dimensional_exemplar():
-    with pytest.raises(ParameterError, match=r"exemplar must be a 2D image.*shape \(4, 16, 16, 1\)"):
+    with pytest.raises(ParameterError, match=r"exemplar of shape \(4, 16, 16, 1\) is a volume .* from a 2D image"):
         call(np.zeros((4, 16, 16, 1)))
 
 

@@ -191,6 +191,16 @@ def check_checkpoint(path: pathlib.Path | None) -> None:
         raise ParameterError(f"folder of checkpoint '{path}' does not exist")
 
 
+def add_exemplar_kind(group) -> None:
+    """``--exemplar-kind``: how a 3-D array or TIFF stack given as a 2D exemplar is read."""
+    group.add_argument(
+        "--exemplar-kind", default="auto", metavar="{auto,image}", choices=("auto", "image"),
+        help="auto refuses a file recognised as a volume (three similar axes, a TIFF stack; "
+             "use 'npmrf3d volume' for those) and an ambiguous 3-D array; image reads any 3-D "
+             "array as an image H x W x C",
+    )
+
+
 def view_sources(args: argparse.Namespace):
     """(EXEMPLAR file, {view: --exemplar-VIEW file}, views -> {view: name for run.json})."""
     exemplar, exemplar_name = exemplar_source(args.exemplar)
@@ -210,7 +220,8 @@ def prepare_run(args: argparse.Namespace, method, config):
     checkpoint = pathlib.Path(args.checkpoint) if getattr(args, "checkpoint", None) is not None else None
     check_checkpoint(checkpoint)
     exemplar, per_view_sources, source_names = view_sources(args)
-    per_view = resolve_exemplars(exemplar, per_view_sources, config.views, **method.fit(config))
+    per_view = resolve_exemplars(exemplar, per_view_sources, config.views, **method.fit(config),
+                                 exemplar_kind=getattr(args, "exemplar_kind", "auto"))
     if not getattr(args, "dry_run", False):
         check_resources(method, config, per_view, hint=_RESOURCE_HINT)
     return out, checkpoint, per_view, source_names(config.views)

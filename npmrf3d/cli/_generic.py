@@ -19,7 +19,7 @@ from ..errors import ParameterError
 from ..exemplar import BUNDLED_PREFIX
 from ..neighborhood import VIEWS
 from ..runs import RUN_FILES
-from ._common import claim_output, dry_run, parse_size, prepare_run, run_method, write_result
+from ._common import add_exemplar_kind, claim_output, dry_run, parse_size, prepare_run, run_method, write_result
 
 __all__ = ["add_method_parser"]
 
@@ -79,6 +79,7 @@ def add_method_parser(commands, name: str, method, *, help: str, description: st
         views.add_argument(f"--exemplar-{view}", default=None, metavar="PATH",
                            help=f"a different exemplar file (or {BUNDLED_PREFIX}NAME) for the {view} "
                                 f"view (default: none = EXEMPLAR)")
+    add_exemplar_kind(views)
     run = parser.add_argument_group("run")
     run.add_argument("--seed", type=int, default=0, metavar="S",
                      help="random seed, a non-negative integer; the result depends on it only")

@@ -22,7 +22,7 @@ from ..errors import ParameterError
 from ..exemplar import BUNDLED_PREFIX
 from ..neighborhood import VIEWS
 from ..runs import RUN_FILES
-from ._common import claim_output, dry_run, choices, default, parse_size, prepare_run, run_method, write_result
+from ._common import add_exemplar_kind, claim_output, dry_run, choices, default, parse_size, prepare_run, run_method, write_result
 from ._generic import add_method_parser
 
 __all__ = ["register"]
@@ -100,6 +100,7 @@ def register(commands, formatter_class) -> None:
                              "of the exemplar's standard deviation; one number for a fixed "
                              "bandwidth, 'none' for the plain weighted average")
     views = kopf.add_argument_group("views, exemplars and constraints")
+    add_exemplar_kind(views)
     views.add_argument("--views", default=",".join(_d("views")), metavar="V[,V...]",
                        help=f"comma-separated views in the energy, 1 to 3 distinct names of "
                             f"{', '.join(VIEWS)}")

@@ -23,7 +23,7 @@ from ..relax import RELAXATIONS
 from ..relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
 from ..runs import RUN_FILES
 from ..synthesis import METHOD
-from ._common import claim_output, dry_run, PROG, choices, default, parse_size, prepare_run, run_method, say, write_result
+from ._common import add_exemplar_kind, claim_output, dry_run, PROG, choices, default, parse_size, prepare_run, run_method, say, write_result
 
 __all__ = ["register", "run"]
 
@@ -200,6 +200,7 @@ def register(commands, formatter_class) -> None:
             help=f"a different exemplar file (or {BUNDLED_PREFIX}NAME) for the {view} view "
                  f"(default: none = EXEMPLAR)",
         )
+    add_exemplar_kind(views)
     views.add_argument(
         "--grey-levels", type=int, default=None, metavar="K",
         help="re-quantise every exemplar channel to K evenly spaced levels, 2 to 65536 "

@@ -1,0 +1,172 @@
+"""``npmrf3d volume VOLUME`` (``volume-lh``, optionally deformed) and ``npmrf3d volume-npmrf
+VOLUME`` (``npmrf-3d``): synthesise from a 3D exemplar (a scan crop).
+
+Options and defaults come from the methods' config classes
+(:class:`npmrf3d.volume_synthesis.VolumeConfig`, :class:`npmrf3d.volume_npmrf.NpmrfVolumeConfig`); the run folder
+is the one ``npmrf3d synth`` writes (its preview shows the exemplar's centre slice).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import pathlib
+import time
+
+import numpy as np
+
+from ..errors import ParameterError
+from ..exemplar import exemplar_source
+from ..fields import FIELDS, field_input
+from ..methods import check_resources
+from ..runs import RUN_FILES
+from ..volume import load_volume_exemplar
+from ..volume_npmrf import METHOD as NPMRF_METHOD
+from ..volume_synthesis import METHOD
+from ._common import (claim_output, check_checkpoint, dry_run, output_folder, parse_size, run_method,
+                      write_result)
+
+__all__ = ["FIELD_HELP", "register"]
+
+#: One line per option taken from :class:`VolumeConfig` (size, vector_field and seed have their own).
+FIELD_HELP = {
+    "levels": "pyramid levels; the coarsest has size / 2**(levels-1) voxels per side",
+    "window": "side of the appearance-space neighbourhoods, odd, 3 to 7 (the paper: 5)",
+    "pca_dims": "appearance-space dimensions kept by PCA (the paper: 8)",
+    "k": "size of the similarity sets (the paper: 3)",
+    "exclude": "later similarity-set members lie farther than this many voxels from earlier ones "
+               "(the paper's 7x7x7 neighbourhood: 3)",
+    "passes": "correction passes per level, each of 8 parity sub-passes",
+    "neighbourhood": "synthesis neighbourhood: diagonal (the paper's 8 diagonal neighbours) or "
+                     "faces (those and the 6 face neighbours)",
+    "jitter": "jitter amplitude at the coarser levels, in units of the level's spacing (the paper: 0.7)",
+    "fine_jitter": "jitter amplitude at the finest level",
+    "angle": "degrees of rotation of the named fields twist and bend",
+    "adaptive": "Parzen bandwidth: 2h^2 = adaptive * the smallest neighbourhood distance, > 0",
+    "centre_bandwidth": "width of the kernel on candidate centre values, times the exemplar's "
+                        "standard deviation, > 0",
+}
+_OWN = ("size", "vector_field", "seed")
+
+
+def _option(name: str) -> str:
+    return "--" + name.replace("_", "-")
+
+
+def register(commands, formatter_class) -> None:
+    """Add the ``volume`` (``volume-lh``) and ``volume-npmrf`` (``npmrf-3d``) sub-commands."""
+    _add(commands, "volume", METHOD, formatter_class,
+         help="synthesise a volume from a 3D exemplar (a scan crop), optionally deformed by a "
+              "vector field (seed 002)",
+         description=(
+            "Synthesise a volume from a 3D exemplar: every voxel copies an exemplar voxel\n"
+            "(appearance-space coordinate pyramid with k = 3 similarity sets, jitter and\n"
+            "correction), optionally turned by a vector field.\n\n"
+            "examples:\n"
+            "  npmrf3d volume crop.tif --size 128 --out big\n"
+            "  npmrf3d volume crop.npy --size 64 --vector-field twist --angle 180\n"
+            "  npmrf3d volume crop.npy --vector-field directions.npy   # (N1, N2, N3, 3) or (..., 3, 3)"
+         ))
+    _add(commands, "volume-npmrf", NPMRF_METHOD, formatter_class,
+         help="synthesise a volume from a 3D exemplar with the NP-MRF of one 3D view (npmrf-3d)",
+         description=(
+             "The NP-MRF with one 3D view: each voxel copies the coherent candidate whose\n"
+             "centre value maximises the Parzen LCPDF of full w^3 neighbourhoods.\n\n"
+             "example:\n"
+             "  npmrf3d volume-npmrf crop.tif --size 128 --out big"
+         ))
+
+
+def _add(commands, name, method, formatter_class, *, help, description) -> None:
+    parser = commands.add_parser(name, help=help, description=description, formatter_class=formatter_class)
+    config_class = method.config_class
+    parser.add_argument("exemplar", metavar="VOLUME",
+                        help="3D exemplar: .npy (D, H, W[, C]) or a TIFF stack (ImageJ/Fiji, multi-page)")
+    fields = {f.name: f for f in dataclasses.fields(config_class)}
+    parser.add_argument("--size", default=",".join(map(str, fields["size"].default)), metavar="N",
+                        help="output size in voxels: N for an N^3 cube or N1,N2,N3; each divisible "
+                             "by 2**(levels-1)")
+    group = parser.add_argument_group("method")
+    for name, f in fields.items():
+        if name in _OWN:
+            continue
+        kind = {int: int, float: float}.get(type(f.default))
+        if kind is None:
+            group.add_argument(_option(name), default=f.default, metavar="NAME", help=FIELD_HELP[name])
+        else:
+            group.add_argument(_option(name), type=kind, default=f.default,
+                               metavar="N" if kind is int else "X", help=FIELD_HELP[name])
+    if method is METHOD:
+        group.add_argument("--vector-field", default=fields["vector_field"].default,
+                           metavar="{" + ",".join(FIELDS) + "}|FILE.npy",
+                           help="deformation: a named field, or a .npy file of directions (N1, N2, N3, 3) "
+                                "or frames (N1, N2, N3, 3, 3) of the output size")
+    inputs = parser.add_argument_group("exemplar")
+    inputs.add_argument("--exemplar-kind", default="auto", choices=("auto", "volume"), metavar="{auto,volume}",
+                        help="auto recognises a volume (and refuses an image); volume reads a 3-D "
+                             "array whose last axis is at most 4 as a volume")
+    inputs.add_argument("--spacing", default=None, metavar="S[,SY,SX]",
+                        help="voxel size of the exemplar, which must be isotropic (default: none = "
+                             "what an ImageJ TIFF records, else isotropic)")
+    run = parser.add_argument_group("run")
+    run.add_argument("--seed", type=int, default=0, metavar="S",
+                     help="random seed, a non-negative integer; the result depends on it only")
+    run.add_argument("--out", default=f"npmrf3d-{name}-out", metavar="DIR",
+                     help="output folder for the run files; created if missing")
+    run.add_argument("--overwrite", action="store_true",
+                     help="replace the files of a previous run in --out instead of refusing")
+    run.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    run.add_argument("--dry-run", action="store_true",
+                     help="print the memory the run needs and whether it fits; write nothing")
+    run.add_argument("--checkpoint", default=None, metavar="PATH",
+                     help="a .npz file written after each level; a matching one is resumed from")
+    parser.set_defaults(handler=lambda args, argv: _handler(args, argv, method))
+    parser.epilog = f"Writes {', '.join(RUN_FILES)} into the output folder."
+
+
+def _spacing(text):
+    if text is None:
+        return None
+    try:
+        values = [float(p) for p in str(text).split(",")]
+    except ValueError:
+        raise ParameterError(f"--spacing must be one number or three (z,y,x); got {text!r}") from None
+    return values[0] if len(values) == 1 else tuple(values)
+
+
+def _handler(args: argparse.Namespace, argv: list[str], method) -> int:
+    t_start = time.perf_counter()
+    fields = [f.name for f in dataclasses.fields(method.config_class) if f.name not in _OWN]
+    options = {name: getattr(args, name) for name in fields}
+    size = parse_size(args.size)
+    extra = {}
+    try:
+        config = method.make_config(size=size, seed=args.seed, vector_field="none", **options)
+        if method is METHOD:
+            field_name, extra["vector_field"] = field_input(args.vector_field, config.size)
+            config = dataclasses.replace(config, vector_field=field_name)
+    except ParameterError as exc:
+        message = str(exc)
+        for name in [*fields, "vector_field"]:
+            if message.startswith(f"{name} must "):
+                message = _option(name) + message[len(name):]
+        raise ParameterError(message) from None
+    out = output_folder(args)
+    checkpoint = pathlib.Path(args.checkpoint) if args.checkpoint is not None else None
+    check_checkpoint(checkpoint)
+    source, _ = exemplar_source(args.exemplar)
+    exemplar = load_volume_exemplar(source, exemplar_kind=args.exemplar_kind,
+                                    spacing=_spacing(args.spacing))
+    per_view = {"volume": exemplar}
+    if args.dry_run:
+        return dry_run(method, config, per_view)
+    check_resources(method, config, per_view,
+                    hint="lower --size (or the exemplar size); --dry-run shows the estimate")
+    with claim_output(out, args.overwrite):
+        result = run_method(args, method, config, per_view, checkpoint=checkpoint, t_start=t_start,
+                            unit="pass", symbol="E", **extra)
+        middle = {"exemplar slice": np.ascontiguousarray(exemplar[exemplar.shape[0] // 2])}
+        title = f"{method.name}, field {config.vector_field}, {config.levels} levels, seed {config.seed}"
+        write_result(out, args, argv, args.command, result, middle, {"volume": args.exemplar}, title,
+                     method=method.name)
+    return 0

@@ -1,0 +1,238 @@
+"""The 3D-exemplar method (seed 002, ``volume-lh``): kernels against naive twins, fields, runs."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from npmrf3d import fields
+from npmrf3d._kernels import volume as _k
+from npmrf3d.errors import ParameterError
+from npmrf3d.methods import get_method
+from npmrf3d.resources import ResourceError
+from npmrf3d.volume_synthesis import NEIGHBOURHOODS, appearance_space, make_volume_config, volume_synthesize
+from tests import naive
+
+RNG_SEED = 15
+
+
+def layers(side: int = 24, period: int = 6, axis: int = 1) -> np.ndarray:
+    """A volume of flat layers normal to ``axis`` (two values)."""
+    profile = (np.arange(side) % period < period // 2).astype(np.float32)
+    shape = [1, 1, 1]
+    shape[axis] = side
+    return np.broadcast_to(profile.reshape(shape), (side, side, side)).copy()
+
+
+# --------------------------------------------------------------------------- kernels
+
+
+@pytest.mark.kernels
+@pytest.mark.parametrize(("h", "radius", "channels"), [(1, 1, 1), (2, 1, 2), (1, 2, 1)])
+def test_project_matches_naive(rng, h, radius, channels):
+    ex = rng.random((4, 5, 6, channels))
+    n = (2 * radius + 1) ** 3 * channels
+    mean, basis = rng.random(n), rng.normal(size=(n, 3))
+    out = np.empty((4, 5, 6, 3))
+    _k.project(ex, h, radius, mean, basis, out)
+    np.testing.assert_allclose(out, naive.naive_project(ex, h, radius, mean, basis), atol=1e-10)
+
+
+@pytest.mark.kernels
+@pytest.mark.parametrize(("k", "exclude"), [(1, 3), (3, 1), (3, 3), (4, 0)])
+def test_similarity_sets_match_naive(rng, k, exclude):
+    coords = rng.integers(0, 8, size=(30, 3)).astype(np.int64)
+    neighbours = np.stack([np.r_[q, rng.permutation(30)[:9]] for q in range(30)]).astype(np.int64)
+    out = np.empty((30, k), dtype=np.int64)
+    _k.similarity_sets(neighbours, coords, k, exclude, out)
+    np.testing.assert_array_equal(out, naive.naive_similarity_sets(neighbours, coords, k, exclude))
+
+
+@pytest.mark.kernels
+@pytest.mark.parametrize("neighbourhood", sorted(NEIGHBOURHOODS))
+@pytest.mark.parametrize("twisted", [False, True])
+@pytest.mark.parametrize("h", [1, 2])
+def test_correct_matches_naive(rng, neighbourhood, twisted, h):
+    shape, n = (7, 6, 8), (4, 6, 5)
+    feat = rng.normal(size=shape + (3,))
+    lo, hi = np.array([1, 1, 1]), np.array([5, 4, 6])
+    coords = np.stack([rng.integers(lo[a], hi[a] + 1, size=n) for a in range(3)], axis=-1).astype(np.int64)
+    kset = rng.integers(0, np.prod(shape), size=(np.prod(shape), 3)).astype(np.int64)
+    frames = (fields.level_frames("twist", None, n, 0, 75.0) if twisted
+              else np.eye(3, dtype=np.float32).reshape(1, 1, 1, 3, 3))
+    offsets = NEIGHBOURHOODS[neighbourhood]
+    for parity in [(0, 0, 0), (1, 0, 1)]:
+        out, cost = coords.copy(), np.zeros(n)
+        _k.correct(coords, out, frames, feat, kset, h, lo, hi, offsets, np.array(parity), cost)
+        want, want_cost = naive.naive_correct(coords, frames, feat, kset, h, lo, hi, offsets, parity)
+        np.testing.assert_array_equal(out, want)
+        np.testing.assert_allclose(cost, want_cost, atol=1e-9)
+
+
+def test_appearance_space_is_the_pca_of_the_neighbourhoods(rng):
+    ex = rng.random((10, 10, 10, 1))
+    feat = appearance_space(ex, 0, 3, 27, np.random.default_rng(0))
+    # all 27 dimensions kept: distances between voxels are those of the raw neighbourhoods
+    raw = naive.naive_project(ex, 1, 1, np.zeros(27), np.eye(27))
+    a, b = (2, 3, 4), (7, 5, 6)
+    assert np.linalg.norm(feat[a] - feat[b]) == pytest.approx(np.linalg.norm(raw[a] - raw[b]), rel=1e-9)
+
+
+# --------------------------------------------------------------------------- fields
+
+
+@pytest.mark.parametrize("name", ["twist", "bend", "radial"])
+def test_named_fields_are_rotations(name):
+    r = fields.level_frames(name, None, (8, 8, 8), 0, 90.0).astype(np.float64)
+    np.testing.assert_allclose(r @ np.swapaxes(r, -1, -2), np.broadcast_to(np.eye(3), r.shape), atol=1e-6)
+    np.testing.assert_allclose(np.linalg.det(r), 1.0, atol=1e-6)
+
+
+def test_twist_turns_about_axis_0_by_the_angle():
+    r = fields.level_frames("twist", None, (4, 2, 2), 0, 180.0)
+    # exemplar axis 1 at slice i points at angle 180 * (i + 0.5) / 4 degrees in the (1, 2) plane
+    angles = np.degrees(np.arctan2(r[:, 0, 0, 2, 1], r[:, 0, 0, 1, 1]))
+    np.testing.assert_allclose(angles, [22.5, 67.5, 112.5, 157.5], atol=1e-4)
+
+
+def test_direction_and_frame_fields(rng):
+    d = rng.normal(size=(2, 3, 2, 3))
+    d[0, 0, 0] = [-1.0, 0.0, 0.0]
+    r = fields.as_frames(d, (2, 3, 2)).astype(np.float64)
+    unit = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    np.testing.assert_allclose(r[..., :, 0], unit, atol=1e-6)  # exemplar axis 0 onto the direction
+    np.testing.assert_allclose(np.linalg.det(r), 1.0, atol=1e-6)
+    scaled = 3.0 * fields.rotation_about(2, np.full((2, 3, 2), 0.4))
+    np.testing.assert_allclose(fields.as_frames(scaled, (2, 3, 2)), fields.rotation_about(2, np.full((2, 3, 2), 0.4)),
+                               atol=1e-6)
+    with pytest.raises(ParameterError, match=r"vector_field must have shape \(2, 3, 2, 3\) .* got \(2, 2, 2, 3\)"):
+        fields.as_frames(np.zeros((2, 2, 2, 3)), (2, 3, 2))
+    with pytest.raises(ParameterError, match="vector_field must be one of none, twist, bend, radial or a .npy file"):
+        fields.field_input("swirl", (2, 3, 2))
+
+
+# --------------------------------------------------------------------------- the method
+
+
+def test_run_copies_exemplar_voxels_and_keeps_the_layers():
+    res = volume_synthesize(layers(), size=16, levels=2, rng=1)
+    assert res.volume.shape == (16, 16, 16, 1)
+    assert set(np.unique(res.volume).tolist()) == {0.0, 1.0}
+    v = res.volume[..., 0]
+    # flat layers normal to axis 1 stay flat: constant along axes 0 and 2 in most places
+    along = [np.mean(np.diff(v, axis=a) == 0) for a in range(3)]
+    assert along[0] > 0.9 and along[2] > 0.9 and along[1] < 0.8
+    assert res.volume.mean() == pytest.approx(0.5, abs=0.15)
+
+
+def test_same_seed_same_volume_and_registry_form():
+    ex = layers(axis=2)
+    a = volume_synthesize(ex, size=16, levels=2, passes=2, rng=4, vector_field="bend", angle=60)
+    b = volume_synthesize(ex, size=16, levels=2, passes=2, rng=4, vector_field="bend", angle=60)
+    np.testing.assert_array_equal(a.volume, b.volume)
+    method = get_method("volume-lh")
+    config = make_volume_config(size=16, levels=2, passes=2, vector_field="bend", angle=60, seed=4)
+    common = method.run({"volume": ex[..., None]}, config, np.random.default_rng(4))
+    np.testing.assert_array_equal(common.volume, a.volume)
+    assert get_method("seed002") is method
+
+
+_THREADS = """
+import hashlib, sys, numpy as np
+from npmrf3d._kernels import _jit
+_jit.use_threads(int(sys.argv[1]))
+from npmrf3d.volume_synthesis import volume_synthesize
+ex = (np.arange(24)[:, None, None] % 6 < 3) * np.ones((24, 24, 24))
+res = volume_synthesize(ex.astype(np.float32), size=16, levels=2, passes=2, rng=9, vector_field="twist")
+sys.stdout.write(hashlib.sha256(res.volume.tobytes()).hexdigest())
+"""
+
+
+def test_same_volume_at_one_and_two_threads():
+    runs = [subprocess.run([sys.executable, "-c", _THREADS, str(t)], capture_output=True, text=True,
+                           timeout=300, check=True).stdout for t in (1, 2)]
+    assert runs[0] == runs[1] and runs[0]
+
+
+def test_a_twist_turns_the_layers():
+    res = volume_synthesize(layers(axis=1), size=16, levels=2, rng=2, vector_field="twist", angle=90)
+    v = res.volume[..., 0]
+    # slice i: the layers' normal lies at angle 90 * (i + 0.5) / 16 degrees in the (j, k) plane
+    gj, gk = np.gradient(v, axis=1), np.gradient(v, axis=2)
+    first = np.degrees(np.arctan2((2 * gj * gk)[:3].sum(), (gj ** 2 - gk ** 2)[:3].sum())) / 2
+    last = np.degrees(np.arctan2((2 * gj * gk)[-3:].sum(), (gj ** 2 - gk ** 2)[-3:].sum())) / 2
+    assert abs(first) < 25 and abs(abs(last) - 80) < 25
+
+
+def test_refusals_name_the_problem(tmp_path):
+    with pytest.raises(ParameterError, match="is a 2D image, and this method needs a volume"):
+        volume_synthesize(np.zeros((24, 24, 3)), size=16, levels=2)
+    with pytest.raises(ParameterError, match="exemplar of size 8x8x8 is too small for window 5"):
+        volume_synthesize(np.zeros((8, 8, 8)), size=16, levels=2)
+    with pytest.raises(ParameterError, match="method volume-lh needs a 3D exemplar"):
+        get_method("volume-lh").run({"front": np.zeros((16, 16, 1))}, make_volume_config(size=16, levels=2),
+                                    np.random.default_rng(0))
+    with pytest.raises(ResourceError, match="are available"):
+        volume_synthesize(layers(), size=4096, levels=2)
+    with pytest.raises(ParameterError, match="neighbourhood must be one of diagonal, faces; got 'all'"):
+        make_volume_config(neighbourhood="all")
+    with pytest.raises(ParameterError, match="size 30 is not divisible by 2\\*\\*\\(levels-1\\) = 4"):
+        make_volume_config(size=30, levels=3)
+
+
+def test_cli_writes_a_run_and_refuses_an_image(tmp_path):
+    np.save(tmp_path / "crop.npy", (layers() * 255).astype(np.uint8))
+    np.save(tmp_path / "image.npy", np.zeros((24, 24, 3), dtype=np.uint8))
+    cmd = [sys.executable, "-m", "npmrf3d", "volume"]
+    ok = subprocess.run([*cmd, str(tmp_path / "crop.npy"), "--size", "16", "--levels", "2", "--passes", "1", "--quiet",
+                         "--vector-field", "twist", "--out", str(tmp_path / "out")],
+                        capture_output=True, text=True, timeout=300)
+    assert ok.returncode == 0, ok.stderr
+    record = json.loads((tmp_path / "out" / "run.json").read_text())
+    assert record["method"] == "volume-lh" and record["config"]["vector_field"] == "twist"
+    assert np.load(tmp_path / "out" / "volume.npy").shape == (16, 16, 16, 1)
+    bad = subprocess.run([*cmd, str(tmp_path / "image.npy"), "--out", str(tmp_path / "bad")],
+                         capture_output=True, text=True, timeout=300)
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "is a 2D image" in bad.stderr
+    assert not (tmp_path / "bad").exists()
+
+
+# --------------------------------------------------------------------------- npmrf-3d
+
+
+@pytest.mark.kernels
+@pytest.mark.parametrize(("window", "channels", "twisted"), [(3, 1, False), (3, 2, True), (5, 1, False)])
+def test_correct_parzen_matches_naive(rng, window, channels, twisted):
+    from npmrf3d.volume_synthesis import window_offsets
+
+    shape, n, h = (7, 6, 8), (4, 4, 6), 1
+    values = rng.random(shape + (channels,))
+    feat = rng.normal(size=shape + (2,))
+    lo, hi = np.array([1, 1, 1]), np.array([5, 4, 6])
+    coords = np.stack([rng.integers(lo[a], hi[a] + 1, size=n) for a in range(3)], axis=-1).astype(np.int64)
+    kset = rng.integers(0, np.prod(shape), size=(np.prod(shape), 2)).astype(np.int64)
+    frames = (fields.level_frames("twist", None, n, 0, 60.0) if twisted
+              else np.eye(3, dtype=np.float32).reshape(1, 1, 1, 3, 3))
+    offsets, woff = NEIGHBOURHOODS["faces"], window_offsets(window)
+    out, cost = coords.copy(), np.zeros(n)
+    _k.correct_parzen(coords, out, frames, feat, values, kset, h, lo, hi, offsets, woff,
+                      np.array([0, 1, 0]), 0.3, 0.01, cost)
+    want, want_cost = naive.naive_correct_parzen(coords, frames, values, kset, h, lo, hi, offsets, woff,
+                                                 (0, 1, 0), 0.3, 0.01)
+    np.testing.assert_array_equal(out, want)
+    np.testing.assert_allclose(cost, want_cost, rtol=1e-10)
+
+
+def test_npmrf_3d_keeps_the_layers_and_refuses_a_field():
+    from npmrf3d.volume_npmrf import make_npmrf_volume_config, npmrf_volume_synthesize
+
+    res = npmrf_volume_synthesize(layers(), size=16, levels=2, window=3, rng=1)
+    v = res.volume[..., 0]
+    assert set(np.unique(v).tolist()) == {0.0, 1.0} and abs(v.mean() - 0.5) < 0.15
+    assert np.mean(np.diff(v, axis=0) == 0) > 0.9 and np.mean(np.diff(v, axis=1) == 0) < 0.8
+    with pytest.raises(ParameterError, match="vector_field must be 'none' for npmrf-3d"):
+        make_npmrf_volume_config(vector_field="twist")
