@@ -18,6 +18,7 @@ from __future__ import annotations
 from . import _validation as check
 from . import coherent, resources, synthesis
 from .baselines import chen_wang, kopf
+from .neural import METHOD as NEURAL
 from .config import SynthesisMethod
 
 __all__ = ["ALIASES", "METHODS", "check_resources", "estimate", "get_method"]
@@ -29,6 +30,7 @@ METHODS: dict[str, SynthesisMethod] = {
         coherent.METHOD,
         kopf.METHOD,
         chen_wang.METHOD,
+        NEURAL,
     )
 }
 
