@@ -204,7 +204,7 @@ def register(commands, formatter_class) -> None:
     gen.add_argument("model", metavar="MODEL", help="a model file of 'npmrf3d neural train'")
     gen.add_argument("--size", default=",".join(map(str, _d("size"))), metavar="N",
                      help="N for an N^3 block or N1,N2,N3")
-    gen.add_argument("--origin", default="0,0,0", metavar="X,Y,Z", help="integer coordinate of the first voxel")
+    gen.add_argument("--origin", default="0,0,0", metavar="X,Y,Z", help="integer coordinate of the first voxel (negative: --origin=-64,0,0)")
     gen.add_argument("--out", required=True, metavar="FILE", help=f"output, one of {', '.join(VOLUME_SUFFIXES)}")
     gen.add_argument("--seed", type=int, default=None, metavar="S",
                      help="noise seed: another volume of the same texture (default: none = the model's)")
