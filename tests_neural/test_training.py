@@ -133,3 +133,12 @@ def test_generate_checks_its_arguments(exemplar, tiny_options):
         neural.generate(model, (1, 2), 4)
     with pytest.raises(ParameterError, match="this run needs about .* of memory"):
         neural.generate(model, 0, 100_000)
+
+
+def test_a_finished_checkpoint_extends_to_more_steps(tmp_path, exemplar, tiny_options):
+    path = tmp_path / "train.ckpt"
+    neural.train(exemplar, rng=1, checkpoint=path, **{**tiny_options, "iterations": 2})
+    extended = neural.train(exemplar, rng=1, checkpoint=path, **{**tiny_options, "iterations": 4})
+    straight = neural.train(exemplar, rng=1, **{**tiny_options, "iterations": 4})
+    assert extended.history == straight.history
+    np.testing.assert_array_equal(neural.generate(extended, 0, 16), neural.generate(straight, 0, 16))

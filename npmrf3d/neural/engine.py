@@ -95,10 +95,14 @@ def _as_image(block: torch.Tensor, view: str) -> torch.Tensor:
 
 
 def _key(config: NeuralConfig, exemplars: dict) -> str:
-    """What a checkpoint must match: the configuration (less its volume size) and the exemplars."""
+    """What a checkpoint must match: the configuration and the exemplars. The volume size, the
+    step count and the checkpoint interval are left out: a step's randomness does not depend on
+    them, so a finished run's checkpoint extends to more ``iterations`` exactly as if it had
+    been asked for from the start."""
     digest = hashlib.sha256()
     settings = config.to_dict()
-    settings.pop("size")
+    for name in ("size", "iterations", "checkpoint_every"):
+        settings.pop(name)
     digest.update(json.dumps(settings, sort_keys=True).encode())
     for view in sorted(exemplars):
         digest.update(view.encode())
