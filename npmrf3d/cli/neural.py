@@ -114,8 +114,6 @@ def _generate(args: argparse.Namespace, argv) -> int:
     if out.suffix == ".zarr":
         if any(origin):
             raise ParameterError(f"--origin must be 0,0,0 for a Zarr volume (it holds [0, size)); got {args.origin}")
-        if args.block % model.config.tile:
-            raise ParameterError(f"--block must be a multiple of the model's tile {model.config.tile}; got {args.block}")
         bar = CountProgress("blocks", unit="block", enabled=not args.quiet)
         try:
             summary = neural.write_zarr(args.model, out, size=size, block=args.block,

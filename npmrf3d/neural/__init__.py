@@ -133,7 +133,15 @@ def load_model(path):
 def write_zarr(model_path, out, *, size, block: int = ZARR_BLOCK, scheduler: str | None = None,
                workers: int = ZARR_WORKERS, overwrite: bool = False, progress=None) -> dict:
     """Write the ``size`` volume at the origin into the Zarr array ``out``, block by block on
-    a Dask cluster (see :func:`npmrf3d.neural.zarr_volume.write_zarr`)."""
+    a Dask cluster (see :func:`npmrf3d.neural.zarr_volume.write_zarr`); ``block`` must be a
+    multiple of the model's tile."""
+    size = check.triple("size", size, low=1)
+    block = check.integer("block", block, low=1)
+    workers = check.integer("workers", workers, low=1)
+    if scheduler is not None and not isinstance(scheduler, str):
+        check.fail(f"scheduler must be None or an address such as 'tcp://HOST:8786'; got {scheduler!r}")
+    if not os.path.isfile(model_path):
+        check.fail(f"model must be an existing model file (from 'npmrf3d neural train'); got {str(model_path)!r}")
     return _extra.zarr_writer().write_zarr(model_path, out, size=size, block=block,
                                            scheduler=scheduler, workers=workers,
                                            overwrite=overwrite, progress=progress)

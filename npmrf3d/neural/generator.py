@@ -22,6 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from .noise import noise_block
@@ -67,11 +68,29 @@ def plan(origin, shape, scales: int) -> Plan:
     return Plan(starts, shapes, crops, concat)
 
 
+#: Convolutions with fewer input channels run with zero channels added up to this count: CPU
+#: libraries take a slow general path below it (measured: a 4 -> 4 channel 3x3x3 convolution of
+#: a 70^3 block took 1.16 s, 8 -> 4 channels 0.23 s). The zeros change no value.
+MIN_CHANNELS = 8
+
+
+class Conv3d(nn.Conv3d):
+    """An unpadded 3D convolution whose input (and weight) is padded with zero channels up to
+    :data:`MIN_CHANNELS` (same parameters and state as :class:`torch.nn.Conv3d`)."""
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        extra = MIN_CHANNELS - self.in_channels
+        if extra <= 0:
+            return super().forward(x)
+        pad = (0, 0) * 3 + (0, extra)
+        return F.conv3d(F.pad(x, pad), F.pad(self.weight, pad), self.bias)
+
+
 def _conv_block(c_in: int, c_out: int, slope: float) -> nn.Sequential:
     layers = []
     for i, k in enumerate((3, 3, 1)):
-        layers += [nn.Conv3d(c_in if i == 0 else c_out, c_out, k), nn.BatchNorm3d(c_out),
-                   nn.LeakyReLU(slope)]
+        layers += [Conv3d(c_in if i == 0 else c_out, c_out, k), nn.BatchNorm3d(c_out),
+                   nn.LeakyReLU(slope, inplace=True)]
     return nn.Sequential(*layers)
 
 
@@ -107,7 +126,7 @@ class SolidGenerator(nn.Module):
             _conv_block(m * (scales - k), m * (scales - k), slope) for k in range(scales - 1))
         self.norm_coarse = nn.ModuleList(nn.BatchNorm3d(m * (scales - k - 1)) for k in range(scales - 1))
         self.norm_noise = nn.ModuleList(nn.BatchNorm3d(m) for _ in range(scales - 1))
-        self.final = nn.Conv3d(m * scales, out_channels, 1)
+        self.final = Conv3d(m * scales, out_channels, 1)
 
     @property
     def device(self) -> torch.device:
@@ -126,7 +145,9 @@ class SolidGenerator(nn.Module):
         top = self.scales - 1
         x = self.noise_blocks[top](noise(top))
         for k in range(top - 1, -1, -1):
-            up = x.repeat_interleave(2, dim=2).repeat_interleave(2, dim=3).repeat_interleave(2, dim=4)
+            b, c, n0, n1, n2 = x.shape  # nearest-neighbour up-sampling by 2, one copy
+            up = x[:, :, :, None, :, None, :, None].expand(b, c, n0, 2, n1, 2, n2, 2)
+            up = up.reshape(b, c, 2 * n0, 2 * n1, 2 * n2)
             (c0, c1, c2), (n0, n1, n2) = p.crop[k], p.concat_shape[k]
             up = up[:, :, c0:c0 + n0, c1:c1 + n1, c2:c2 + n2]
             y = self.noise_blocks[k](noise(k))

@@ -109,6 +109,9 @@ def write_zarr(model_path, out, *, size, block: int = ZARR_BLOCK, scheduler: str
         ``blocks`` (total), ``skipped`` (already done), ``written``, ``dashboard`` (a link or None).
     """
     model = load_model(model_path)
+    if block % model.config.tile:
+        raise ParameterError(f"block must be a multiple of the model's tile {model.config.tile} "
+                             f"(each tile is computed once); got {block}")
     out = pathlib.Path(out)
     size = tuple(int(n) for n in size)
     _prepare(model_path, out, size, block, model.channels, overwrite)
