@@ -34,7 +34,7 @@ from .config import NeuralConfig, slice_side
 from .descriptor import gram, gram_loss, make_descriptor
 from .generator import SolidGenerator
 
-__all__ = ["FORMAT", "NeuralModel", "generate_block", "load_model", "model_bytes", "save_model",
+__all__ = ["FORMAT", "NeuralModel", "default_device", "generate_block", "load_model", "model_bytes", "save_model",
            "train_model"]
 
 #: The ``format`` entry of a model file.
@@ -78,6 +78,11 @@ class NeuralModel:
     @property
     def parameters(self) -> int:
         return sum(p.numel() for p in self.generator.parameters())
+
+
+def default_device() -> torch.device:
+    """A CUDA GPU when torch sees one, else the CPU."""
+    return torch.device("cuda" if torch.cuda.is_available() else "cpu")
 
 
 def _slice_shape(view: str, side: int) -> tuple[int, int, int]:
@@ -144,17 +149,19 @@ def train_model(per_view: dict, config: NeuralConfig, rng: np.random.Generator, 
     channels = next(iter(per_view.values())).shape[2]
     torch.manual_seed(config.seed or 0)
     generator = SolidGenerator(out_channels=channels, seed=config.seed or 0, **config.architecture)
-    optimizer = torch.optim.Adam(generator.parameters(), lr=config.learning_rate)
     mean = np.mean([a.reshape(-1, channels).mean(axis=0) for a in per_view.values()], axis=0)
     with torch.no_grad():  # start near the exemplars' mean colour: a loss of sane size from step 1
         generator.final.weight.mul_(INIT_GAIN)
         generator.final.bias.copy_(torch.as_tensor(mean, dtype=torch.float32))
-    descriptor = make_descriptor(config, channels, mean)
+    device = default_device()
+    generator.to(device)
+    descriptor = make_descriptor(config, channels, mean).to(device)
     targets = {}
     with torch.no_grad():
         for view, exemplar in per_view.items():
-            image = torch.from_numpy(np.ascontiguousarray(exemplar.transpose(2, 0, 1)))[None]
+            image = torch.from_numpy(np.ascontiguousarray(exemplar.transpose(2, 0, 1)))[None].to(device)
             targets[view] = [gram(f) for f in descriptor(image)]
+    optimizer = torch.optim.Adam(generator.parameters(), lr=config.learning_rate)
     sides = {v: slice_side(config, a.shape) for v, a in per_view.items()}
     key = _key(config, per_view)
     start, history, seconds = 0, [], 0.0
@@ -223,6 +230,9 @@ def generate_block(model: NeuralModel, origin, shape, *, seed: int | None = None
     """
     generator, tile = model.generator, model.config.tile
     generator.eval()
+    if generator.device.type == "cuda":  # one algorithm per tile shape, run the same way each time
+        torch.backends.cudnn.benchmark = False
+        torch.backends.cudnn.deterministic = True
     out = np.empty((*shape, model.channels), dtype=np.float32)
     corners = [(a * tile, b * tile, c * tile) for a, b, c in itertools.product(*_tiles(origin, shape, tile))]
     threads = torch.get_num_threads()
@@ -282,7 +292,7 @@ def load_model(source) -> NeuralModel:
     generator = SolidGenerator(out_channels=int(payload["out_channels"]), seed=config.seed or 0,
                                **config.architecture)
     generator.load_state_dict(payload["state"])
-    generator.eval()
+    generator.to(default_device()).eval()
     exemplars = {v: tuple(s) for v, s in json.loads(payload["exemplars"]).items()}
     return NeuralModel(generator, config, list(payload["history"]), json.loads(payload["timings"]),
                        exemplars)
