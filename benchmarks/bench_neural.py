@@ -48,20 +48,29 @@ def main(argv=None) -> int:
 
     options = dict(slice_size=args.slice, tile=args.tile, seed=0)
     neural.train(exemplar, iterations=1, **options)  # warm-up
-    times = []
-    model = neural.train(exemplar, iterations=args.steps, rng=0,
-                         progress=lambda i, n, loss: times.append(time.perf_counter()), **options)
+    times, cpu = [], []
+
+    def clock(i, n, loss):
+        times.append(time.perf_counter())
+        cpu.append(time.process_time())
+
+    model = neural.train(exemplar, iterations=args.steps, rng=0, progress=clock, **options)
     per_step = float(np.median(np.diff(times)))
+    cpu_step = float(np.median(np.diff(cpu)))
     print(f"training: {per_step:.2f} s per step ({1 / per_step:.3f} steps/s); "
           f"{int(1800 / per_step)} steps fit in 30 min; {model.parameters} parameters")
+    print(f"  CPU time {cpu_step:.2f} s per step (a machine shared with other jobs stretches the "
+          f"wall time; idle, {args.threads} threads would take about {cpu_step / args.threads:.2f}-"
+          f"{cpu_step:.2f} s)")
 
     neural.generate(model, (0, 0, 0), args.tile)  # warm-up
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     volume = neural.generate(model, (0, 0, 0), args.gen_size)
-    t = time.perf_counter() - t0
+    t, c = time.perf_counter() - t0, time.process_time() - c0
     rate = volume.shape[0] * volume.shape[1] * volume.shape[2] / t
     print(f"generation: {args.gen_size}^3 in {t:.1f} s ({rate:.3g} voxels/s, tile {args.tile}); "
-          f"1024^3 at this rate: {1024 ** 3 / rate / 60:.1f} min")
+          f"1024^3 at this rate: {1024 ** 3 / rate / 60:.1f} min; CPU time {c:.1f} s "
+          f"(idle, {args.threads} threads: about {c / args.threads:.1f} s)")
 
     if args.zarr:
         with tempfile.TemporaryDirectory() as tmp:
