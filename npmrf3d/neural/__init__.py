@@ -78,6 +78,7 @@ def train(exemplar=None, *, exemplars=None, rng=None, progress=None, checkpoint=
     config = make_neural_config(**options)
     rng = check.rng(rng)
     per_view = resolve_exemplars(exemplar, exemplars, config.views, **_fit(config))
+    check_memory(neural_estimate(config, per_view), hint="lower --size (the slice side) or --batch")
     eng = _extra.engine("training the neural generator")
     return eng.train_model(per_view, config, rng, progress=progress,
                            checkpoint=None if checkpoint is None else pathlib.Path(checkpoint))
