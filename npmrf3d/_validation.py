@@ -180,3 +180,16 @@ def rng(value) -> np.random.Generator:
             fail(f"seed must be a non-negative integer; got {value}")
         return np.random.default_rng(value)
     fail(f"rng must be None, an integer seed or a numpy Generator; got {value!r}")
+
+
+def triple(parameter: str, value, *, low: int | None = None) -> tuple[int, int, int]:
+    """One integer (repeated on the three axes) or three integers, each >= ``low``."""
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+        value = (int(value),) * 3
+    try:
+        items = tuple(value)
+    except TypeError:
+        fail(f"{parameter} must be an integer or three integers; got {value!r}")
+    if len(items) != 3:
+        fail(f"{parameter} must be an integer or three integers; got {value!r}")
+    return tuple(integer(parameter, v, low=low) for v in items)

@@ -18,6 +18,7 @@ from __future__ import annotations
 from . import _validation as check
 from . import coherent, resources, synthesis, volume_npmrf, volume_synthesis
 from .baselines import chen_wang, kopf
+from .neural import METHOD as NEURAL
 from .config import SynthesisMethod
 
 __all__ = ["ALIASES", "METHODS", "check_resources", "estimate", "get_method"]
@@ -31,6 +32,7 @@ METHODS: dict[str, SynthesisMethod] = {
         chen_wang.METHOD,
         volume_synthesis.METHOD,
         volume_npmrf.METHOD,
+        NEURAL,
     )
 }
 

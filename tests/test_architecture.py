@@ -3,6 +3,9 @@
 * no import cycles among the package's modules (module-level and function-level imports);
 * the package's own modules are imported at module top, never inside a function;
 * only ``npmrf3d/_kernels/`` imports numba;
+* only the torch modules of ``npmrf3d/neural/`` import torch, and they are reached only through
+  the one documented lazy import, ``npmrf3d/neural/_extra.py`` (issue 16: torch is an optional
+  extra, so the function-level-import rule above cannot hold for them: ``importlib`` does it);
 * every library module stays under ~400 lines or says at its top why not.
 """
 
@@ -111,6 +114,33 @@ def test_only_the_kernels_import_numba():
                    if "import numba" in f.read_text(encoding="utf-8")
                    or "from numba" in f.read_text(encoding="utf-8"))
     assert users and all(u.startswith("_kernels/") for u in users)
+
+
+#: The modules of ``npmrf3d/neural/`` that import torch (everything else there must not).
+TORCH_MODULES = {"neural/descriptor.py", "neural/engine.py", "neural/generator.py",
+                 "neural/noise.py", "neural/zarr_volume.py"}
+
+
+def test_only_the_neural_torch_modules_import_torch_and_only_lazily():
+    users, imported_by = set(), {}
+    modules = _modules()
+    for name, path in modules.items():
+        rel = str(path.relative_to(PACKAGE))
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import) and any(a.name.split(".")[0] == "torch" for a in node.names):
+                users.add(rel)
+            if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "torch" and not node.level:
+                users.add(rel)
+        for target, _ in _imports(name, path, modules):
+            imported_by.setdefault(target, set()).add(rel)
+    assert users == TORCH_MODULES
+    for rel in TORCH_MODULES:  # a torch module is imported by torch modules only
+        name = "npmrf3d." + rel[:-3].replace("/", ".")
+        assert imported_by.get(name, set()) <= TORCH_MODULES, (name, imported_by.get(name))
+    lazy = [str(f.relative_to(PACKAGE)) for f in PACKAGE.rglob("*.py")
+            if 'import_module("npmrf3d.neural.' in f.read_text(encoding="utf-8")]
+    assert lazy == ["neural/_extra.py"]
 
 
 def test_long_modules_say_why():

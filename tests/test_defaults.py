@@ -133,6 +133,6 @@ def test_every_registered_method_has_the_common_signature():
 def test_unknown_method_lists_the_registered_ones():
     from npmrf3d.errors import ParameterError
 
-    with pytest.raises(ParameterError, match="method must be one of npmrf, coherent, kopf, chen-wang, volume-lh, npmrf-3d; got 'nope'"):
+    with pytest.raises(ParameterError, match="method must be one of npmrf, coherent, kopf, chen-wang, volume-lh, npmrf-3d, neural; got 'nope'"):
         get_method("nope")
     assert get_method("np_k") is METHODS["kopf"]

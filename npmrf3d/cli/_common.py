@@ -351,3 +351,26 @@ class RunsProgress:
         if self.bar is not None:
             self.bar.close()
             self.bar = None
+
+
+class CountProgress:
+    """One tqdm bar on stderr over a count of steps (training steps, Zarr blocks), called as
+    ``progress(done, total, value)``; ``value`` (the loss) is shown as a postfix when given."""
+
+    def __init__(self, name: str, *, unit: str, symbol: str = "", enabled: bool = True):
+        self.name, self.unit, self.symbol, self.enabled, self.bar = name, unit, symbol, enabled, None
+
+    def __call__(self, done: int, total: int, value: float | None = None) -> None:
+        if not self.enabled:
+            return
+        if self.bar is None:
+            self.bar = tqdm(total=total, initial=done, desc=self.name, unit=self.unit,
+                            file=sys.stderr, dynamic_ncols=True)
+        if value is not None and self.symbol and value == value:
+            self.bar.set_postfix({self.symbol: f"{value:.4g}"}, refresh=False)
+        self.bar.update(done - self.bar.n)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None

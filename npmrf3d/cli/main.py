@@ -21,13 +21,13 @@ import sys
 import threading
 
 from .. import __version__
-from . import baseline, coherent, info, metrics, study, synth, volume
+from . import baseline, coherent, info, metrics, neural, study, synth, volume
 from ._common import PROG, HelpFormatter, Parser, guarded, say
 
 __all__ = ["COMMANDS", "build_parser", "main"]
 
 #: The sub-command modules, in the order ``--help`` lists them (``study`` adds ``report``).
-COMMANDS = (synth, coherent, info, metrics, study, baseline, volume)
+COMMANDS = (synth, coherent, info, metrics, study, baseline, volume, neural)
 #: Library parameter names that messages should call by their option names.
 OPTION_NAMES = synth.OPTION_NAMES
 
