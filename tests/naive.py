@@ -604,3 +604,36 @@ def naive_upsample_sources(src, view, coarse_width, fine_shape):
         c = min(2 * (s % coarse_width) + x[ca] % 2, fine_shape[1] - 1)
         out[x] = r * fine_shape[1] + c
     return out
+
+
+# --------------------------------------------------------------------------- batched distances
+
+
+def naive_gemm_operands(view_patches, n_channels: int):
+    """Twin of ``make_gemm_operands``: the channel means ``mu`` over every view's patch entries,
+    the centred patches ``y' = y - mu`` (n, M, C) and ``q[p, m] = ||y'_{p,m}||^2`` per view."""
+    stacked = np.concatenate([np.asarray(p, dtype=np.float64).reshape(-1, n_channels)
+                              for p in view_patches])
+    centre = stacked.mean(axis=0)
+    centred = [np.asarray(p, dtype=np.float64) - centre for p in view_patches]
+    return centre, centred, [(y**2).sum(axis=2) for y in centred]
+
+
+def naive_gemm_rows(volume, temps, sites, view_offsets3d, centre):
+    """Twin of ``gemm_rows``: per site the row ``[-2 t_m x'_{m,c} ..., t_m ...]`` and
+    ``s0 = sum_m t_m ||x'_m||^2`` (float64), and whether every trust is 1."""
+    rows, s0, trusted = [], [], True
+    for site in sites:
+        x, temp = gather(volume, temps, site, view_offsets3d)
+        t = (1.0 - temp) ** 2
+        xc = x - centre
+        rows.append(np.concatenate([(-2.0 * t[:, None] * xc).ravel(), t]))
+        s0.append(float((t * (xc**2).sum(axis=1)).sum()))
+        trusted = trusted and bool((t == 1.0).all())
+    return np.array(rows), np.array(s0), trusted
+
+
+def naive_block_distances(volume, temps, sites, view_offsets3d, patches):
+    """``D_p`` of every site (S, n) by the direct sum (the definition, float64)."""
+    return np.array([naive_neighbour_distances(volume, temps, s, view_offsets3d, patches)
+                     for s in sites])

@@ -15,7 +15,13 @@ import numpy as np
 
 from .._kernels.relax import PARALLEL_MIN_SITES
 
-__all__ = ["histogram_penalty", "label_counts", "sweep"]
+__all__ = ["DISTANCES", "histogram_penalty", "label_counts", "sweep"]
+
+#: How the class kernels get the neighbour distances ``D_p`` (SPEC.md section 2): ``gemm`` (the
+#: default) computes a block of sites at once as one float32 matrix product plus rank-one terms
+#: (:mod:`npmrf3d._kernels.gemm`); ``direct`` sums the squared differences site by site
+#: (:func:`npmrf3d._kernels.parzen.neighbour_distances`). Same model; the two round differently.
+DISTANCES = ("gemm", "direct")
 
 #: ``update(sites, drawn, penalty, parallel, old, new)``: update one class in place; ``old`` and
 #: ``new`` receive each site's label before and after (``old = -2``: site not visited).
