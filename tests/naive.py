@@ -621,16 +621,15 @@ def naive_gemm_operands(view_patches, n_channels: int):
 
 def naive_gemm_rows(volume, temps, sites, view_offsets3d, centre):
     """Twin of ``gemm_rows``: per site the row ``[-2 t_m x'_{m,c} ..., t_m ...]`` and
-    ``s0 = sum_m t_m ||x'_m||^2`` (float64), and whether every trust is 1."""
-    rows, s0, trusted = [], [], True
+    ``s0 = sum_m t_m ||x'_m||^2`` (float64)."""
+    rows, s0 = [], []
     for site in sites:
         x, temp = gather(volume, temps, site, view_offsets3d)
         t = (1.0 - temp) ** 2
         xc = x - centre
         rows.append(np.concatenate([(-2.0 * t[:, None] * xc).ravel(), t]))
         s0.append(float((t * (xc**2).sum(axis=1)).sum()))
-        trusted = trusted and bool((t == 1.0).all())
-    return np.array(rows), np.array(s0), trusted
+    return np.array(rows), np.array(s0)
 
 
 def naive_block_distances(volume, temps, sites, view_offsets3d, patches):

@@ -23,10 +23,14 @@ from npmrf3d._kernels.gemm import (
     gemm_rows,
     icm_update_class_gemm,
     icm_update_class_gemm_serial,
+    make_block_scratch,
     make_gemm_operands,
+    sites_best_distances,
+    sites_best_distances_direct,
 )
 from npmrf3d.config import DecisionRule
 from npmrf3d.parzen import PRUNE
+from npmrf3d.relax._sweep import resolve_distances
 from tests import naive
 from tests.test_kernels import VIEWS3, assert_matches, make_case, naive_for, random_volume
 
@@ -61,14 +65,30 @@ def test_gemm_operands_match_naive(channels, window, rng):
         assert (ops.patches[a, :, n:] == 0).all() and (ops.norms[a, n:] == 0).all()
 
 
+def lattice_temps(rng, shape, partial: bool):
+    """Temperature 0 on the even lattice (inherited voxels), 1 elsewhere (hot), and with
+    ``partial`` a few voxels in between: sites on the lattice then have fully trusted, untrusted
+    and (``partial``) partly trusted neighbour columns in one block."""
+    grid = np.indices(shape)
+    temps = np.where((grid % 2 == 0).all(axis=0), 0.0, 1.0).astype(np.float32)
+    if partial:
+        temps[rng.random(shape) < 0.1] = 0.5
+    return temps
+
+
 @pytest.mark.parametrize("channels", [1, 3])
 @pytest.mark.parametrize("window", [3, 5])
-@pytest.mark.parametrize("temps_mode", ["zeros", "ones", "random"])
+@pytest.mark.parametrize("temps_mode", ["zeros", "ones", "random", "lattice", "lattice+partial"])
 def test_block_distances_match_the_direct_sum(channels, window, temps_mode, rng):
     """``D_p`` from the product equals the direct float64 sum within the expansion's float32
     error bound ``(K + 4) eps32 sum_i |terms_i|`` (the sum of the absolute values of what is
-    added), and is never negative."""
-    labels, models, ref, volume, temps, sites = case(rng, channels, window, temps_mode)
+    added), and is never negative; with every mix of untrusted, fully and partly trusted
+    neighbour columns (the packed products)."""
+    mode = "zeros" if temps_mode.startswith("lattice") else temps_mode
+    labels, models, ref, volume, temps, sites = case(rng, channels, window, mode, shape=(8, 8, 10))
+    if temps_mode.startswith("lattice"):
+        temps = lattice_temps(rng, temps.shape, temps_mode.endswith("partial"))
+        sites = 2 * (sites // 2)
     ops = make_gemm_operands(models.patches_t, models.n_patches, channels)
     n_m = window * window - 1
     width = n_m * channels + n_m
@@ -76,18 +96,17 @@ def test_block_distances_match_the_direct_sum(channels, window, temps_mode, rng)
     for a, v in enumerate(VIEWS3):
         offsets = ref[v]["offsets"]
         a_rows, s0 = np.empty((BLOCK, width), np.float32), np.empty(BLOCK)
-        trusted = gemm_rows(volume, temps, sites, rows, len(sites), models.offsets[a],
-                            ops.centre, a_rows, s0)
-        want_rows, want_s0, want_trusted = naive.naive_gemm_rows(volume, temps, sites, offsets,
-                                                                 ops.centre.astype(np.float64))
-        assert trusted == want_trusted == (temps_mode == "zeros")
+        gemm_rows(volume, temps, sites, rows, len(sites), models.offsets[a], ops.centre, a_rows,
+                  s0)
+        want_rows, want_s0 = naive.naive_gemm_rows(volume, temps, sites, offsets,
+                                                   ops.centre.astype(np.float64))
         np.testing.assert_allclose(a_rows[: len(sites)], want_rows, rtol=1e-6, atol=1e-6)
         np.testing.assert_allclose(s0[: len(sites)], want_s0, rtol=1e-6, atol=1e-6)
         n = int(models.n_patches[a])
-        product = np.empty((BLOCK, models.patches_t.shape[2]), np.float32)
+        scratch = make_block_scratch(BLOCK, width, models.patches_t.shape[2])
         with single_threaded_blas():
-            block_distances(a_rows, s0, len(sites), n_m, ops.patches[a], ops.norms[a], n,
-                            trusted, np.empty((BLOCK, n_m * channels), np.float32), product)
+            block_distances(a_rows, s0, len(sites), n_m, ops.patches[a], ops.norms[a], n, scratch)
+        product = scratch[3]
         got = product[: len(sites), :n].astype(np.float64)
         want = naive.naive_block_distances(volume, temps, sites, offsets, ref[v]["patches"])
         yc = np.abs(ref[v]["patches"] - ops.centre.astype(np.float64))  # (n, M, C)
@@ -128,7 +147,7 @@ def test_log_lcpdf_sites_agrees_with_the_direct_kernel(rng):
                                    rtol=1e-4, atol=1e-6)
 
 
-def _class_state(rng, channels=1, window=3, shape=(12, 12, 12)):
+def _class_state(rng, channels=1, window=3, shape=(16, 16, 16)):
     labels, models, ref, volume, temps, _ = case(rng, channels, window, "random", shape=shape)
     lab = rng.integers(0, len(labels), size=shape).astype(np.int32)
     volume = labels[lab].astype(np.float32)
@@ -193,14 +212,16 @@ THREADS_SCRIPT = textwrap.dedent("""
     import sys, numba, numpy as np
     import npmrf3d
     from npmrf3d import data
-    from tests.conftest import checkerboard
+    from npmrf3d.relax._sweep import GEMM_MIN_DIMENSION
     assert numba.get_num_threads() == int(sys.argv[2])
+    ihc = data.path("ihc64")
+    assert 3 * (7 * 7 - 1) >= GEMM_MIN_DIMENSION  # colour 7x7 runs take the batched path
     vols = [
-        npmrf3d.synthesize(checkerboard(), size=16, window=5, levels=2, variant=v, rng=7).volume
+        npmrf3d.synthesize(ihc, size=16, window=7, levels=1, variant=v, palette=16, rng=7).volume
         for v in ("sharp", "literal")
     ] + [
-        npmrf3d.synthesize(data.path("ihc64"), size=16, window=3, levels=2, relaxation="anneal",
-                           sampler=s, palette=8, proposals=2, rng=7).volume
+        npmrf3d.synthesize(ihc, size=16, window=7, levels=1, relaxation="anneal", sampler=s,
+                           palette=16, proposals=2, rng=7).volume
         for s in ("heat-bath", "metropolis")
     ]
     np.save(sys.argv[1], np.concatenate([v.ravel() for v in vols]))
@@ -220,3 +241,33 @@ def test_same_seed_same_volume_at_one_and_two_threads(tmp_path):
                        env=env, cwd=root, timeout=600)
         volumes.append(np.load(out))
     np.testing.assert_array_equal(volumes[0], volumes[1])
+
+
+@pytest.mark.parametrize("temps_mode", ["zeros", "random", "lattice"])
+def test_best_distances_match_naive_on_both_paths(temps_mode, rng):
+    labels, models, ref, volume, temps, _ = case(rng, 3, 3, "zeros" if temps_mode == "lattice"
+                                                 else temps_mode, shape=(8, 8, 8))
+    if temps_mode == "lattice":
+        temps = lattice_temps(rng, temps.shape, False)
+    sites = np.argwhere(np.ones((8, 8, 8), bool))[::2].astype(np.int64)  # 256 + 0: two blocks
+    ops = make_gemm_operands(models.patches_t, models.n_patches, 3)
+    got = np.empty((len(sites), 3), np.float32)
+    direct = np.empty((len(sites), 3), np.float32)
+    with single_threaded_blas():
+        sites_best_distances(volume, temps, sites, models, ops, got)
+    sites_best_distances_direct(volume, temps, sites, models, direct)
+    want = np.array([[naive.naive_block_distances(volume, temps, [s], ref[v]["offsets"],
+                                                  ref[v]["patches"]).min() for v in VIEWS3]
+                     for s in sites])
+    np.testing.assert_allclose(direct, want, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-5)
+
+
+def test_auto_distances_take_the_product_from_the_measured_dimension(rng):
+    grey = case(rng, 1, 5, "zeros")[1]  # d = 24
+    colour = case(rng, 3, 7, "zeros", views=("front",))[1]  # d = 144
+    assert resolve_distances("auto", grey) == "direct"
+    assert resolve_distances("auto", colour) == "gemm"
+    assert resolve_distances("direct", colour) == "direct"
+    with pytest.raises(ValueError, match="distances must be one of auto, gemm, direct; got 'blas'"):
+        resolve_distances("blas", grey)

@@ -11,7 +11,9 @@ with ``q_{p,m} = ||y'_{p,m}||^2``. The first term is one float64 number per site
 are one float32 matrix product ``A (B, M*C + M) @ Y (M*C + M, n)`` for the whole block, done by
 BLAS (``np.dot``: scipy's ``sgemm`` when compiled). When every neighbour of every site of a block
 is fully trusted (``t_m = 1``: annealing, cooled regions) the last ``M`` columns are dropped and
-``sum_m q_{p,m}`` is added from a float64 table instead. ``D_p`` is clamped at 0 (the expansion
+``sum_m q_{p,m}`` is added from a float64 table instead; more generally the columns of
+neighbours that no site of the block trusts (hot voxels) are left out, and so are the ``q``
+columns of neighbours every site trusts fully (:func:`block_distances`). ``D_p`` is clamped at 0 (the expansion
 can round a little below it). Its rounding error is at most ``(M*C + M + 4) * eps32`` times the
 sum of the absolute values of the terms added (tests/test_gemm.py checks it against the direct
 float64 sum); the direct kernel's error is relative to ``D_p`` itself, so the two paths agree
@@ -37,10 +39,16 @@ from typing import NamedTuple
 import numpy as np
 
 from ._jit import jit, jit_parallel, prange
-from .parzen import log_lcpdf_at_labels, log_lcpdf_from_distances
+from .parzen import (
+    gather_neighbours,
+    log_lcpdf_at_labels,
+    log_lcpdf_from_distances,
+    neighbour_distances,
+)
 from .relax import (
     HEAT_BATH,
     choose_label,
+    make_buffers,
     metropolis_accept,
     objective_scores,
     penalty_pair,
@@ -48,7 +56,7 @@ from .relax import (
 )
 
 #: Sites per matrix product (a fixed partition of each class: results do not depend on threads).
-BLOCK = 64
+BLOCK = 256
 
 
 class GemmOperands(NamedTuple):
@@ -105,13 +113,11 @@ def gemm_rows(volume, temps, sites, rows, n_rows, offsets, centre, a, s0):
     """The left operand of the product for the sites ``sites[rows[:n_rows]]`` of one view.
 
     Row ``b`` of ``a`` (B, M*C + M) float32: ``-2 t_m x'_{m,c}`` at ``m*C + c``, ``t_m`` at
-    ``M*C + m``; ``s0[b] = sum_m t_m ||x'_m||^2`` (float64). Returns True when every neighbour
-    of every listed site is fully trusted (``t_m = 1``).
+    ``M*C + m``; ``s0[b] = sum_m t_m ||x'_m||^2`` (float64).
     """
     n1, n2, n3, nc = volume.shape
     n_m = offsets.shape[0]
     mc = n_m * nc
-    trusted = True
     for b in range(n_rows):
         q = rows[b]
         i, j, k = sites[q, 0], sites[q, 1], sites[q, 2]
@@ -122,8 +128,6 @@ def gemm_rows(volume, temps, sites, rows, n_rows, offsets, centre, a, s0):
             kk = (k + offsets[m, 2]) % n3
             u = np.float32(1.0) - temps[ii, jj, kk]
             t = u * u
-            if t != 1.0:
-                trusted = False
             a[b, mc + m] = t
             sq = 0.0
             for c in range(nc):
@@ -132,32 +136,112 @@ def gemm_rows(volume, temps, sites, rows, n_rows, offsets, centre, a, s0):
                 sq += np.float64(x) * np.float64(x)
             acc += np.float64(t) * sq
         s0[b] = acc
-    return trusted
+
+
+#: Columns are packed into a smaller product only when at most this share of them is kept
+#: (packing copies the kept rows of the exemplar matrix, which costs as much as a few sites).
+PACK_BELOW = 0.75
 
 
 @jit
-def block_distances(a, s0, n_rows, n_m, patches, norms, n_patches, trusted, packed, product):
-    """``product[b, p]`` (float32) becomes ``D_p`` of row ``b < n_rows`` (module docstring).
+def make_block_scratch(n_rows_max, width, n_max):
+    """Scratch of :func:`block_distances` for up to ``n_rows_max`` rows: the packed left operand
+    (flat), kept columns, the float64 sum of the fully trusted ``q`` rows, the product."""
+    return (np.empty(n_rows_max * width, dtype=np.float32),
+            np.empty(width, dtype=np.int64),
+            np.empty(n_max, dtype=np.float64),
+            np.empty((n_rows_max, n_max), dtype=np.float32))
+
+
+@jit
+def block_distances(a, s0, n_rows, n_m, patches, norms, n_patches, scratch):
+    """``D_p`` of rows ``b < n_rows`` into the product buffer ``scratch[3][b, p]`` (float32).
 
     ``a`` (B, M*C + M) and ``s0`` from :func:`gemm_rows`; ``patches`` (M*C + M, n_max) and
-    ``norms`` (n_max,): one view's :class:`GemmOperands`; ``packed`` (B, M*C) float32 scratch
-    for the fully trusted product; ``product`` (B, n_max) float32. Columns from ``n_patches``
-    on are left undefined.
+    ``norms`` (n_max,): one view's :class:`GemmOperands`; ``scratch`` from
+    :func:`make_block_scratch`. Columns that no row needs are left out of the product: a
+    neighbour with trust 0 in every row (a hot voxel) contributes nothing, and the ``q`` column
+    of a neighbour with trust 1 in every row adds the same ``q_{p,m}`` to every row, once, in
+    float64 (all fully trusted: ``norms``). Columns from ``n_patches`` on are left undefined.
     """
-    n_mc = patches.shape[0] - n_m
-    if trusted:
+    packed_a, kept, extra, product = scratch
+    width = patches.shape[0]
+    n_mc = width - n_m
+    nc = n_mc // n_m
+    n_kept = 0
+    n_full = 0
+    for m in range(n_m):  # value columns of neighbours someone trusts
+        live = False
+        for b in range(n_rows):
+            if a[b, n_mc + m] != 0.0:
+                live = True
+                break
+        if live:
+            for c in range(nc):
+                kept[n_kept] = m * nc + c
+                n_kept += 1
+    n_values = n_kept
+    for m in range(n_m):  # q columns of neighbours trusted partly (not 0 or 1 in every row)
+        live = False
+        full = True
+        for b in range(n_rows):
+            t = a[b, n_mc + m]
+            if t != 0.0:
+                live = True
+            if t != 1.0:
+                full = False
+        if full:
+            n_full += 1
+        elif live:
+            kept[n_kept] = n_mc + m
+            n_kept += 1
+    pack = n_kept < PACK_BELOW * width
+    if not pack:  # the whole product: every q column inside it, nothing extra
+        n_full = 0
+        np.dot(a[:n_rows], patches, product[:n_rows])
+    elif n_kept == n_values and n_values == n_mc:  # a prefix of the rows: no copy of patches
         for b in range(n_rows):
             for r in range(n_mc):
-                packed[b, r] = a[b, r]
-        np.dot(packed[:n_rows], patches[:n_mc], product[:n_rows])
+                packed_a[b * n_mc + r] = a[b, r]
+        np.dot(packed_a[: n_rows * n_mc].reshape((n_rows, n_mc)), patches[:n_mc],
+               product[:n_rows])
+    elif n_kept > 0:
+        packed_y = np.zeros((n_kept, patches.shape[1]), dtype=np.float32)
+        for b in range(n_rows):
+            for r in range(n_kept):
+                packed_a[b * n_kept + r] = a[b, kept[r]]
+        for r in range(n_kept):
+            src = patches[kept[r]]
+            dst = packed_y[r]
+            for p in range(n_patches):
+                dst[p] = src[p]
+        np.dot(packed_a[: n_rows * n_kept].reshape((n_rows, n_kept)), packed_y, product[:n_rows])
     else:
-        np.dot(a[:n_rows], patches, product[:n_rows])
+        for b in range(n_rows):
+            for p in range(n_patches):
+                product[b, p] = 0.0
+    if n_full == n_m:
+        for p in range(n_patches):
+            extra[p] = norms[p]
+    elif n_full > 0:
+        for p in range(n_patches):
+            extra[p] = 0.0
+        for m in range(n_m):
+            full = True
+            for b in range(n_rows):
+                if a[b, n_mc + m] != 1.0:
+                    full = False
+                    break
+            if full:
+                row = patches[n_mc + m]
+                for p in range(n_patches):
+                    extra[p] += row[p]
     for b in range(n_rows):
         base = s0[b]
         row = product[b]
-        if trusted:
+        if n_full > 0:
             for p in range(n_patches):
-                d = base + norms[p] + row[p]
+                d = base + extra[p] + row[p]
                 row[p] = d if d > 0.0 else 0.0
         else:
             for p in range(n_patches):
@@ -173,27 +257,25 @@ def block_log_lcpdfs(volume, temps, sites, rows, n_rows, models, ops, adapt_eps,
     ``query`` (S, Q) int64 with Q >= 1 and ``query[q, 0] >= 0``: only the labels
     ``query[rows[b]]`` are evaluated into ``log_l[b, v, :Q]`` (a Metropolis step's current and
     proposed labels); ``query`` of shape (0, 0): every label, into ``log_l[b, v, :K]``.
-    ``log_l`` (BLOCK, V, max(K, Q)) float64. The same LCPDF as
+    ``log_l`` (at least n_rows, V, max(K, Q)) float64. The same LCPDF as
     :func:`npmrf3d._kernels.relax.site_log_lcpdfs`; only ``D_p`` is computed differently.
     """
     n_views, n_m = models.offsets.shape[0], models.offsets.shape[1]
     n_labels = models.labels.shape[0]
     nc = volume.shape[3]
     width = ops.patches.shape[1]
-    a = np.empty((BLOCK, width), dtype=np.float32)
-    packed = np.empty((BLOCK, n_m * nc), dtype=np.float32)
-    s0 = np.empty(BLOCK, dtype=np.float64)
-    product = np.empty((BLOCK, models.patches_t.shape[2]), dtype=np.float32)
+    a = np.empty((n_rows, width), dtype=np.float32)
+    s0 = np.empty(n_rows, dtype=np.float64)
+    scratch = make_block_scratch(n_rows, width, models.patches_t.shape[2])
+    product = scratch[3]
     weights = np.zeros(n_labels, dtype=np.float64)
     nonzero = np.empty(n_labels, dtype=np.int64)
     log_weights = np.empty(n_labels, dtype=np.float64)
     all_labels = query.shape[0] == 0
     for v in range(n_views):
         n = models.n_patches[v]
-        trusted = gemm_rows(volume, temps, sites, rows, n_rows, models.offsets[v], ops.centre, a,
-                            s0)
-        block_distances(a, s0, n_rows, n_m, ops.patches[v], ops.norms[v], n, trusted, packed,
-                        product)
+        gemm_rows(volume, temps, sites, rows, n_rows, models.offsets[v], ops.centre, a, s0)
+        block_distances(a, s0, n_rows, n_m, ops.patches[v], ops.norms[v], n, scratch)
         for b in range(n_rows):
             if all_labels:
                 log_lcpdf_from_distances(
@@ -236,7 +318,7 @@ def icm_update_block(
             new_labels[q] = -2
     if n_rows == 0:
         return
-    log_l = np.empty((BLOCK, n_views, n_labels), dtype=np.float64)
+    log_l = np.empty((n_rows, n_views, n_labels), dtype=np.float64)
     block_log_lcpdfs(volume, temps, sites, rows, n_rows, models, ops, adapt_eps, min_two_h2,
                      prune, outlier, np.empty((0, 0), dtype=np.int64), log_l)
     score = np.empty(n_labels, dtype=np.float64)
@@ -331,7 +413,7 @@ def anneal_update_block(
     if n_rows == 0:
         return
     width = n_labels if heat_bath else 2
-    log_l = np.empty((BLOCK, n_views, width), dtype=np.float64)
+    log_l = np.empty((n_rows, n_views, width), dtype=np.float64)
     # the block's own rows of ``pairs`` are addressed by ``rows[b] - start``: shift them
     local = np.empty(BLOCK, dtype=np.int64)
     for b in range(n_rows):
@@ -407,3 +489,50 @@ def sites_log_lcpdfs(volume, temps, sites, models, ops, adapt_eps, min_two_h2, p
         block_log_lcpdfs(volume, temps, sites[start:start + n_rows], rows, n_rows, models, ops,
                          adapt_eps, min_two_h2, prune, outlier, none, log_l)
         out[start:start + n_rows] = log_l[:n_rows]
+
+
+@jit
+def best_distances_block(start, stop, volume, temps, sites, models, ops, out):
+    """``out[q, v] = min_p D_p`` of sites ``start .. stop - 1`` (one block) by the product."""
+    n_m = models.offsets.shape[1]
+    width = ops.patches.shape[1]
+    rows = np.arange(BLOCK)
+    n_rows = stop - start
+    a = np.empty((n_rows, width), dtype=np.float32)
+    s0 = np.empty(n_rows, dtype=np.float64)
+    scratch = make_block_scratch(n_rows, width, models.patches_t.shape[2])
+    for v in range(models.offsets.shape[0]):
+        n = models.n_patches[v]
+        gemm_rows(volume, temps, sites[start:stop], rows, n_rows, models.offsets[v], ops.centre,
+                  a, s0)
+        block_distances(a, s0, n_rows, n_m, ops.patches[v], ops.norms[v], n, scratch)
+        for b in range(n_rows):
+            out[start + b, v] = scratch[3][b, :n].min()
+
+
+@jit_parallel
+def sites_best_distances(volume, temps, sites, models, ops, out):
+    """The best-matching patch distance ``min_p D_p`` of every site (S, 3) and view into ``out``
+    (S, V) float32, by blocks of matrix products in parallel (the distance stage of the
+    relaxations alone: what ``benchmarks/bench_parzen_blas.py`` times)."""
+    n_sites = sites.shape[0]
+    for blk in prange((n_sites + BLOCK - 1) // BLOCK):
+        best_distances_block(blk * BLOCK, min(n_sites, (blk + 1) * BLOCK), volume, temps, sites,
+                             models, ops, out)
+
+
+@jit_parallel
+def sites_best_distances_direct(volume, temps, sites, models, out):
+    """:func:`sites_best_distances` by the direct per-site sum
+    (:func:`npmrf3d._kernels.parzen.neighbour_distances`), for comparison."""
+    n_sites = sites.shape[0]
+    for blk in prange((n_sites + BLOCK - 1) // BLOCK):
+        buffers = make_buffers(models)
+        values, trust, dist, _, _, _, rows = buffers
+        for q in range(blk * BLOCK, min(n_sites, (blk + 1) * BLOCK)):
+            for v in range(models.offsets.shape[0]):
+                n = models.n_patches[v]
+                gather_neighbours(volume, temps, sites[q, 0], sites[q, 1], sites[q, 2],
+                                  models.offsets[v], values, trust)
+                neighbour_distances(values, trust, models.patches_t[v], n, dist, rows)
+                out[q, v] = dist[:n].min()

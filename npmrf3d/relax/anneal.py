@@ -45,7 +45,7 @@ from .._kernels.relax import (
     anneal_update_class,
     anneal_update_class_serial,
 )
-from ._sweep import DISTANCES, label_counts, sweep
+from ._sweep import label_counts, resolve_distances, sweep
 
 __all__ = ["AnnealOptions", "SAMPLERS", "SCHEDULES", "PROPOSALS", "geometric_schedule",
            "linear_schedule", "relax_anneal"]
@@ -117,7 +117,7 @@ def relax_anneal(
     schedule: str, t0: float, t_end: float, proposals: int, proposal: str, resynth: bool,
     adaptive: float, min_two_h2: float, prune: float, histogram_weight: float, outlier: float,
     exemplar_freq: np.ndarray, rng: np.random.Generator,
-    on_sweep: Callable[[int, float], None] | None = None, distances: str = "gemm",
+    on_sweep: Callable[[int, float], None] | None = None, distances: str = "auto",
 ) -> tuple[list[float], dict]:
     """Anneal one level in place.
 
@@ -166,9 +166,9 @@ def relax_anneal(
             candidates = rng.integers(0, n_labels, size=len(sites), dtype=np.int64)
         return candidates, rng.random(len(sites))
 
-    if distances not in DISTANCES:
-        raise ValueError(f"distances must be one of {DISTANCES}, got {distances!r}")
-    ops = make_gemm_operands(models.patches_t, models.n_patches, models.labels.shape[1])
+    distances = resolve_distances(distances, models)
+    ops = (make_gemm_operands(models.patches_t, models.n_patches, models.labels.shape[1])
+           if distances == "gemm" else None)
 
     def update(sites, drawn, penalty, parallel, old, new, temperature):
         args = (heuristic, code, temperature, resynth, adaptive, min_two_h2, prune, penalty,

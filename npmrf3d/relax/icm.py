@@ -18,7 +18,7 @@ import numpy as np
 from .._kernels._jit import single_threaded_blas
 from .._kernels.gemm import icm_update_class_gemm, icm_update_class_gemm_serial, make_gemm_operands
 from .._kernels.relax import ViewModels, icm_update_class, icm_update_class_serial
-from ._sweep import DISTANCES, histogram_penalty, label_counts, sweep
+from ._sweep import histogram_penalty, label_counts, resolve_distances, sweep
 
 __all__ = ["IcmOptions", "expected_sweeps", "histogram_penalty", "relax_icm"]
 
@@ -82,7 +82,7 @@ def relax_icm(
     models: ViewModels, classes: list[np.ndarray], *, heuristic: int, decision: int, tau: float,
     xi: float, stop: float, max_sweeps: int, resynth: bool, adaptive: float, min_two_h2: float,
     prune: float, histogram_weight: float, outlier: float, exemplar_freq: np.ndarray, rng: np.random.Generator,
-    on_sweep: Callable[[int, float], None] | None = None, distances: str = "gemm",
+    on_sweep: Callable[[int, float], None] | None = None, distances: str = "auto",
 ) -> tuple[list[float], dict]:
     """Relax one level in place.
 
@@ -122,9 +122,9 @@ def relax_icm(
     updates = 0
     sweeps = 0
 
-    if distances not in DISTANCES:
-        raise ValueError(f"distances must be one of {DISTANCES}, got {distances!r}")
-    ops = make_gemm_operands(models.patches_t, models.n_patches, models.labels.shape[1])
+    distances = resolve_distances(distances, models)
+    ops = (make_gemm_operands(models.patches_t, models.n_patches, models.labels.shape[1])
+           if distances == "gemm" else None)
 
     def update(sites, drawn, penalty, parallel, old, new):
         args = (heuristic, decision, tau, xi, resynth, adaptive, min_two_h2, prune, penalty,
