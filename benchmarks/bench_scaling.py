@@ -31,6 +31,7 @@ import numpy as np
 import npmrf3d
 from npmrf3d import data
 from npmrf3d.baselines import chen_wang_synthesize, kopf_synthesize
+from npmrf3d.errors import ParameterError
 from npmrf3d.plotting import save_figure
 
 from _common import hardware
@@ -62,7 +63,7 @@ def measure(grid, *, levels: int, budget: float, previous_factor: float, done: d
                 rows.append(done[method, size, side])
                 last = rows[-1]["wall_s"]
                 continue
-            if last is not None and last * previous_factor > budget:
+            if last is not None and last * previous_factor > budget:  # extrapolated
                 rows.append({"method": method, "size": size, "exemplar": side, "skipped": True,
                              "estimate_s": last * previous_factor})
                 print(f"{method:22s} {size:4d}^3  exemplar {side:3d}  skipped (about "
@@ -72,7 +73,13 @@ def measure(grid, *, levels: int, budget: float, previous_factor: float, done: d
             exemplar = np.ascontiguousarray(ex_full[:side, :side])
             load = os.getloadavg()[0]
             t0, c0 = time.perf_counter(), time.process_time()
-            run(method, exemplar, size, levels)
+            try:
+                run(method, exemplar, size, levels)
+            except ParameterError as err:  # e.g. Chen-Wang's 8x8 window on a 32x32 exemplar
+                rows.append({"method": method, "size": size, "exemplar": side, "skipped": True,
+                             "reason": str(err)})
+                print(f"{method:22s} {size:4d}^3  exemplar {side:3d}  not possible: {err}")
+                continue
             wall, cpu = time.perf_counter() - t0, time.process_time() - c0
             last = wall
             per_voxel = wall / size**3 * 1e6

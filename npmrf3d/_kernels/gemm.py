@@ -1,5 +1,9 @@
 """Neighbour distances of many sites at once as one matrix product (issue 14, item 1).
 
+Why over 400 lines: the block versions of the ICM and annealing class updates live beside the
+product they are built on (the per-site rules they apply are the shared ones of
+:mod:`npmrf3d._kernels.relax`).
+
 For one view, sites ``s`` of a block and exemplar patches ``p``, with trust ``t_m = (1 - T_m)^2``
 of neighbour ``m``, values centred on the exemplar's channel means ``mu`` (``x' = x - mu``,
 ``y' = y - mu``, which leaves every difference unchanged and keeps the norms small)::
@@ -26,10 +30,6 @@ threads: the volume depends on the seed only. (Measured with OpenBLAS 0.3.30/0.3
 sgemm of a (4096, 96) by (96, 3364) product differs in the last bits between 1 and 2 BLAS
 threads, and rows of a 64-row product differ from the same rows inside a 4096-row one; so
 neither BLAS's own threads nor blocks that depend on the thread count would do.)
-
-This module is long (about 400 lines) because the block versions of the ICM and annealing class
-updates live beside the product they are built on; the per-site rules they apply are the
-shared ones of :mod:`npmrf3d._kernels.relax`.
 """
 
 from __future__ import annotations
