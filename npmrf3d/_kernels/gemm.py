@@ -17,8 +17,9 @@ BLAS (``np.dot``: scipy's ``sgemm`` when compiled). When every neighbour of ever
 is fully trusted (``t_m = 1``: annealing, cooled regions) the last ``M`` columns are dropped and
 ``sum_m q_{p,m}`` is added from a float64 table instead; more generally the columns of
 neighbours that no site of the block trusts (hot voxels) are left out, and so are the ``q``
-columns of neighbours every site trusts fully (:func:`block_distances`). ``D_p`` is clamped at 0 (the expansion
-can round a little below it). Its rounding error is at most ``(M*C + M + 4) * eps32`` times the
+columns of neighbours every site trusts fully (:func:`block_distances`). ``D_p`` is clamped at
+0 (the expansion can round a little below it). Its rounding error is at most
+``(M*C + M + 4) * eps32`` times the
 sum of the absolute values of the terms added (tests/test_gemm.py checks it against the direct
 float64 sum); the direct kernel's error is relative to ``D_p`` itself, so the two paths agree
 to float32 rounding, not bit for bit.
