@@ -228,5 +228,9 @@ def test_auto_distances_take_the_product_from_the_measured_dimension(rng):
     assert resolve_distances("auto", grey) == "direct"
     assert resolve_distances("auto", colour) == "gemm"
     assert resolve_distances("direct", colour) == "direct"
+    grey7 = case(rng, 1, 7, "zeros", views=("front",))[1]  # d = 48
+    assert resolve_distances("auto", grey7) == "direct"
+    assert resolve_distances("auto", grey7, trusted=True) == "gemm"
+    assert resolve_distances("auto", grey, trusted=True) == "direct"
     with pytest.raises(ValueError, match="distances must be one of auto, gemm, direct; got 'blas'"):
         resolve_distances("blas", grey)

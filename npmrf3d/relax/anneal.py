@@ -166,7 +166,7 @@ def relax_anneal(
             candidates = rng.integers(0, n_labels, size=len(sites), dtype=np.int64)
         return candidates, rng.random(len(sites))
 
-    distances = resolve_distances(distances, models)
+    distances = resolve_distances(distances, models, trusted=True)
     ops = (make_gemm_operands(models.patches_t, models.n_patches, models.labels.shape[1])
            if distances == "gemm" else None)
 
