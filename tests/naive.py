@@ -739,3 +739,35 @@ def naive_correct_parzen(coords, frames, values, kset, h, lo, hi, offsets, windo
         out[p] = candidates[best]
         cost[p] = dist[best]
     return out, cost
+
+
+# --------------------------------------------------------------------------- batched distances
+
+
+def naive_gemm_operands(view_patches, n_channels: int):
+    """Twin of ``make_gemm_operands``: the channel means ``mu`` over every view's patch entries,
+    the centred patches ``y' = y - mu`` (n, M, C) and ``q[p, m] = ||y'_{p,m}||^2`` per view."""
+    stacked = np.concatenate([np.asarray(p, dtype=np.float64).reshape(-1, n_channels)
+                              for p in view_patches])
+    centre = stacked.mean(axis=0)
+    centred = [np.asarray(p, dtype=np.float64) - centre for p in view_patches]
+    return centre, centred, [(y**2).sum(axis=2) for y in centred]
+
+
+def naive_gemm_rows(volume, temps, sites, view_offsets3d, centre):
+    """Twin of ``gemm_rows``: per site the row ``[-2 t_m x'_{m,c} ..., t_m ...]`` and
+    ``s0 = sum_m t_m ||x'_m||^2`` (float64)."""
+    rows, s0 = [], []
+    for site in sites:
+        x, temp = gather(volume, temps, site, view_offsets3d)
+        t = (1.0 - temp) ** 2
+        xc = x - centre
+        rows.append(np.concatenate([(-2.0 * t[:, None] * xc).ravel(), t]))
+        s0.append(float((t * (xc**2).sum(axis=1)).sum()))
+    return np.array(rows), np.array(s0)
+
+
+def naive_block_distances(volume, temps, sites, view_offsets3d, patches):
+    """``D_p`` of every site (S, n) by the direct sum (the definition, float64)."""
+    return np.array([naive_neighbour_distances(volume, temps, s, view_offsets3d, patches)
+                     for s in sites])

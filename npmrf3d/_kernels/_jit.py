@@ -12,9 +12,14 @@ speed-up in docs/quality.md).
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numba
+import scipy.linalg.cython_blas  # noqa: F401  (loads the BLAS that np.dot in a kernel calls,
+# so that threadpoolctl finds it and limits it: see single_threaded_blas)
+from threadpoolctl import threadpool_limits
 
 
 def _default_cache_dir() -> str:
@@ -55,3 +60,17 @@ def use_threads(threads: int | None) -> int:
 def thread_count() -> int:
     """Number of threads numba's parallel loops use in this process."""
     return int(numba.get_num_threads())
+
+
+@contextmanager
+def single_threaded_blas() -> Iterator[None]:
+    """Run BLAS (numpy's and scipy's OpenBLAS, which ``np.dot`` in a kernel calls) on one thread
+    inside the block; the previous limits come back afterwards.
+
+    The batched-distance kernels (:mod:`npmrf3d._kernels.gemm`) call ``sgemm`` once per block of
+    sites from numba's parallel threads: the parallelism is theirs, a fixed partition of the
+    sites, and each call must be the same single-threaded product whatever the thread count
+    (OpenBLAS's own threads would also oversubscribe the cores).
+    """
+    with threadpool_limits(limits=1, user_api="blas"):
+        yield

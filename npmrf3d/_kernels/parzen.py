@@ -135,7 +135,7 @@ def label_weights(dist, n_patches, centre_labels, inv_two_h2, adapt_eps, min_two
         lw = -(dist[p] - d_min) * inv
         if lw < -prune:
             continue
-        wp = math.exp(lw)
+        wp = 1.0 if lw == 0.0 else math.exp(lw)  # exp(0) is exactly 1: hot windows tie often
         if wp == 0.0:  # underflow: contributes nothing (and must not mark its label as seen)
             continue
         lab = centre_labels[p]

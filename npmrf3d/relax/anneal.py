@@ -32,6 +32,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._kernels._jit import single_threaded_blas
+from .._kernels.gemm import (
+    anneal_update_class_gemm,
+    anneal_update_class_gemm_serial,
+    make_gemm_operands,
+)
 from .._kernels.relax import (
     HEAT_BATH,
     METROPOLIS,
@@ -39,7 +45,7 @@ from .._kernels.relax import (
     anneal_update_class,
     anneal_update_class_serial,
 )
-from ._sweep import label_counts, sweep
+from ._sweep import label_counts, resolve_distances, sweep
 
 __all__ = ["AnnealOptions", "SAMPLERS", "SCHEDULES", "PROPOSALS", "geometric_schedule",
            "linear_schedule", "relax_anneal"]
@@ -111,7 +117,7 @@ def relax_anneal(
     schedule: str, t0: float, t_end: float, proposals: int, proposal: str, resynth: bool,
     adaptive: float, min_two_h2: float, prune: float, histogram_weight: float, outlier: float,
     exemplar_freq: np.ndarray, rng: np.random.Generator,
-    on_sweep: Callable[[int, float], None] | None = None,
+    on_sweep: Callable[[int, float], None] | None = None, distances: str = "auto",
 ) -> tuple[list[float], dict]:
     """Anneal one level in place.
 
@@ -132,6 +138,7 @@ def relax_anneal(
         As for :func:`npmrf3d.relax.icm.relax_icm`.
     rng : Generator for the class order, the candidates and the uniforms
     on_sweep : called as ``on_sweep(sweep, temperature)`` after each sweep
+    distances : one of :data:`npmrf3d.relax._sweep.DISTANCES` (how ``D_p`` is computed)
 
     Returns
     -------
@@ -159,21 +166,33 @@ def relax_anneal(
             candidates = rng.integers(0, n_labels, size=len(sites), dtype=np.int64)
         return candidates, rng.random(len(sites))
 
-    for step, temperature in enumerate(temperatures, start=1):
-        def update(sites, drawn, penalty, parallel, old, new, temperature=float(temperature)):
+    distances = resolve_distances(distances, models, trusted=True)
+    ops = (make_gemm_operands(models.patches_t, models.n_patches, models.labels.shape[1])
+           if distances == "gemm" else None)
+
+    def update(sites, drawn, penalty, parallel, old, new, temperature):
+        args = (heuristic, code, temperature, resynth, adaptive, min_two_h2, prune, penalty,
+                outlier, old, new)
+        if distances == "gemm":
+            kernel = anneal_update_class_gemm if parallel else anneal_update_class_gemm_serial
+            kernel(volume, labels_volume, temps, inherited, sites, drawn[0], drawn[1], models,
+                   ops, *args)
+        else:
             kernel = anneal_update_class if parallel else anneal_update_class_serial
             kernel(volume, labels_volume, temps, inherited, sites, drawn[0], drawn[1], models,
-                   heuristic, code, temperature, resynth, adaptive, min_two_h2, prune, penalty,
-                   outlier, old, new)
+                   *args)
 
-        sweep_updates, sweep_changed = sweep(classes, rng, draw=draw, update=update, counts=counts,
-                                             exemplar_freq=exemplar_freq,
-                                             histogram_weight=histogram_weight)
-        updates += sweep_updates
-        changed += sweep_changed
-        acceptance.append(sweep_changed / max(sweep_updates, 1))
-        history.append(float(temperature))
-        if on_sweep is not None:
-            on_sweep(step, float(temperature))
+    with single_threaded_blas():
+        for step, temperature in enumerate(temperatures, start=1):
+            sweep_updates, sweep_changed = sweep(
+                classes, rng, draw=draw, counts=counts, exemplar_freq=exemplar_freq,
+                histogram_weight=histogram_weight,
+                update=lambda *a, t=float(temperature): update(*a, t))
+            updates += sweep_updates
+            changed += sweep_changed
+            acceptance.append(sweep_changed / max(sweep_updates, 1))
+            history.append(float(temperature))
+            if on_sweep is not None:
+                on_sweep(step, float(temperature))
     return history, {"sweeps": int(proposals), "updates": updates, "evaluations": updates * n_views,
                      "changed": changed, "acceptance": acceptance}

@@ -15,8 +15,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._kernels._jit import single_threaded_blas
+from .._kernels.gemm import icm_update_class_gemm, icm_update_class_gemm_serial, make_gemm_operands
 from .._kernels.relax import ViewModels, icm_update_class, icm_update_class_serial
-from ._sweep import histogram_penalty, label_counts, sweep
+from ._sweep import histogram_penalty, label_counts, resolve_distances, sweep
 
 __all__ = ["IcmOptions", "expected_sweeps", "histogram_penalty", "relax_icm"]
 
@@ -80,7 +82,7 @@ def relax_icm(
     models: ViewModels, classes: list[np.ndarray], *, heuristic: int, decision: int, tau: float,
     xi: float, stop: float, max_sweeps: int, resynth: bool, adaptive: float, min_two_h2: float,
     prune: float, histogram_weight: float, outlier: float, exemplar_freq: np.ndarray, rng: np.random.Generator,
-    on_sweep: Callable[[int, float], None] | None = None,
+    on_sweep: Callable[[int, float], None] | None = None, distances: str = "auto",
 ) -> tuple[list[float], dict]:
     """Relax one level in place.
 
@@ -105,6 +107,7 @@ def relax_icm(
     exemplar_freq : (K,) label frequencies of the exemplar(s)
     rng : Generator for the class order and the decisions
     on_sweep : called as ``on_sweep(sweep, global_temperature)`` after each sweep
+    distances : one of :data:`npmrf3d.relax._sweep.DISTANCES` (how ``D_p`` is computed)
 
     Returns
     -------
@@ -119,18 +122,28 @@ def relax_icm(
     updates = 0
     sweeps = 0
 
-    def update(sites, drawn, penalty, parallel, old, new):
-        kernel = icm_update_class if parallel else icm_update_class_serial
-        kernel(volume, labels_volume, temps, inherited, sites, drawn[0], models, heuristic,
-               decision, tau, xi, resynth, adaptive, min_two_h2, prune, penalty, outlier, old, new)
+    distances = resolve_distances(distances, models)
+    ops = (make_gemm_operands(models.patches_t, models.n_patches, models.labels.shape[1])
+           if distances == "gemm" else None)
 
-    while sweeps < max_sweeps and history[-1] > target:
-        visited, _ = sweep(classes, rng, draw=lambda sites: (rng.random(len(sites)),),
-                           update=update, counts=counts, exemplar_freq=exemplar_freq,
-                           histogram_weight=histogram_weight)
-        updates += visited
-        sweeps += 1
-        history.append(float(temps.sum(dtype=np.float64)))
-        if on_sweep is not None:
-            on_sweep(sweeps, history[-1])
+    def update(sites, drawn, penalty, parallel, old, new):
+        args = (heuristic, decision, tau, xi, resynth, adaptive, min_two_h2, prune, penalty,
+                outlier, old, new)
+        if distances == "gemm":
+            kernel = icm_update_class_gemm if parallel else icm_update_class_gemm_serial
+            kernel(volume, labels_volume, temps, inherited, sites, drawn[0], models, ops, *args)
+        else:
+            kernel = icm_update_class if parallel else icm_update_class_serial
+            kernel(volume, labels_volume, temps, inherited, sites, drawn[0], models, *args)
+
+    with single_threaded_blas():
+        while sweeps < max_sweeps and history[-1] > target:
+            visited, _ = sweep(classes, rng, draw=lambda sites: (rng.random(len(sites)),),
+                               update=update, counts=counts, exemplar_freq=exemplar_freq,
+                               histogram_weight=histogram_weight)
+            updates += visited
+            sweeps += 1
+            history.append(float(temps.sum(dtype=np.float64)))
+            if on_sweep is not None:
+                on_sweep(sweeps, history[-1])
     return history, {"sweeps": sweeps, "updates": updates, "evaluations": updates * n_views}
