@@ -65,7 +65,7 @@ class CoherentConfig:
     # measured (docs/quality.md): the histogram prior alone keeps hubble's spots and leaves
     # gravel as it was; the vote weighting (Chen–Wang's default) cost gravel's grain here
     value_weight: float = 0.0
-    value_prior: float = 3.0
+    value_prior: float = 5.0
     value_bins: int = _CW.value_bins
     seed: int | None = None
 
