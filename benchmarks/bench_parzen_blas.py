@@ -59,16 +59,7 @@ def best_of(fn, repeats: int) -> tuple[float, float]:
 
 def sgemm_cpu_gflops(n: int = 1024, repeats: int = 5) -> float:
     """float32 ``n x n`` matrix multiply on one BLAS thread, per CPU second (one core's rate)."""
-    rng = np.random.default_rng(0)
-    a = rng.random((n, n), dtype=np.float32)
-    with single_threaded_blas():
-        a @ a
-        best = np.inf
-        for _ in range(repeats):
-            c0 = time.thread_time()
-            a @ a
-            best = min(best, time.thread_time() - c0)
-    return 2.0 * n**3 / best / 1e9
+    return matmul_gflops(n, repeats, clock=time.thread_time, blas=single_threaded_blas)
 
 
 def distance_stage(size: int, repeats: int, exemplar: str, window: int, palette: int | None) -> None:

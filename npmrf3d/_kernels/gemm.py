@@ -49,6 +49,7 @@ from .parzen import (
 from .relax import (
     HEAT_BATH,
     choose_label,
+    cool_site,
     make_buffers,
     metropolis_accept,
     objective_scores,
@@ -305,8 +306,6 @@ def icm_update_block(
     n_views = models.offsets.shape[0]
     n_labels = models.labels.shape[0]
     nc = volume.shape[3]
-    n1, n2, n3 = temps.shape
-    n_union = models.union_offsets.shape[0]
     rows = np.empty(BLOCK, dtype=np.int64)
     n_rows = 0
     for q in range(start, stop):
@@ -335,12 +334,7 @@ def icm_update_block(
         for c in range(nc):
             volume[i, j, k, c] = value[c]
         if not inherited[i, j, k]:
-            total = 0.0
-            for r in range(n_union):
-                total += temps[(i + models.union_offsets[r, 0]) % n1,
-                               (j + models.union_offsets[r, 1]) % n2,
-                               (k + models.union_offsets[r, 2]) % n3]
-            temps[i, j, k] = max(0.0, (xi + total) / n_union)
+            cool_site(temps, i, j, k, models.union_offsets, xi)
 
 
 @jit_parallel

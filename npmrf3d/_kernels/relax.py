@@ -220,6 +220,20 @@ PARALLEL_MIN_SITES = 64
 
 
 @jit
+def cool_site(temps, i, j, k, union_offsets, xi):
+    """The ICM temperature update of site ``(i, j, k)`` after its decision: the mean of ``xi``
+    and its union neighbourhood's temperatures, ``max(0, (xi + sum_r T[x + o_r]) / n_union)``
+    (SPEC.md section 4; toroidal volume)."""
+    n1, n2, n3 = temps.shape
+    n_union = union_offsets.shape[0]
+    total = 0.0
+    for r in range(n_union):
+        total += temps[(i + union_offsets[r, 0]) % n1, (j + union_offsets[r, 1]) % n2,
+                       (k + union_offsets[r, 2]) % n3]
+    temps[i, j, k] = max(0.0, (xi + total) / n_union)
+
+
+@jit
 def icm_update_sites(
     start, stop, volume, labels_volume, temps, inherited, sites, uniforms, models, heuristic,
     decision, tau, xi, resynth, adapt_eps, min_two_h2, prune, penalty, outlier, old_labels,
@@ -229,8 +243,6 @@ def icm_update_sites(
     n_views = models.offsets.shape[0]
     n_labels = models.labels.shape[0]
     nc = volume.shape[3]
-    n1, n2, n3 = temps.shape
-    n_union = models.union_offsets.shape[0]
     buffers = make_buffers(models)
     log_l = np.empty((n_views, n_labels), dtype=np.float64)
     score = np.empty(n_labels, dtype=np.float64)
@@ -252,12 +264,7 @@ def icm_update_sites(
         for c in range(nc):
             volume[i, j, k, c] = value[c]
         if not is_inherited:
-            total = 0.0
-            for r in range(n_union):
-                total += temps[(i + models.union_offsets[r, 0]) % n1,
-                               (j + models.union_offsets[r, 1]) % n2,
-                               (k + models.union_offsets[r, 2]) % n3]
-            temps[i, j, k] = max(0.0, (xi + total) / n_union)
+            cool_site(temps, i, j, k, models.union_offsets, xi)
 
 
 @jit_parallel
