@@ -363,6 +363,38 @@ def _votes(p0, p1, p2, assign, omega, view_axes, ex_off, ewidth, window, anchor,
     return count
 
 
+@jit
+def _group_votes(vg, vv, vw, count, n_views, slot, ug, uv, uw, umax, uarg):
+    """Merge the ``count`` votes by (texel, view) (views may share an exemplar's rows): group ``i`` (in order of first appearance) has texel
+    ``ug[i]``, view ``uv[i]``, summed weight ``uw[i]``, heaviest single weight ``umax[i]`` and
+    the index ``uarg[i]`` of its first vote of that weight. ``slot`` (one entry per texel and view,
+    all -1) is scratch and is left all -1. Returns the number of groups. A score summed over the
+    groups equals the sum over the votes (up to rounding) at a fraction of the cost: coherent
+    neighbourhoods vote for the same texels."""
+    u = 0
+    for q in range(count):
+        g = vg[q]
+        key = g * n_views + vv[q]
+        i = slot[key]
+        if i < 0:
+            i = u
+            slot[key] = i
+            ug[i] = g
+            uv[i] = vv[q]
+            uw[i] = vw[q]
+            umax[i] = vw[q]
+            uarg[i] = q
+            u += 1
+        else:
+            uw[i] += vw[q]
+            if vw[q] > umax[i]:
+                umax[i] = vw[q]
+                uarg[i] = q
+    for i in range(u):
+        slot[ug[i] * n_views + uv[i]] = -1
+    return u
+
+
 @jit_parallel
 def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window, anchor, grid,
           order, batch_bounds, pos_hist, hist_off, theta, position_weight, position_boost, medoid, balance, chunk,
@@ -417,6 +449,12 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
             mean = np.empty(channels, dtype=np.float64)
             vsum = np.empty(n_views, dtype=np.float64)
             taken = np.zeros(cap, dtype=np.bool_)
+            slot = np.full(ex_flat.shape[0] * n_views, -1, dtype=np.int64)
+            ug = np.empty(cap, dtype=np.int64)
+            uv = np.empty(cap, dtype=np.int64)
+            uw = np.empty(cap, dtype=np.float64)
+            umax = np.empty(cap, dtype=np.float64)
+            uarg = np.empty(cap, dtype=np.int64)
             tops = np.empty(max(medoid, 1), dtype=np.int64)
             lik = np.empty(n_views, dtype=np.float64)
             for t in range(c * chunk, min(m, (c + 1) * chunk)):
@@ -439,23 +477,25 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
                         vsum[vv[q]] += vw[q]
                     for q in range(count):
                         vw[q] /= vsum[vv[q]]
+                # the votes merged by (texel, view): summed weight, heaviest
+                # single vote and its index; groups in order of first appearance
+                u = _group_votes(vg, vv, vw, count, n_views, slot, ug, uv, uw, umax, uarg)
                 best = 0
                 if medoid:
                     # candidates: the `medoid` heaviest votes with distinct (texel, view), heaviest
-                    # first (ties: the earlier vote)
+                    # first (ties: the earlier vote) -- the groups of the heaviest single votes
                     n_try = 0
-                    for q in range(count):
+                    for q in range(u):
                         taken[q] = False
                     for a in range(medoid):
                         top = -1
-                        for q in range(count):
-                            if not taken[q] and (top < 0 or vw[q] > vw[top]):
+                        for q in range(u):
+                            if not taken[q] and (top < 0 or umax[q] > umax[top]
+                                                 or (umax[q] == umax[top] and uarg[q] < uarg[top])):
                                 top = q
                         if top < 0:
                             break
-                        for q in range(count):  # its repeats are no new candidates
-                            if vg[q] == vg[top] and vv[q] == vv[top]:
-                                taken[q] = True
+                        taken[top] = True
                         tops[n_try] = top
                         n_try += 1
                     best_e = np.inf
@@ -465,16 +505,16 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
                         for q in range(count):
                             vsum[vv[q]] += vw[q]
                     for a in range(n_try):
-                        q = tops[a]
+                        ga = ug[tops[a]]
                         if likelihood:
                             for v in range(n_views):
                                 lik[v] = 0.0
-                            for q2 in range(count):
+                            for q2 in range(u):
                                 dd = 0.0
                                 for ch in range(channels):
-                                    diff = ex_flat[vg[q], ch] - ex_flat[vg[q2], ch]
+                                    diff = ex_flat[ga, ch] - ex_flat[ug[q2], ch]
                                     dd += diff * diff
-                                lik[vv[q2]] += vw[q2] * np.exp(-dd / h2c)
+                                lik[uv[q2]] += uw[q2] * np.exp(-dd / h2c)
                             score = 0.0 if likelihood == 1 else np.inf
                             for v in range(n_views):
                                 lv = (1.0 - outlier) * lik[v] / vsum[v] + outlier if vsum[v] > 0.0 else outlier
@@ -483,24 +523,24 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
                                 else:
                                     score = min(score, lv)
                             if val_prior > 0.0:
-                                prior = value_prior(ex_bins, vg[q], val_hist, val_target, val_unit, val_prior)
+                                prior = value_prior(ex_bins, ga, val_hist, val_target, val_unit, val_prior)
                                 score = score + prior if likelihood == 1 else score * np.exp(prior)
                             if -score < best_e:
                                 best_e = -score
-                                best = q
+                                best = uarg[tops[a]]
                             continue
                         e_sum = 0.0
-                        for q2 in range(count):
+                        for q2 in range(u):
                             dd = 0.0
                             for ch in range(channels):
-                                diff = ex_flat[vg[q], ch] - ex_flat[vg[q2], ch]
+                                diff = ex_flat[ga, ch] - ex_flat[ug[q2], ch]
                                 dd += diff * diff
-                            e_sum += vw[q2] * np.sqrt(dd)
+                            e_sum += uw[q2] * np.sqrt(dd)
                         if val_prior > 0.0:
-                            e_sum *= np.exp(-value_prior(ex_bins, vg[q], val_hist, val_target, val_unit, val_prior))
+                            e_sum *= np.exp(-value_prior(ex_bins, ga, val_hist, val_target, val_unit, val_prior))
                         if e_sum < best_e:
                             best_e = e_sum
-                            best = q
+                            best = uarg[tops[a]]
                 else:
                     total = 0.0
                     for ch in range(channels):
@@ -512,14 +552,14 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
                     for ch in range(channels):
                         mean[ch] /= total
                     best_d = np.inf
-                    for q in range(count):
+                    for q in range(u):
                         dd = 0.0
                         for ch in range(channels):
-                            diff = ex_flat[vg[q], ch] - mean[ch]
+                            diff = ex_flat[ug[q], ch] - mean[ch]
                             dd += diff * diff
                         if dd < best_d:
                             best_d = dd
-                            best = q
+                            best = uarg[q]
                 g = vg[best]
                 for ch in range(channels):
                     if volume[p0, p1, p2, ch] != ex_flat[g, ch]:
@@ -537,18 +577,18 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
                         continue
                     near = -1
                     near_d = np.inf
-                    for q in range(count):
-                        if vv[q] != v:
+                    for q in range(u):
+                        if uv[q] != v:
                             continue
                         dd = 0.0
                         for ch in range(channels):
-                            diff = ex_flat[vg[q], ch] - ex_flat[g, ch]
+                            diff = ex_flat[ug[q], ch] - ex_flat[g, ch]
                             dd += diff * diff
                         if dd < near_d:
                             near_d = dd
                             near = q
                     if near >= 0:
-                        new_src[t, v] = vg[near] - ex_off[v]
+                        new_src[t, v] = ug[near] - ex_off[v]
         # sequential, fixed order: histograms follow the new sources
         for t in range(m):
             flat = order[start + t]
