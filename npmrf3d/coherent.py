@@ -12,6 +12,11 @@ one with the highest NP-MRF score: per view the Parzen estimate of that colour f
 votes (centre kernel ``centre_bandwidth`` times the exemplar's standard deviation, mixed with an
 ``outlier`` share), combined over views by the heuristic (ML_H2b: product; ML_H2a: minimum).
 
+With ``t0 > 0`` the decision is **annealed** (issue 14, item 2): each voxel draws among its
+candidates with probability proportional to ``exp(score / T)`` (a heat-bath step over the
+candidates; ``score`` the ML_H2b log-score with the histogram prior), ``T`` falling from ``t0``
+to ``t_end`` over each level's iterations; ``T -> 0`` is the highest score again.
+
 The search, votes, histograms and level loop are Chen–Wang's (:mod:`npmrf3d.baselines.chen_wang`);
 only the decision differs, so a voxel copies an exemplar texel (colour and source) and the
 volume's colours are exemplar colours. Results depend only on the seed, never on the thread
@@ -33,9 +38,11 @@ from .baselines import chen_wang
 from .config import SynthesisMethod, SynthesisResult
 from .exemplar import resolve_exemplars
 from .neighborhood import VIEWS
+from .relax.anneal import SCHEDULES
 from .resources import check_memory, coherent_estimate
 
-__all__ = ["METHOD", "CoherentConfig", "HEURISTIC_CODES", "coherent_synthesize", "make_coherent_config", "run"]
+__all__ = ["METHOD", "CoherentConfig", "HEURISTIC_CODES", "coherent_synthesize", "make_coherent_config", "run",
+           "temperatures"]
 
 #: Heuristics that have an objective to rank candidates by (kernel codes of the solver).
 HEURISTIC_CODES = {"ML_H2b": 1, "ML_H2a": 2}
@@ -67,6 +74,10 @@ class CoherentConfig:
     value_weight: float = 0.0
     value_prior: float = 5.0
     value_bins: int = _CW.value_bins
+    # annealing over the candidates (issue 14, item 2): t0 = 0 decides by the highest score (ICM)
+    t0: float = 0.0
+    t_end: float = 0.05
+    schedule: str = "geometric"
     seed: int | None = None
 
     def to_dict(self) -> dict:
@@ -88,7 +99,7 @@ def make_coherent_config(
     position_boost=DEFAULTS.position_boost, random_candidates=DEFAULTS.random_candidates,
     global_share=DEFAULTS.global_share, coherence_bias=DEFAULTS.coherence_bias,
     value_weight=DEFAULTS.value_weight, value_prior=DEFAULTS.value_prior, value_bins=DEFAULTS.value_bins,
-    seed=None,
+    t0=DEFAULTS.t0, t_end=DEFAULTS.t_end, schedule=DEFAULTS.schedule, seed=None,
 ) -> CoherentConfig:
     """Validate plain keyword arguments into a frozen :class:`CoherentConfig` (the shared
     coherence fields are validated as Chen–Wang's)."""
@@ -101,7 +112,12 @@ def make_coherent_config(
     heuristic = check.choice("heuristic", heuristic, tuple(HEURISTIC_CODES))
     centre_bandwidth = check.real("centre_bandwidth", centre_bandwidth, low=0.0, low_open=True)
     outlier = check.real("outlier", outlier, low=0.0, high=1.0, high_open=True)
+    t0 = check.real("t0", t0, low=0.0)
+    schedule = check.choice("schedule", schedule, tuple(SCHEDULES))
+    if t0 > 0.0:
+        t_end = check.real("t_end", t_end, low=0.0, low_open=schedule == "geometric", high=t0)
     return CoherentConfig(heuristic=heuristic, centre_bandwidth=centre_bandwidth, outlier=outlier,
+                          t0=t0, t_end=float(t_end), schedule=schedule,
                           **{name: getattr(cw, name) for name in _SHARED})
 
 
@@ -109,11 +125,28 @@ def _chen_wang_config(config: CoherentConfig) -> chen_wang.ChenWangConfig:
     return chen_wang.make_chen_wang_config(**{name: getattr(config, name) for name in _SHARED})
 
 
+def temperatures(config: CoherentConfig) -> tuple[tuple[float, ...], ...]:
+    """The annealing temperatures of a run: per level (coarsest first), one per iteration, from
+    ``t0`` to ``t_end`` by ``schedule``; all 0 (the highest score decides) when ``t0`` is 0.
+
+    Examples
+    --------
+    >>> temperatures(make_coherent_config(size=32, levels=2, window=5, iterations=(3, 2), t0=1.0, t_end=0.01))
+    ((1.0, 0.1, 0.01), (1.0, 0.01))
+    """
+    if config.t0 == 0.0:
+        return tuple((0.0,) * n for n in config.iterations)
+    return tuple(tuple(float(t) for t in SCHEDULES[config.schedule](config.t0, config.t_end, n))
+                 for n in config.iterations)
+
+
 def run(config: CoherentConfig, per_view_exemplars: Mapping[str, np.ndarray], rng: np.random.Generator, *,
         progress=None, checkpoint: str | Path | None = None, t_start: float | None = None) -> SynthesisResult:
     """Run a validated configuration on validated float32 ``(H, W, C)`` exemplars (one per view);
     the signature of a registered method."""
     decision = (HEURISTIC_CODES[config.heuristic], config.centre_bandwidth, config.outlier)
+    if config.t0 > 0.0:
+        decision += (temperatures(config),)
     result = chen_wang.run(_chen_wang_config(config), per_view_exemplars, rng, progress=progress,
                            checkpoint=checkpoint, t_start=t_start, decision=decision)
     return dataclasses.replace(result, config=config)

@@ -75,9 +75,6 @@ def make_config(
     variant = DEFAULT_VARIANT[relaxation] if variant is None else VARIANT_ALIASES.get(variant, variant)
     variant = check.choice("variant", variant, VARIANTS)
     if variant == "coherent":
-        if relaxation != "icm":
-            check.fail("variant 'coherent' decides each voxel over its coherent candidates and has no "
-                       "annealing; use relaxation 'icm', or variant 'sharp' or 'literal' for annealing")
         if heuristic not in coherent.HEURISTIC_CODES:
             check.fail(f"variant 'coherent' ranks candidates by an objective: use heuristic ML_H2b or "
                        f"ML_H2a, or variant 'sharp' or 'literal' for {heuristic}")
@@ -178,8 +175,10 @@ def synthesize(
         ``sharp`` for annealing. ``coherent`` (issue 12, :mod:`npmrf3d.coherent`): each view's
         Parzen estimate sums over the coherent candidates of every neighbourhood containing the
         voxel, and the voxel copies the best exemplar texel (``window`` at every level; the ICM
-        and annealing options are not used; ``history`` holds the mean patch energy per
-        iteration). ``sharp`` (formerly ``default``, still accepted): the full-Parzen rule chosen
+        options are not used; ``history`` holds the mean patch energy per iteration). With
+        ``relaxation="anneal"`` it draws among its candidates with probability proportional to
+        ``exp(score / T)``, ``T`` from ``t0`` to ``t_end`` by ``schedule`` over each level's
+        iterations (``sampler``, ``proposals``, ``proposal`` are not used). ``sharp`` (formerly ``default``, still accepted): the full-Parzen rule chosen
         by an earlier measurement (docs/quality.md). ``literal``: the paper word for word.
     bandwidth, centre_bandwidth, adaptive, decision, tau, histogram_weight, outlier : optional
         Override single fields of the preset (:class:`npmrf3d.config.DecisionRule`).
@@ -344,11 +343,16 @@ def npmrf_method(per_view: dict[str, np.ndarray], config: SynthesisConfig, rng: 
 
 def _coherent_options(config: SynthesisConfig) -> coherent.CoherentConfig:
     """The coherent sampler's options for a ``coherent``-variant configuration: its window at
-    every level, its levels, views, heuristic, centre bandwidth and outlier share."""
+    every level, its levels, views, heuristic, centre bandwidth and outlier share; with relaxation
+    ``anneal`` its temperatures ``t0`` to ``t_end`` by ``schedule`` over each level's iterations
+    (a heat-bath draw among the candidates; ``sampler``, ``proposals`` and ``proposal`` belong to
+    the full-Parzen annealer and are not used)."""
+    anneal = config.relaxation == "anneal"
     return coherent.make_coherent_config(
         size=config.size, window=(config.window,) * config.levels, levels=config.levels,
         views=config.views, heuristic=config.heuristic, centre_bandwidth=config.rule.centre_bandwidth,
-        outlier=config.rule.outlier, seed=config.seed)
+        outlier=config.rule.outlier, t0=config.t0 if anneal else 0.0, t_end=config.t_end,
+        schedule=config.schedule, seed=config.seed)
 
 
 def npmrf_resources(config: SynthesisConfig, per_view):

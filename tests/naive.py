@@ -526,10 +526,12 @@ def naive_votes(site, views, assign, omega, exemplars, window, grid, pos_hist, t
 
 def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, order, bounds,
                 pos_hist, theta, position_weight, position_boost=0.0, medoid=0, balance=False,
-                likelihood=0, h2c=1.0, outlier=0.0, values=None):
+                likelihood=0, h2c=1.0, outlier=0.0, values=None, temperature=0.0, salt=0):
     """Literal discrete solver; returns (volume, src, pos_hist, changed). ``likelihood`` 1 or 2:
     the coherent NP-MRF decision (per-view Parzen estimate of each candidate's colour, product or
-    minimum over views) instead of the medoid. ``values`` (see :func:`naive_votes`, plus
+    minimum over views) instead of the medoid; with ``temperature > 0`` a heat-bath draw among the
+    candidates, ``P(a) ~ exp(l_a / temperature)`` (``l`` the log-score), from the voxel's hash
+    ``(naive_mix(salt * n + flat) + 0.5) / 2**31``. ``values`` (see :func:`naive_votes`, plus
     ``unit``): the value histogram, which follows every changed voxel between batches (updated
     in place)."""
     volume = volume.copy()
@@ -570,6 +572,7 @@ def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, o
                     for m in votes:
                         totals[m[1]] = totals.get(m[1], 0.0) + m[3]
                     best_score = -np.inf
+                    logs = []
                     for q in ranked:
                         lik = {}
                         for m in votes:
@@ -590,8 +593,21 @@ def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, o
                                 prior += values["prior"] * np.log((values["target"][ch][bq] + eps)
                                                                   / (max(values["hist"][ch][bq], 0.0) + eps))
                             score = score + prior if likelihood == 1 else score * np.exp(prior)
+                        logs.append(score if likelihood == 1 else np.log(score))
                         if score > best_score:
                             best, best_score = votes[q], score
+                    if temperature > 0 and len(ranked) > 1 and max(logs) > -np.inf:
+                        top = max(logs)
+                        weights = [np.exp((x - top) / temperature) for x in logs]
+                        n_vox = volume.shape[0] * n1 * n2
+                        u = (naive_mix(salt * n_vox + int(flat)) + 0.5) / 2147483648.0 * sum(weights)
+                        cum, pick = 0.0, len(ranked) - 1
+                        for a, wgt in enumerate(weights):
+                            cum += wgt
+                            if u < cum:
+                                pick = a
+                                break
+                        best = votes[ranked[pick]]
                     ranked = []
                 for q in ranked:
                     e_sum = sum(m[3] * float(np.sqrt(((votes[q][0] - m[0]) ** 2).sum())) for m in votes)

@@ -21,6 +21,7 @@ from npmrf3d._kernels import coherence as _k
 from npmrf3d.baselines import ChenWangConfig, chen_wang_synthesize
 from npmrf3d.baselines import chen_wang as CW
 from npmrf3d.config import SynthesisResult
+from npmrf3d.coherent import coherent_synthesize
 from npmrf3d.errors import ParameterError
 from npmrf3d.neighborhood import VIEW_AXES
 
@@ -293,7 +294,8 @@ def test_value_histogram_pulls_the_solver_towards_the_exemplars_histogram(weight
                  ex.reshape(-1, 1), np.zeros(1, np.int64), np.array([12]), 4, m.anchor, 1,
                  gen.permutation(n).astype(np.int64), np.linspace(0, n, 17).astype(np.int64), hist,
                  np.zeros(1, np.int64), np.array([n / 144.0]), 0.0, 0.0, 8, False, 16, likelihood, 0.01,
-                 0.01, vh.ex_bins, vh.hist, vh.target, w, prior if w else 0.0, vh.lo, vh.scale, vh.unit)
+                 0.01, vh.ex_bins, vh.hist, vh.target, w, prior if w else 0.0, vh.lo, vh.scale, vh.unit,
+                 0.0, 0)
         share[w] = float((vol > 0.5).mean())
         np.testing.assert_allclose(vh.hist[0] * vh.unit, [np.sum(vol < 0.5), 0, 0, np.sum(vol > 0.5)])
     assert share[0.0] < 0.15
@@ -335,19 +337,22 @@ def _values(exemplars, models, volume, bins=5):
 
 
 def _no_values(packed):
-    """The solver's value-histogram arguments with the histogram matching off."""
+    """The solver's trailing arguments: histogram matching off, no annealing (temperature 0)."""
     channels = packed.shape[1]
     zeros = np.zeros((channels, 2))
-    return (np.zeros(packed.shape, np.int64), zeros, zeros, 0.0, 0.0, np.zeros(channels), np.zeros(channels), 1.0)
+    return (np.zeros(packed.shape, np.int64), zeros, zeros, 0.0, 0.0, np.zeros(channels), np.zeros(channels), 1.0,
+            0.0, 0)
 
 
 @pytest.mark.parametrize("views", [("front",), ("front", "top"), VIEWS3])
-@pytest.mark.parametrize("medoid,balance,boost,likelihood,value_weight", [
-    (0, False, 0.0, 0, 0.0), (0, True, 2.0, 0, 4.0), (3, False, 0.0, 0, 0.0), (8, True, 5.0, 0, 4.0),
-    (8, False, 0.0, 1, 4.0), (3, True, 2.0, 2, 0.0), (3, False, 2.0, 2, 4.0)])
+@pytest.mark.parametrize("medoid,balance,boost,likelihood,value_weight,temperature", [
+    (0, False, 0.0, 0, 0.0, 0.0), (0, True, 2.0, 0, 4.0, 0.0), (3, False, 0.0, 0, 0.0, 0.0),
+    (8, True, 5.0, 0, 4.0, 0.0), (8, False, 0.0, 1, 4.0, 0.0), (3, True, 2.0, 2, 0.0, 0.0),
+    (3, False, 2.0, 2, 4.0, 0.0), (8, False, 0.0, 1, 4.0, 0.7), (3, True, 2.0, 2, 0.0, 2.0)])
 @pytest.mark.kernels
 @pytest.mark.parametrize("grid,channels", [(1, 1), (2, 3)])
-def test_solve_matches_twin(rng, views, medoid, balance, boost, likelihood, value_weight, grid, channels):
+def test_solve_matches_twin(rng, views, medoid, balance, boost, likelihood, value_weight, temperature, grid,
+                            channels):
     window = 4
     exemplars, models, assign, omega, src, volume = _solve_case(rng, views, window, channels, grid,
                                                                 shared=len(views) != 2)
@@ -364,14 +369,15 @@ def test_solve_matches_twin(rng, views, medoid, balance, boost, likelihood, valu
     want_vol, want_src, want_hist, want_changed = naive_solve(
         volume, src, assign, omega, views, exemplars, window=window, grid=grid, order=order,
         bounds=bounds, pos_hist=pos_hist, theta=theta, position_weight=3.0, position_boost=boost, medoid=medoid,
-        balance=balance, likelihood=likelihood, h2c=0.05, outlier=0.01, values=values)
+        balance=balance, likelihood=likelihood, h2c=0.05, outlier=0.01, values=values,
+        temperature=temperature, salt=12345)
     got_vol, got_src = volume.copy(), src.copy()
     got_hist = np.concatenate(pos_hist)
     changed = _k.solve(got_vol, got_src, assign, omega, np.array([VIEW_AXES[v] for v in views]),
                        packed, ex_off, np.full(len(views), 10), window, coh.anchor(window), grid,
                        order, bounds, got_hist, hist_off, theta, 3.0, boost, medoid, balance, 7,
                        likelihood, 0.05, 0.01, vh.ex_bins, vh.hist, vh.target, value_weight,
-                       values["prior"], vh.lo, vh.scale, vh.unit)
+                       values["prior"], vh.lo, vh.scale, vh.unit, temperature, 12345)
     np.testing.assert_array_equal(got_vol, want_vol)
     np.testing.assert_allclose(vh.hist, np.array(values["hist"]), atol=1e-12)
     np.testing.assert_array_equal(got_src, want_src)
@@ -415,7 +421,8 @@ def test_position_histogram_flattens_a_skewed_usage(medoid):
         _k.solve(vol, src, assign, omega, np.array([[0, 1]]), m.exemplar.reshape(-1, 1),
                  np.zeros(1, np.int64), np.array([10]), 4, m.anchor, 1, order,
                  np.linspace(0, n, 65).astype(np.int64), hist, np.zeros(1, np.int64),
-                 np.array([n / 100.0]), weight, 0.0, medoid, False, 16, 0, 1.0, 0.0, *_no_values(m.exemplar.reshape(-1, 1)))
+                 np.array([n / 100.0]), weight, 0.0, medoid, False, 16, 0, 1.0, 0.0,
+                 *_no_values(m.exemplar.reshape(-1, 1)))
         counts = np.bincount(src.ravel(), minlength=100)
         used[weight] = (int((counts > 0).sum()), int(counts.max()))
     assert used[0.0] == (1, n)  # skewed: one texel everywhere
@@ -464,9 +471,12 @@ def test_same_seed_same_volume_at_one_and_two_threads(tmp_path):
         from npmrf3d.baselines import chen_wang
         assert numba.get_num_threads() == int(sys.argv[2])
         ex = np.random.default_rng(3).random((24, 24, 3)).astype(np.float32)
+        from npmrf3d.coherent import coherent_synthesize
         vols = [chen_wang.chen_wang_synthesize(ex, size=16, window=(4, 4), levels=2, iterations=2,
                                                solver=solver, rng=7).volume
                 for solver in chen_wang.SOLVERS]
+        vols.append(coherent_synthesize(ex, size=16, window=(4, 4), levels=2, iterations=(2, 2),
+                                        t0=2.0, rng=7).volume)  # annealed: hashed draws
         np.save(sys.argv[1], np.stack(vols))
         """
     )
@@ -477,6 +487,20 @@ def test_same_seed_same_volume_at_one_and_two_threads(tmp_path):
         subprocess.run([sys.executable, "-c", script, str(out), str(threads)], check=True, env=env)
         volumes.append(np.load(out))
     np.testing.assert_array_equal(volumes[0], volumes[1])
+
+
+def test_annealed_coherent_decision_explores_hot_and_settles_cold():
+    """Hot (T = 100 throughout) the voxels draw among their candidates almost uniformly and the
+    stripes' period breaks up; annealed from hot to cold it is kept as well as by the highest
+    score (T = 0)."""
+    stripes = np.tile(np.array([0, 0, 1, 1], dtype=np.uint8) * 255, (24, 6))  # period 4 along columns
+    same4 = {}
+    for t0, t_end in ((0.0, 0.05), (100.0, 100.0), (5.0, 0.01)):
+        v = coherent_synthesize(stripes, size=16, window=(4, 4), levels=2, iterations=(3, 3), views="front",
+                                t0=t0, t_end=t_end, rng=0).volume[..., 0]
+        same4[t0] = (v == np.roll(v, 4, axis=1)).mean()
+    assert same4[100.0] < same4[0.0] - 0.03
+    assert same4[5.0] > 0.9
 
 
 def test_periodic_exemplar_pattern_appears_in_the_constrained_slices():

@@ -285,7 +285,8 @@ BAD_INPUTS = {
     "negative-seed": (lambda t: ["--seed", "-1"], "seed"),
     "sample-with-H1": (lambda t: ["--heuristic", "ML_H1a", "--decision", "sample", "--variant", "sharp"], "argmax"),
     "coherent-with-H1": (lambda t: ["--heuristic", "ML_H1a"], "variant 'coherent' ranks candidates by an objective"),
-    "coherent-anneal": (lambda t: ["--relaxation", "anneal", "--variant", "coherent"], "has no annealing"),
+    "coherent-anneal-hot-end": (lambda t: ["--relaxation", "anneal", "--variant", "coherent", "--t0", "0.5",
+                                           "--t-end", "0.9"], "--t-end"),
 }
 
 

@@ -399,7 +399,7 @@ def _group_votes(vg, vv, vw, count, n_views, slot, ug, uv, uw, umax, uarg):
 def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window, anchor, grid,
           order, batch_bounds, pos_hist, hist_off, theta, position_weight, position_boost, medoid, balance, chunk,
           likelihood, h2c, outlier, ex_bins, val_hist, val_target, val_weight, val_prior, val_lo, val_scale,
-          val_unit):
+          val_unit, temperature, salt):
     """Discrete solver (paper section 4.2 with eq. 4), one pass over all voxels.
 
     Voxels are visited in ``order`` (flat indices), cut into batches at ``batch_bounds``. Within a
@@ -429,9 +429,16 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
     ``val_prior`` (0 = off; added to the ML_H2b
     log-score, a factor ``exp(prior)`` on the ML_H2a score), which vanishes when the histograms
     agree.
+
+    Annealing (``temperature > 0``, NP-MRF rule only): instead of the highest score, the voxel
+    draws candidate ``a`` with probability proportional to ``exp(l_a / temperature)`` (a
+    heat-bath step over its candidates; ``l_a`` the ML_H2b log-score, or the log of the ML_H2a
+    score), from the uniform ``(mix(salt * n_voxels + flat) + 0.5) / 2**31`` -- a hash of the
+    voxel, so the draw depends on no thread count (``salt < 2**31``).
     """
     n_views = assign.shape[0]
     n0, n1, n2, channels = volume.shape
+    n_vox = n0 * n1 * n2
     cap = n_views * window * window
     changed = 0
     for b in range(batch_bounds.shape[0] - 1):
@@ -457,6 +464,7 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
             uarg = np.empty(cap, dtype=np.int64)
             tops = np.empty(max(medoid, 1), dtype=np.int64)
             lik = np.empty(n_views, dtype=np.float64)
+            scores = np.empty(max(medoid, 1), dtype=np.float64)
             for t in range(c * chunk, min(m, (c + 1) * chunk)):
                 flat = order[start + t]
                 p0 = flat // (n1 * n2)
@@ -525,6 +533,7 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
                             if val_prior > 0.0:
                                 prior = value_prior(ex_bins, ga, val_hist, val_target, val_unit, val_prior)
                                 score = score + prior if likelihood == 1 else score * np.exp(prior)
+                            scores[a] = score if likelihood == 1 else np.log(score)
                             if -score < best_e:
                                 best_e = -score
                                 best = uarg[tops[a]]
@@ -541,6 +550,23 @@ def solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth, window
                         if e_sum < best_e:
                             best_e = e_sum
                             best = uarg[tops[a]]
+                    if likelihood and temperature > 0.0 and n_try > 1:
+                        top_l = scores[0]
+                        for a in range(1, n_try):
+                            top_l = max(top_l, scores[a])
+                        if top_l > -np.inf:
+                            total = 0.0
+                            for a in range(n_try):
+                                total += np.exp((scores[a] - top_l) / temperature)
+                            x = (mix(salt * n_vox + flat) + 0.5) / 2147483648.0 * total
+                            acc = 0.0
+                            pick = n_try - 1
+                            for a in range(n_try):
+                                acc += np.exp((scores[a] - top_l) / temperature)
+                                if x < acc:
+                                    pick = a
+                                    break
+                            best = uarg[tops[pick]]
                 else:
                     total = 0.0
                     for ch in range(channels):

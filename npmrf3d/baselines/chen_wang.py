@@ -345,14 +345,16 @@ def chen_wang_synthesize(
 
 def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rng: np.random.Generator, *,
         progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
-        t_start: float | None = None, decision: tuple[int, float, float] = (0, 0.0, 0.0)) -> SynthesisResult:
+        t_start: float | None = None, decision: tuple = (0, 0.0, 0.0)) -> SynthesisResult:
     """Run a validated configuration on validated float32 ``(H, W, C)`` exemplars (one per view).
 
     The body of :func:`chen_wang_synthesize`, with the signature of a registered method.
     ``decision = (likelihood, centre_bandwidth, outlier)`` switches the solver's choice among the
     heaviest votes to the NP-MRF rule (``likelihood`` 1 = ML_H2b, 2 = ML_H2a; the centre kernel's
     width is ``centre_bandwidth`` times the exemplar's standard deviation); used by the coherent
-    NP-MRF sampler (:mod:`npmrf3d.coherent`), 0 = Chen–Wang's own solver.
+    NP-MRF sampler (:mod:`npmrf3d.coherent`), 0 = Chen–Wang's own solver. A fourth entry, one
+    tuple of temperatures per level (coarsest first, one per iteration), anneals that decision
+    (a heat-bath draw among the candidates; 0 = the highest score).
     """
     t_start = time.perf_counter() if t_start is None else t_start
     views = config.views
@@ -449,6 +451,8 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
             t_search += time.perf_counter() - ts
             ts = time.perf_counter()
             order = rng.permutation(n_vox).astype(np.int64)
+            temperature = float(decision[3][li][it]) if len(decision) > 3 else 0.0
+            salt = int(rng.integers(0, 2**31)) if temperature > 0.0 else 0
             for b in range(len(bounds) - 1):
                 # within a batch the histograms are frozen and every voxel depends only on them
                 # and the votes, so visiting a batch in memory order gives the same volume faster
@@ -460,7 +464,8 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
                                         config.balance_views, _SOLVE_CHUNK, decision[0],
                                         2.0 * (decision[1] * sigma) ** 2 or 1.0, decision[2],
                                         values.ex_bins, values.hist, values.target, config.value_weight,
-                                        config.value_prior, values.lo, values.scale, values.unit)))
+                                        config.value_prior, values.lo, values.scale, values.unit,
+                                        temperature, salt)))
             t_solve += time.perf_counter() - ts
             level_history.append(energy_sum / max(1, sites))
             if progress is not None:
