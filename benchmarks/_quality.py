@@ -79,6 +79,13 @@ def _npmrf_sharp(ex, size, levels, seed, *, palette=None, **_):
                               variant="sharp").volume
 
 
+def _npmrf_anneal(ex, size, levels, seed, *, palette=None, **_):
+    """``synth --relaxation anneal --variant coherent``: the coherent sampler annealed over its
+    candidates (t0 1 to t_end 0.05 over each level's iterations)."""
+    return npmrf3d.synthesize(ex, size=size, levels=levels, rng=seed, palette=palette,
+                              relaxation="anneal", variant="coherent").volume
+
+
 def _npk(ex, size, levels, seed, **_):
     from npmrf3d.baselines import kopf_synthesize
     return kopf_synthesize(ex, size=size, levels=levels, rng=seed).volume
@@ -97,12 +104,13 @@ def _registered(name):
 METHODS: dict[str, Callable[..., np.ndarray]] = {
     "npmrf-default": _npmrf_default,
     "npmrf-sharp": _npmrf_sharp,
+    "npmrf-anneal": _npmrf_anneal,
     "npk": _npk,
     "chen-wang": _registered("chen-wang"),
     "coherent": _registered("coherent"),
 }
 #: Methods that take ``palette`` (the others never see it, and their cache key has none).
-PALETTE_METHODS = {"npmrf-default", "npmrf-sharp"}
+PALETTE_METHODS = {"npmrf-default", "npmrf-sharp", "npmrf-anneal"}
 
 
 # --------------------------------------------------------------------------- exemplars

@@ -79,7 +79,9 @@ def test_catalog_declares_the_seven_studies_and_ground_truth():
     npk = STUDIES["npk"].runs("full")
     assert {r.algorithm for r in npk} == {"npmrf", "kopf", "chen-wang", "coherent", "control"}
     assert len({r.exemplar for r in npk}) >= 14
-    assert all(dict(r.params)["relaxation"] == "anneal" for r in npk if r.algorithm == "npmrf")
+    assert all(dict(r.params)["relaxation"] == "anneal" for r in npk
+               if r.algorithm == "npmrf" and r.method != "default")
+    assert {r.method for r in npk} >= {"default", "coherent-anneal"}
     views = {dict(r.params)["views"] for r in STUDIES["views"].runs()}
     assert views == {"front,right,top", "front,top"}
     with pytest.raises(ParameterError, match="heuristics, cooling"):

@@ -85,6 +85,8 @@ def _m(name: str, algorithm: str = "npmrf", **params) -> Method:
 #: synth's default (ICM, the coherent NP-MRF sampler, full colours): the studies that compare the
 #: paper's full-Parzen settings show it beside them (issue 12).
 _DEFAULT = _m("default", relaxation="icm", variant="coherent", palette=None)
+#: The coherent sampler annealed over its candidates (issue 14, item 2), full colours.
+_COHERENT_ANNEAL = _m("coherent-anneal", relaxation="anneal", variant="coherent", palette=None)
 
 HEURISTICS = Study(
     name="heuristics",
@@ -201,7 +203,9 @@ NPK = Study(
           "heat-bath sampler. NP_K: Kopf et al. 2007 as implemented in "
           "npmrf3d.baselines.kopf with its default settings and the study's levels. 'control' is "
           "the structureless control (voxels drawn independently from the exemplar): a method "
-          "no better than it made no structure.",
+          "no better than it made no structure. 'default' is synth's default (the coherent "
+          "NP-MRF sampler, ICM, 7x7 at every level); 'coherent-anneal' the same annealed over "
+          "its candidates (t0 1 to 0.05 per level); both on the full colours, no palette.",
     common=(("heuristic", "ML_H2b"), ("window", 7), ("palette", 64), *_ANNEAL),
     methods=(
         _m("ML_H2b-anneal"),
@@ -209,6 +213,8 @@ NPK = Study(
         _m("NP_K", "kopf", window=8),
         _m("chen-wang", "chen-wang"),
         _m("coherent", "coherent"),
+        _DEFAULT,
+        _COHERENT_ANNEAL,
         _m("control", "control"),
     ),
     full=Scale(exemplars=STUDY_EXEMPLARS, seeds=(0,), sizes=(32,), levels=2, crop=64),
