@@ -257,6 +257,32 @@ def test_report_has_every_run_row_and_figure(quick_results, tmp_path):
     assert "study-fig-cooling-temperature" in text and "xi-1-full" in text
 
 
+def test_spread_summary_and_which_leads_exceed_it(tmp_path):
+    from npmrf3d.studies.table import separations, summarise
+
+    def row(method, seed, ac, exemplar="e", status="ok"):
+        return {"exemplar": exemplar, "method": method, "seed": str(seed), "status": status,
+                "mean_ac": str(ac)}
+    rows = ([row("a", s, x) for s, x in enumerate((1.0, 1.2, 1.1))]
+            + [row("b", s, x) for s, x in enumerate((2.0, 2.1, 1.9))]
+            + [row("c", s, x) for s, x in enumerate((1.05, 1.35, 0.95))]
+            + [row("c", 9, 0.0, status="failed")]            # failed runs are left out
+            + [row("a", 0, 0.5, exemplar="one"), row("b", 0, 0.7, exemplar="one")])
+    summary = {(r["exemplar"], r["method"]): r for r in summarise(rows)}
+    assert summary[("e", "a")]["n"] == 3 and summary[("e", "c")]["n"] == 3
+    np.testing.assert_allclose(summary[("e", "a")]["mean"], 1.1)
+    np.testing.assert_allclose(summary[("e", "a")]["std"], np.std([1.0, 1.2, 1.1]))
+    verdict = {r["exemplar"]: r for r in separations(list(summary.values()))}
+    assert (verdict["e"]["best"], verdict["e"]["runner_up"]) == ("a", "c")
+    assert verdict["e"]["exceeds_spread"] is False       # 0.017 apart, spreads 0.08 + 0.17
+    assert verdict["one"]["exceeds_spread"] is None      # one seed: unknown
+    without_c = [r for r in summary.values() if r["method"] != "c"]
+    assert {r["exemplar"]: r["exceeds_spread"] for r in separations(without_c)}["e"] is True
+    html_text = report._spread_section(rows)
+    assert "Across seeds" in html_text and "<b>1.1 ± 0.082 (3)</b>" in html_text
+    assert "no (0.0167" in html_text and "one seed: spread unknown" in html_text
+
+
 def test_report_shows_failures(tmp_path):
     outcome = run_study(_study("failing", BROKEN, GOOD), out=tmp_path, scheduler="serial",
                         progress=False, echo=None)

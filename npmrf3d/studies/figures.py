@@ -16,7 +16,6 @@ Figures (written by :func:`make_figures` into the study folder, each with its nu
 from __future__ import annotations
 
 import json
-import math
 import pathlib
 from collections import defaultdict
 
@@ -28,7 +27,7 @@ from npmrf3d.io import read_volume
 from npmrf3d.metrics import view_slices
 from npmrf3d.plotting import save_figure, to_display
 
-from .table import as_float, metric_columns, unique, write_csv
+from .table import metric_columns, summarise, unique, write_csv
 
 __all__ = ["make_figures"]
 
@@ -42,22 +41,7 @@ def _metrics_figure(study_dir, rows):
         return []
     exemplars = unique(r["exemplar"] for r in rows)
     methods = unique(r["method"] for r in rows)
-    values = defaultdict(list)
-    for r in rows:
-        if r["status"] == "failed":
-            continue
-        for c in columns:
-            x = as_float(r.get(c))
-            if math.isfinite(x):
-                values[(c, r["exemplar"], r["method"])].append(x)
-    summary = []
-    for c in columns:
-        for e in exemplars:
-            for m in methods:
-                xs = values.get((c, e, m), [])
-                summary.append({"metric": c, "exemplar": e, "method": m, "n": len(xs),
-                                "mean": float(np.mean(xs)) if xs else math.nan,
-                                "std": float(np.std(xs)) if xs else math.nan})
+    summary = summarise(rows)
     write_csv(study_dir / "metrics_summary.csv", summary)
     fig = Figure(figsize=(max(6.0, 0.5 * len(exemplars) * len(methods) + 2), 2.6 * len(columns)),
                  layout="constrained")

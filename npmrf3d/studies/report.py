@@ -27,7 +27,7 @@ from npmrf3d.io import atomic_write
 from npmrf3d.methods import METHODS
 
 from .figures import make_figures  # noqa: F401 (re-exported: report.make_figures)
-from .table import as_float, metric_columns, read_results, unique
+from .table import as_float, metric_columns, read_results, separations, summarise, unique
 
 __all__ = ["build_report", "find_studies", "make_figures", "write_report"]
 
@@ -136,6 +136,8 @@ def _study_section(study_dir: pathlib.Path) -> str:
                  "better. Full per-view values are in results.csv.</p>"
                  f"<table class='runs'><tr>{header}</tr>{''.join(body)}</table>")
 
+    parts.append(_spread_section(rows))
+
     failures = [r for r in rows if r.get("status") == "failed"]
     if failures:
         items = "".join(f"<li><b>{_esc(r['run_id'])}</b>: <code>{_esc(r.get('error', ''))}</code>"
@@ -164,6 +166,41 @@ def _study_section(study_dir: pathlib.Path) -> str:
         parts.append(f"<figure class='run'>{img}<figcaption>{_esc(label)}</figcaption></figure>")
     parts.append("</div></section>")
     return "\n".join(parts)
+
+
+def _spread_section(rows: list[dict]) -> str:
+    """Mean +- standard deviation over seeds per exemplar, metric and method, the best method
+    in bold, and whether its lead over the runner-up exceeds the spread (the two standard
+    deviations added; "one seed" when the spread is unknown)."""
+    summary = summarise(rows)
+    if not summary:
+        return ""
+    methods = unique(r["method"] for r in rows)
+    cell = {(r["metric"], r["exemplar"], r["method"]): r for r in summary}
+    verdicts = {(v["metric"], v["exemplar"]): v for v in separations(summary)}
+    header = "".join(f"<th>{_esc(m)}</th>" for m in methods)
+    body = []
+    for (metric, exemplar), v in verdicts.items():
+        cells = []
+        for m in methods:
+            r = cell.get((metric, exemplar, m))
+            if r is None or not r["n"]:
+                cells.append("<td></td>")
+                continue
+            text = f"{r['mean']:.4g} ± {r['std']:.2g} ({r['n']})"
+            cells.append(f"<td><b>{_esc(text)}</b></td>" if m == v["best"] else f"<td>{_esc(text)}</td>")
+        verdict = ("one seed: spread unknown" if v["exceeds_spread"] is None else
+                   f"{'yes' if v['exceeds_spread'] else 'no'} ({v['difference']:.3g} vs {v['spread']:.3g})")
+        if v["runner_up"] is None:
+            verdict = "one method"
+        body.append(f"<tr><td>{_esc(exemplar)}</td><td>{_esc(metric.removeprefix('mean_'))}</td>"
+                    f"{''.join(cells)}<td>{_esc(verdict)}</td></tr>")
+    return ("<h3>Across seeds</h3><p>Mean ± standard deviation over seeds (number of seeds); the "
+            "lowest mean in bold. The last column says whether the best method's lead over the "
+            "runner-up exceeds the spread: the difference of their means against the sum of their "
+            "standard deviations.</p>"
+            f"<table class='spread'><tr><th>exemplar</th><th>metric</th>{header}"
+            f"<th>lead exceeds spread?</th></tr>{''.join(body)}</table>")
 
 
 _STYLE = """

@@ -18,7 +18,7 @@ from npmrf3d._files import atomic_write
 from .grid import RunSpec
 
 __all__ = ["BASE_COLUMNS", "FINISHED_FILES", "as_float", "is_finished", "metric_columns", "unique", "load_row", "make_row", "read_results",
-           "write_csv"]
+           "separations", "summarise", "write_csv"]
 
 #: The files that mark a finished run.
 FINISHED_FILES = ("run.json", "metrics.json")
@@ -122,4 +122,66 @@ def unique(values) -> list:
     for v in values:
         if v not in out:
             out.append(v)
+    return out
+
+
+def summarise(rows: list[dict]) -> list[dict]:
+    """Mean and standard deviation over seeds of every metric column, per exemplar and method:
+    rows ``{"metric", "exemplar", "method", "n", "mean", "std"}`` (failed runs and missing
+    values left out; ``std`` is the population standard deviation, 0 for one seed, nan for none).
+
+    Examples
+    --------
+    >>> rows = [{"exemplar": "e", "method": "m", "status": "ok", "mean_ac": x} for x in ("1", "3")]
+    >>> [(r["n"], r["mean"], r["std"]) for r in summarise(rows)]
+    [(2, 2.0, 1.0)]
+    """
+    columns = metric_columns(rows)
+    values: dict = {}
+    for r in rows:
+        if r.get("status") == "failed":
+            continue
+        for c in columns:
+            x = as_float(r.get(c))
+            if math.isfinite(x):
+                values.setdefault((c, r["exemplar"], r["method"]), []).append(x)
+    out = []
+    for c in columns:
+        for e in unique(r["exemplar"] for r in rows):
+            for m in unique(r["method"] for r in rows):
+                xs = values.get((c, e, m), [])
+                mean = sum(xs) / len(xs) if xs else math.nan
+                std = math.sqrt(sum((x - mean) ** 2 for x in xs) / len(xs)) if xs else math.nan
+                out.append({"metric": c, "exemplar": e, "method": m, "n": len(xs), "mean": mean, "std": std})
+    return out
+
+
+def separations(summary: list[dict]) -> list[dict]:
+    """Per metric and exemplar: the best method (lowest mean) and, against the runner-up, whether
+    the difference exceeds the spread over seeds (``|mean_1 - mean_2| > std_1 + std_2``, both
+    with at least two seeds; ``None`` when either has fewer, i.e. the spread is unknown).
+
+    Examples
+    --------
+    >>> s = [{"metric": "ac", "exemplar": "e", "method": m, "n": 3, "mean": mu, "std": 0.1}
+    ...      for m, mu in (("a", 1.0), ("b", 1.5), ("c", 1.05))]
+    >>> [(r["best"], r["runner_up"], r["exceeds_spread"]) for r in separations(s)]
+    [('a', 'c', False)]
+    """
+    groups: dict = {}
+    for r in summary:
+        if r["n"] and math.isfinite(r["mean"]):
+            groups.setdefault((r["metric"], r["exemplar"]), []).append(r)
+    out = []
+    for (metric, exemplar), items in groups.items():
+        items = sorted(items, key=lambda r: r["mean"])
+        best, second = items[0], (items[1] if len(items) > 1 else None)
+        exceeds = None
+        if second is not None and best["n"] > 1 and second["n"] > 1:
+            exceeds = bool(second["mean"] - best["mean"] > best["std"] + second["std"])
+        out.append({"metric": metric, "exemplar": exemplar, "best": best["method"],
+                    "runner_up": second["method"] if second else None,
+                    "difference": (second["mean"] - best["mean"]) if second else math.nan,
+                    "spread": (best["std"] + second["std"]) if second else math.nan,
+                    "exceeds_spread": exceeds})
     return out
