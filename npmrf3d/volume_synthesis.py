@@ -220,6 +220,7 @@ def correction_pass(coords: np.ndarray, frames: np.ndarray, feat: np.ndarray, ks
     """One correction pass: the 8 parity sub-passes in a fixed order; returns the coordinates and
     the mean matching distance."""
     coords = np.ascontiguousarray(coords, dtype=np.int64)
+    feat = np.ascontiguousarray(feat)
     cost = np.zeros(coords.shape[:3])
     for parity in np.ndindex(2, 2, 2):
         out = coords.copy()
