@@ -221,12 +221,19 @@ def correction_pass(coords: np.ndarray, frames: np.ndarray, feat: np.ndarray, ks
     the mean matching distance."""
     coords = np.ascontiguousarray(coords, dtype=np.int64)
     feat = np.ascontiguousarray(feat)
+    positions = set_positions(kset, feat.shape[:3])
     cost = np.zeros(coords.shape[:3])
     for parity in np.ndindex(2, 2, 2):
         out = coords.copy()
-        _k.correct(coords, out, frames, feat, kset, h, lo, hi, offsets, np.array(parity, dtype=np.int64), cost)
+        _k.correct(coords, out, frames, feat, positions, h, lo, hi, offsets, np.array(parity, dtype=np.int64), cost)
         coords = out
     return coords, float(cost.mean())
+
+
+def set_positions(kset: np.ndarray, shape) -> np.ndarray:
+    """The similarity sets ``(D * H * W, k)`` of flat indices as positions ``(D * H * W, k, 3)``
+    int64, the form :func:`npmrf3d._kernels.volume.correct` reads."""
+    return np.ascontiguousarray(np.stack(np.unravel_index(kset, tuple(shape)), axis=-1), dtype=np.int64)
 
 
 def smoothed(exemplar: np.ndarray, level: int) -> np.ndarray:

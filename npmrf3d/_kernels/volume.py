@@ -68,6 +68,16 @@ def _clamp(v, lo, hi):
 
 
 @jit
+def _wrap(q, n):
+    """``q % n`` for a ``q`` a few periods off (neighbour offsets), without a division."""
+    while q < 0:
+        q += n
+    while q >= n:
+        q -= n
+    return q
+
+
+@jit
 def _offset(frames, single, i, j, k, offsets, d, out):
     """``out = floor(R(i, j, k) @ offsets[d] + 0.5)``: the output-space offset of offset ``d``."""
     fi = 0 if single else i
@@ -131,7 +141,9 @@ def correct(coords, out, frames, feat, kset, h, lo, hi, offsets, parity, cost):
 
     A candidate equal to one already scored is skipped: its distance is the same, and only a
     strictly smaller one wins, so the choice is that of scoring every candidate (coherent
-    neighbours propose the same coordinate many times). Where ``[lo - h |D|, hi + h |D|]`` lies
+    neighbours propose the same coordinate many times). ``kset`` holds the sets as exemplar
+    positions, ``(D * H * W, k, 3)`` (row: flat index of the voxel), so no candidate is decoded by
+    division. Where ``[lo - h |D|, hi + h |D|]`` lies
     inside the exemplar (every level but the coarsest ones) no position is clamped, and the
     distances run on flat indices (:func:`_distance_flat`). The loop runs in parallel over planes
     ``i`` of the parity class, each with its own scratch arrays; every voxel's result depends on
@@ -167,9 +179,9 @@ def correct(coords, out, frames, feat, kset, h, lo, hi, offsets, parity, cost):
             for kk in range(parity[2], n3, 2):
                 for d in range(n_off):
                     _offset(frames, single, i, j, kk, offsets, d, off)
-                    qi = (i + off[0]) % n1
-                    qj = (j + off[1]) % n2
-                    qk = (kk + off[2]) % n3
+                    qi = _wrap(i + off[0], n1)
+                    qj = _wrap(j + off[1], n2)
+                    qk = _wrap(kk + off[2], n3)
                     for r in range(3):
                         src[d, r] = coords[qi, qj, qk, r]
                     for e in range(dims):
@@ -184,10 +196,9 @@ def correct(coords, out, frames, feat, kset, h, lo, hi, offsets, parity, cost):
                 for d in range(n_off):
                     flat = (src[d, 0] * shape[1] + src[d, 1]) * shape[2] + src[d, 2]
                     for s in range(k):
-                        q = kset[flat, s]
-                        ua = _clamp(q // plane - h * offsets[d, 0], lo[0], hi[0])
-                        ub = _clamp((q // shape[2]) % shape[1] - h * offsets[d, 1], lo[1], hi[1])
-                        uc = _clamp(q % shape[2] - h * offsets[d, 2], lo[2], hi[2])
+                        ua = _clamp(kset[flat, s, 0] - h * offsets[d, 0], lo[0], hi[0])
+                        ub = _clamp(kset[flat, s, 1] - h * offsets[d, 1], lo[1], hi[1])
+                        uc = _clamp(kset[flat, s, 2] - h * offsets[d, 2], lo[2], hi[2])
                         key = (ua * shape[1] + ub) * shape[2] + uc
                         fresh = True
                         for t in range(n_seen):
