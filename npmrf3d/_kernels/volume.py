@@ -8,13 +8,14 @@ Private: called with validated arrays only; nothing here raises a user-facing er
 * :func:`project` (parallel over exemplar slices): appearance-space vectors of every voxel.
 * :func:`correct_parzen`: the same sub-pass decided by the Parzen LCPDF of full ``w^3``
   neighbourhoods (the NP-MRF with one 3D view, ``npmrf-3d``).
-* :func:`correct` (parallel over the voxels of one parity class): one voxel-correction sub-pass.
+* :func:`correct` (parallel over the planes of one parity class): one voxel-correction sub-pass.
   Reads coordinates from ``coords`` and writes the corrected ones to ``out`` (Jacobi within the
   sub-pass), so a voxel's result depends on the inputs only, never on the thread count.
 
 Coordinates are exemplar voxel positions ``(a, b, c)`` kept inside the valid box ``[lo, hi]``
 per axis; ``feat`` is the appearance-space exemplar ``(D, H, W, d)`` (PCA of 5^3 neighbourhoods);
-``kset`` holds flat exemplar indices ``(a * H + b) * W + c``.
+``kset`` holds flat exemplar indices ``(a * H + b) * W + c`` (in :func:`correct`: the same sets
+as positions, ``(D * H * W, k, 3)``).
 """
 
 from __future__ import annotations
