@@ -1,6 +1,6 @@
 """Synthesis from a 3D exemplar with a vector-field deformation (seed 002; issue 15, item 3).
 
-Why a module of ~400 lines: configuration, validation, the appearance-space model, the level
+Why a module of ~500 lines: configuration, validation, the appearance-space model, the level
 loop, the checkpoint and the registry entry of one method, most of it the documented signature.
 
 The method (registry name ``volume-lh``: it is Lefebvre & Hoppe's appearance-space, coordinate
@@ -218,14 +218,26 @@ def jittered(coords: np.ndarray, h: int, amount: float, uniforms: np.ndarray, lo
 def correction_pass(coords: np.ndarray, frames: np.ndarray, feat: np.ndarray, kset: np.ndarray,
                     h: int, lo, hi, offsets: np.ndarray = _k.DIAGONALS) -> tuple[np.ndarray, float]:
     """One correction pass: the 8 parity sub-passes in a fixed order; returns the coordinates and
-    the mean matching distance."""
-    coords = np.ascontiguousarray(coords, dtype=np.int64)
+    the mean matching distance.
+
+    A sub-pass reads ``coords`` and writes its parity class into ``out``, which is then copied
+    back into ``coords`` (an eighth of the voxels), so every sub-pass reads its input unchanged."""
+    coords = np.array(coords, dtype=np.int64, order="C")  # a copy: the caller's array stays
+    out = np.empty_like(coords)
+    feat = np.ascontiguousarray(feat)
+    positions = set_positions(kset, feat.shape[:3])
     cost = np.zeros(coords.shape[:3])
     for parity in np.ndindex(2, 2, 2):
-        out = coords.copy()
-        _k.correct(coords, out, frames, feat, kset, h, lo, hi, offsets, np.array(parity, dtype=np.int64), cost)
-        coords = out
+        _k.correct(coords, out, frames, feat, positions, h, lo, hi, offsets, np.array(parity, dtype=np.int64), cost)
+        cls = tuple(slice(p, None, 2) for p in parity)
+        coords[cls] = out[cls]
     return coords, float(cost.mean())
+
+
+def set_positions(kset: np.ndarray, shape) -> np.ndarray:
+    """The similarity sets ``(D * H * W, k)`` of flat indices as positions ``(D * H * W, k, 3)``
+    int64, the form :func:`npmrf3d._kernels.volume.correct` reads."""
+    return np.ascontiguousarray(np.stack(np.unravel_index(kset, tuple(shape)), axis=-1), dtype=np.int64)
 
 
 def smoothed(exemplar: np.ndarray, level: int) -> np.ndarray:
@@ -455,7 +467,8 @@ def volume_estimate(config: VolumeConfig, exemplars) -> Estimate:
     """Peak memory of a run: per output voxel the coordinates (int64 x 3, two copies while a
     sub-pass runs, three while up-sampling), the frames (9 float32, when a field is used) and
     the jitter (3 float32); per exemplar voxel the appearance space (float64 x dims, twice while
-    it is built), the similarity sets (int64 x k) and the smoothed exemplar (float64 x C)."""
+    it is built), the similarity sets (int64 x k, and as positions int64 x 3k) and the smoothed
+    exemplar (float64 x C)."""
     n = int(np.prod(config.size))
     shape = next(iter(dict(exemplars).values()))
     shape = tuple(np.shape(shape)) if not isinstance(shape, tuple) else shape
@@ -463,7 +476,7 @@ def volume_estimate(config: VolumeConfig, exemplars) -> Estimate:
     c = shape[3] if len(shape) > 3 else 1
     field = 0 if config.vector_field == "none" else 36 * n
     return Estimate({"coordinates": 3 * 24 * n + 12 * n + 4 * c * n, "vector field": field,
-                     "exemplar model": m * (16 * config.pca_dims + 8 * config.k + 16 * c)},
+                     "exemplar model": m * (16 * config.pca_dims + 32 * config.k + 16 * c)},
                     seconds=n / 2.0e5)
 
 

@@ -14,7 +14,8 @@ from npmrf3d._kernels import volume as _k
 from npmrf3d.errors import ParameterError
 from npmrf3d.methods import get_method
 from npmrf3d.resources import ResourceError
-from npmrf3d.volume_synthesis import NEIGHBOURHOODS, appearance_space, make_volume_config, volume_synthesize
+from npmrf3d.volume_synthesis import (NEIGHBOURHOODS, appearance_space, make_volume_config, set_positions,
+                                      volume_synthesize)
 from tests import naive
 
 RNG_SEED = 15
@@ -67,7 +68,7 @@ def test_correct_matches_naive(rng, neighbourhood, twisted, h):
     offsets = NEIGHBOURHOODS[neighbourhood]
     for parity in [(0, 0, 0), (1, 0, 1)]:
         out, cost = coords.copy(), np.zeros(n)
-        _k.correct(coords, out, frames, feat, kset, h, lo, hi, offsets, np.array(parity), cost)
+        _k.correct(coords, out, frames, feat, set_positions(kset, shape), h, lo, hi, offsets, np.array(parity), cost)
         want, want_cost = naive.naive_correct(coords, frames, feat, kset, h, lo, hi, offsets, parity)
         np.testing.assert_array_equal(out, want)
         np.testing.assert_allclose(cost, want_cost, atol=1e-9)

@@ -8,13 +8,14 @@ Private: called with validated arrays only; nothing here raises a user-facing er
 * :func:`project` (parallel over exemplar slices): appearance-space vectors of every voxel.
 * :func:`correct_parzen`: the same sub-pass decided by the Parzen LCPDF of full ``w^3``
   neighbourhoods (the NP-MRF with one 3D view, ``npmrf-3d``).
-* :func:`correct` (parallel over the voxels of one parity class): one voxel-correction sub-pass.
+* :func:`correct` (parallel over the planes of one parity class): one voxel-correction sub-pass.
   Reads coordinates from ``coords`` and writes the corrected ones to ``out`` (Jacobi within the
   sub-pass), so a voxel's result depends on the inputs only, never on the thread count.
 
 Coordinates are exemplar voxel positions ``(a, b, c)`` kept inside the valid box ``[lo, hi]``
 per axis; ``feat`` is the appearance-space exemplar ``(D, H, W, d)`` (PCA of 5^3 neighbourhoods);
-``kset`` holds flat exemplar indices ``(a * H + b) * W + c``.
+``kset`` holds flat exemplar indices ``(a * H + b) * W + c`` (in :func:`correct`: the same sets
+as positions, ``(D * H * W, k, 3)``).
 """
 
 from __future__ import annotations
@@ -68,6 +69,16 @@ def _clamp(v, lo, hi):
 
 
 @jit
+def _wrap(q, n):
+    """``q % n`` for a ``q`` a few periods off (neighbour offsets), without a division."""
+    while q < 0:
+        q += n
+    while q >= n:
+        q -= n
+    return q
+
+
+@jit
 def _offset(frames, single, i, j, k, offsets, d, out):
     """``out = floor(R(i, j, k) @ offsets[d] + 0.5)``: the output-space offset of offset ``d``."""
     fi = 0 if single else i
@@ -99,6 +110,23 @@ def _distance(feat, a, b, c, h, offsets, neigh, shape, bound):
     return total
 
 
+@jit
+def _distance_flat(flat_feat, base, flat_offsets, neigh, bound):
+    """:func:`_distance` where no position needs clamping: ``flat_feat`` is ``feat`` as
+    ``(D * H * W, d)``, ``base`` the candidate's flat index and ``flat_offsets[D]`` the flat
+    step of ``h D``; the same sums in the same order (the same bits), without the index arithmetic."""
+    total = 0.0
+    dims = flat_feat.shape[1]
+    for d in range(flat_offsets.shape[0]):
+        if total >= bound:
+            return total
+        row = base + flat_offsets[d]
+        for e in range(dims):
+            diff = flat_feat[row, e] - neigh[d, e]
+            total += diff * diff
+    return total
+
+
 @jit_parallel
 def correct(coords, out, frames, feat, kset, h, lo, hi, offsets, parity, cost):
     """One correction sub-pass over the voxels ``(i, j, k)`` with ``(i % 2, j % 2, k % 2) ==
@@ -111,52 +139,88 @@ def correct(coords, out, frames, feat, kset, h, lo, hi, offsets, parity, cost):
     ``sum_D ||feat[u + h D] - feat[coords[I_D]]||^2`` (first on ties) is written to ``out[p]``
     and its distance to ``cost[p]``. ``frames`` is ``(N1, N2, N3, 3, 3)`` or ``(1, 1, 1, 3, 3)``
     (one frame for all voxels).
+
+    A candidate equal to one already scored is skipped: its distance is the same, and only a
+    strictly smaller one wins, so the choice is that of scoring every candidate (coherent
+    neighbours propose the same coordinate many times). ``kset`` holds the sets as exemplar
+    positions, ``(D * H * W, k, 3)`` (row: flat index of the voxel), so no candidate is decoded by
+    division. Where ``[lo - h |D|, hi + h |D|]`` lies
+    inside the exemplar (every level but the coarsest ones) no position is clamped, and the
+    distances run on flat indices (:func:`_distance_flat`). The loop runs in parallel over planes
+    ``i`` of the parity class, each with its own scratch arrays; every voxel's result depends on
+    the inputs only.
     """
     n1, n2, n3 = coords.shape[0], coords.shape[1], coords.shape[2]
     shape = np.array([feat.shape[0], feat.shape[1], feat.shape[2]], dtype=np.int64)
     single = frames.shape[0] == 1
     dims = feat.shape[3]
     k = kset.shape[1]
-    c1 = (n2 - parity[1] + 1) // 2
-    c2 = (n3 - parity[2] + 1) // 2
-    count = ((n1 - parity[0] + 1) // 2) * c1 * c2
-    for t in prange(count):
-        i = parity[0] + 2 * (t // (c1 * c2))
-        j = parity[1] + 2 * ((t // c2) % c1)
-        kk = parity[2] + 2 * (t % c2)
-        n_off = offsets.shape[0]
+    n_off = offsets.shape[0]
+    plane = shape[1] * shape[2]
+    c0 = (n1 - parity[0] + 1) // 2
+    reach = 0
+    for d in range(n_off):
+        for r in range(3):
+            reach = max(reach, h * abs(offsets[d, r]))
+    inside = True
+    for r in range(3):
+        if lo[r] - reach < 0 or hi[r] + reach > shape[r] - 1:
+            inside = False
+    flat_feat = feat.reshape(shape[0] * plane, dims)  # a view: feat is C-contiguous
+    flat_offsets = np.empty(n_off, dtype=np.int64)
+    for d in range(n_off):
+        flat_offsets[d] = (h * offsets[d, 0] * shape[1] + h * offsets[d, 1]) * shape[2] + h * offsets[d, 2]
+    for ti in prange(c0):
+        i = parity[0] + 2 * ti
         off = np.empty(3, dtype=np.int64)
         neigh = np.empty((n_off, dims), dtype=np.float64)
         src = np.empty((n_off, 3), dtype=np.int64)
-        for d in range(n_off):
-            _offset(frames, single, i, j, kk, offsets, d, off)
-            qi = (i + off[0]) % n1
-            qj = (j + off[1]) % n2
-            qk = (kk + off[2]) % n3
-            for r in range(3):
-                src[d, r] = coords[qi, qj, qk, r]
-            for e in range(dims):
-                neigh[d, e] = feat[src[d, 0], src[d, 1], src[d, 2], e]
-        ba, bb, bc = coords[i, j, kk, 0], coords[i, j, kk, 1], coords[i, j, kk, 2]
-        best = _distance(feat, ba, bb, bc, h, offsets, neigh, shape, np.inf)
-        for d in range(n_off):
-            flat = (src[d, 0] * shape[1] + src[d, 1]) * shape[2] + src[d, 2]
-            for s in range(k):
-                q = kset[flat, s]
-                qa = q // (shape[1] * shape[2])
-                qb = (q // shape[2]) % shape[1]
-                qc = q % shape[2]
-                ua = _clamp(qa - h * offsets[d, 0], lo[0], hi[0])
-                ub = _clamp(qb - h * offsets[d, 1], lo[1], hi[1])
-                uc = _clamp(qc - h * offsets[d, 2], lo[2], hi[2])
-                dist = _distance(feat, ua, ub, uc, h, offsets, neigh, shape, best)
-                if dist < best:
-                    best = dist
-                    ba, bb, bc = ua, ub, uc
-        out[i, j, kk, 0] = ba
-        out[i, j, kk, 1] = bb
-        out[i, j, kk, 2] = bc
-        cost[i, j, kk] = best
+        seen = np.empty(1 + n_off * k, dtype=np.int64)
+        for j in range(parity[1], n2, 2):
+            for kk in range(parity[2], n3, 2):
+                for d in range(n_off):
+                    _offset(frames, single, i, j, kk, offsets, d, off)
+                    qi = _wrap(i + off[0], n1)
+                    qj = _wrap(j + off[1], n2)
+                    qk = _wrap(kk + off[2], n3)
+                    for r in range(3):
+                        src[d, r] = coords[qi, qj, qk, r]
+                    for e in range(dims):
+                        neigh[d, e] = feat[src[d, 0], src[d, 1], src[d, 2], e]
+                ba, bb, bc = coords[i, j, kk, 0], coords[i, j, kk, 1], coords[i, j, kk, 2]
+                seen[0] = (ba * shape[1] + bb) * shape[2] + bc
+                if inside:
+                    best = _distance_flat(flat_feat, seen[0], flat_offsets, neigh, np.inf)
+                else:
+                    best = _distance(feat, ba, bb, bc, h, offsets, neigh, shape, np.inf)
+                n_seen = 1
+                for d in range(n_off):
+                    flat = (src[d, 0] * shape[1] + src[d, 1]) * shape[2] + src[d, 2]
+                    for s in range(k):
+                        ua = _clamp(kset[flat, s, 0] - h * offsets[d, 0], lo[0], hi[0])
+                        ub = _clamp(kset[flat, s, 1] - h * offsets[d, 1], lo[1], hi[1])
+                        uc = _clamp(kset[flat, s, 2] - h * offsets[d, 2], lo[2], hi[2])
+                        key = (ua * shape[1] + ub) * shape[2] + uc
+                        fresh = True
+                        for t in range(n_seen):
+                            if seen[t] == key:
+                                fresh = False
+                                break
+                        if not fresh:
+                            continue
+                        seen[n_seen] = key
+                        n_seen += 1
+                        if inside:
+                            dist = _distance_flat(flat_feat, key, flat_offsets, neigh, best)
+                        else:
+                            dist = _distance(feat, ua, ub, uc, h, offsets, neigh, shape, best)
+                        if dist < best:
+                            best = dist
+                            ba, bb, bc = ua, ub, uc
+                out[i, j, kk, 0] = ba
+                out[i, j, kk, 1] = bb
+                out[i, j, kk, 2] = bc
+                cost[i, j, kk] = best
 
 
 @jit_parallel
