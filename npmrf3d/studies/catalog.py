@@ -212,7 +212,7 @@ NPK = Study(
           "the structureless control (voxels drawn independently from the exemplar): a method "
           "no better than it made no structure. 'neural' is the on-demand 3D CNN generator "
           "(seed 004; npmrf3d.neural) trained on the same exemplar (150 steps of one 64x64 "
-          "slice per view), its train and generate seconds "
+          "slice per view, Gram and value-histogram loss), its train and generate seconds "
           "apart; it needs the optional extra npmrf3d[neural] (torch) and is left out, with a "
           "note in study.json, where that is not installed.",
     common=(("heuristic", "ML_H2b"), ("window", 7), ("palette", 64), *_ANNEAL),
