@@ -190,6 +190,10 @@ class SynthesisMethod:
         (and a rough time) of a run, from its configuration and the (H, W, C) shape of each
         view's exemplar, before anything is allocated. None: the volume and one work copy
         (:func:`npmrf3d.resources.generic_estimate`).
+    unavailable : callable, optional
+        ``unavailable() -> str | None``: why the method cannot run in this environment (an
+        optional extra is not installed), or None when it can; checked without importing the
+        extra. None: always available. The studies leave unavailable methods out and say so.
     """
 
     name: str
@@ -200,3 +204,4 @@ class SynthesisMethod:
     fit: Callable[[Any], dict]
     description: str = ""
     resources: Callable[[Any, dict], Any] | None = None
+    unavailable: Callable[[], str | None] | None = None

@@ -6,11 +6,13 @@ from __future__ import annotations
 import html.parser
 import json
 import logging
+import sys
 
 import numpy as np
 import pytest
 
 import npmrf3d.exemplar
+import npmrf3d.methods
 from npmrf3d import cli
 from npmrf3d.errors import ParameterError
 from npmrf3d.studies import STUDIES, Method, Scale, Study, get_study, run_study
@@ -77,7 +79,7 @@ def test_catalog_declares_the_seven_studies_and_ground_truth():
     assert {r.method for r in STUDIES["heuristics"].runs()} >= {"ML_H1a", "ML_H1b", "ML_H2a",
                                                                 "ML_H2b"}
     npk = STUDIES["npk"].runs("full")
-    assert {r.algorithm for r in npk} == {"npmrf", "kopf", "chen-wang", "coherent", "control"}
+    assert {r.algorithm for r in npk} == {"npmrf", "kopf", "chen-wang", "coherent", "neural", "control"}
     assert len({r.exemplar for r in npk}) >= 14
     assert all(dict(r.params)["relaxation"] == "anneal" for r in npk
                if r.algorithm == "npmrf" and r.method != "default")
@@ -88,6 +90,45 @@ def test_catalog_declares_the_seven_studies_and_ground_truth():
         get_study("nope")
     with pytest.raises(ParameterError, match="--volume"):
         STUDIES["groundtruth"].runs("quick")
+
+
+def test_npk_declares_the_neural_method_in_both_modes():
+    """Declared whatever is installed; the runner leaves it out where torch is missing."""
+    full = [r for r in STUDIES["npk"].runs("full") if r.algorithm == "neural"]
+    quick = [r for r in STUDIES["npk"].runs("quick") if r.algorithm == "neural"]
+    assert len(full) == len(catalog.STUDY_EXEMPLARS) and len(quick) == 1
+    kwargs = full[0].kwargs()
+    assert kwargs == {"iterations": catalog.NEURAL_ITERATIONS, "size": 32, "rng": 0}  # no "levels"
+    assert 100 <= catalog.NEURAL_ITERATIONS <= 300
+    tiny = quick[0].kwargs()
+    assert tiny["iterations"] <= 5 and tiny["scales"] <= 3 and tiny["size"] == 8
+    for run in (full[0], quick[0]):  # the declared options are valid without torch
+        config = npmrf3d.methods.METHODS["neural"].make_config(
+            **{k: v for k, v in run.kwargs().items() if k != "rng"})
+        assert config.size == (run.size,) * 3
+    assert "levels" in [r for r in STUDIES["npk"].runs("full") if r.algorithm == "kopf"][0].kwargs()
+
+
+def test_a_method_without_its_extra_is_left_out_and_said(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "torch", None)  # as if torch were not installed
+    neural = Method("neural", "neural", (("iterations", 1),))
+    study = _study("extra", neural, CONTROL)
+    messages = []
+    outcome = run_study(study, out=tmp_path, scheduler="serial", progress=False, echo=messages.append)
+    assert [r["method"] for r in outcome.rows] == ["control"] and outcome.counts["done"] == 1
+    assert not (tmp_path / "extra" / "gravel64-neural-s0").exists()
+    info = json.loads((tmp_path / "extra" / "study.json").read_text())
+    [note] = info["left_out"]
+    assert note["method"] == "neural" and note["algorithm"] == "neural" and note["runs"] == 1
+    assert 'needs torch, which is not installed' in note["reason"]
+    assert 'pip install "npmrf3d[neural]"' in note["reason"]
+    assert [r["method"] for r in info["runs"]] == ["control"]
+    assert any(m.startswith("left out: method neural (1 runs): the neural method needs torch") for m in messages)
+    assert [r["method"] for r in runner.read_results(tmp_path / "extra" / "results.csv")] == ["control"]
+    page = report.build_report(tmp_path / "extra")
+    assert "left out: neural" in page and "npmrf3d[neural]" in page
+    with pytest.raises(ParameterError, match="no method can run here: the neural method needs torch"):
+        run_study(_study("only", neural), out=tmp_path, scheduler="serial", progress=False, echo=None)
 
 
 def test_overrides_and_kwargs():

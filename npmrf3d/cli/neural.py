@@ -65,7 +65,8 @@ def _train(args: argparse.Namespace, argv) -> int:
     _extra.require("torch", "'npmrf3d neural train'")
     options = {name: getattr(args, name) for name in (
         "iterations", "batch", "learning_rate", "scales", "noise_channels", "channel_step", "tile",
-        "descriptor", "filters", "descriptor_scales", "filter_size", "checkpoint_every", "seed")}
+        "descriptor", "filters", "descriptor_scales", "filter_size", "histogram_weight", "checkpoint_every",
+        "seed")}
     try:
         config = neural.make_neural_config(views=args.views, slice_size=args.size,
                                            vgg19_weights=args.vgg19, **options)
@@ -174,6 +175,8 @@ def register(commands, formatter_class) -> None:
     desc.add_argument("--filters", type=int, default=_d("filters"), metavar="N", help="random filters per scale")
     desc.add_argument("--descriptor-scales", type=int, default=_d("descriptor_scales"), metavar="N", help="pyramid scales")
     desc.add_argument("--filter-size", type=int, default=_d("filter_size"), metavar="N", help="random filter side")
+    desc.add_argument("--histogram-weight", type=float, default=_d("histogram_weight"), metavar="X",
+                      help="weight of the value-histogram (sorted-value) loss term beside the Gram terms; 0: none")
     views = train.add_argument_group("views and exemplars")
     views.add_argument("--views", default=",".join(_d("views")), metavar="V[,V...]",
                        help=f"constrained views, 1 to 3 of {', '.join(VIEWS)}")

@@ -182,5 +182,5 @@ METHOD = SynthesisMethod(
     name="neural", run=neural_method, make_config=make_neural_config, config_class=NeuralConfig,
     synthesize=neural_synthesize, fit=_fit,
     description="on-demand 3D CNN generator (seed 004): trained on slices, any block on demand; needs npmrf3d[neural]",
-    resources=neural_estimate,
+    resources=neural_estimate, unavailable=_extra.missing,
 )

@@ -10,10 +10,11 @@ command line). ``tests/test_architecture.py`` checks that this is the only such 
 from __future__ import annotations
 
 import importlib
+import importlib.util
 
 from ..errors import ParameterError
 
-__all__ = ["MissingExtraError", "engine", "require", "zarr_writer"]
+__all__ = ["MissingExtraError", "engine", "missing", "require", "zarr_writer"]
 
 #: The install line every "missing extra" message gives.
 INSTALL = 'pip install "npmrf3d[neural]"'
@@ -32,6 +33,23 @@ def require(module: str, what: str):
             f"{what} needs {module}, which is not installed ({exc.msg if hasattr(exc, 'msg') else exc}); "
             f"install the neural extra: {INSTALL} (install PyTorch's CPU build first to avoid "
             f"the multi-GB CUDA build)") from None
+
+
+def missing(what: str = "the neural method", modules=("torch",)) -> str | None:
+    """Why ``what`` cannot run here (the first of ``modules`` that is not installed), or None;
+    found without importing the modules (``import npmrf3d`` stays free of torch).
+
+    >>> missing(modules=("os",)) is None
+    True
+    """
+    for module in modules:
+        try:
+            found = importlib.util.find_spec(module) is not None
+        except (ImportError, ValueError):  # a broken or hidden module (sys.modules[name] = None)
+            found = False
+        if not found:
+            return f"{what} needs {module}, which is not installed; install the neural extra: {INSTALL}"
+    return None
 
 
 def engine(what: str = "the neural method"):

@@ -56,6 +56,10 @@ class NeuralConfig:
         A local VGG-19 ``state_dict`` file (torchvision's layout); needed for ``vgg19``.
     filters, descriptor_scales, filter_size : int
         The random descriptor: filters per scale, pyramid scales, filter side.
+    histogram_weight : float
+        Weight of the value-histogram term of the loss (:func:`npmrf3d.neural.descriptor.
+        histogram_loss`: sorted slice values against the exemplar's quantiles, per channel) beside
+        the Gram terms; 0 leaves it out (the paper's loss).
     checkpoint_every : int
         Steps between two checkpoints (when a checkpoint file is given).
     seed : int or None
@@ -77,6 +81,7 @@ class NeuralConfig:
     filters: int = 48
     descriptor_scales: int = 5
     filter_size: int = 5
+    histogram_weight: float = 1.0
     checkpoint_every: int = 25
     seed: int | None = None
 
@@ -103,6 +108,7 @@ def make_neural_config(*, size=NeuralConfig.size, views=NeuralConfig.views,
                        filters: int = NeuralConfig.filters,
                        descriptor_scales: int = NeuralConfig.descriptor_scales,
                        filter_size: int = NeuralConfig.filter_size,
+                       histogram_weight: float = NeuralConfig.histogram_weight,
                        checkpoint_every: int = NeuralConfig.checkpoint_every,
                        seed=NeuralConfig.seed) -> NeuralConfig:
     """Validate plain keyword arguments into a :class:`NeuralConfig` (``ParameterError``).
@@ -139,6 +145,7 @@ def make_neural_config(*, size=NeuralConfig.size, views=NeuralConfig.views,
         filters=check.integer("filters", filters, low=1, high=1024),
         descriptor_scales=check.integer("descriptor_scales", descriptor_scales, low=1, high=8),
         filter_size=check.integer("filter_size", filter_size, low=1, high=15),
+        histogram_weight=check.real("histogram_weight", histogram_weight, low=0.0, high=1000.0),
         checkpoint_every=check.integer("checkpoint_every", checkpoint_every, low=1),
         seed=seed)
 

@@ -6,7 +6,9 @@ Imported only through :func:`npmrf3d.neural._extra.engine` (the documented lazy 
 Training (seed 004, section 5): each step draws, per constrained view, ``batch`` single-slice
 blocks of the unbounded volume at random integer origins (the slice orientation of the view,
 :data:`npmrf3d.neighborhood.VIEW_AXES`), and minimises the Gram loss of their descriptor
-features against the view's exemplar with Adam. Random origins are the paper's doubly
+features against the view's exemplar (plus ``histogram_weight`` times the sorted-value distance
+of the slice's values to the exemplar's, :func:`~npmrf3d.neural.descriptor.histogram_loss`)
+with Adam. Random origins are the paper's doubly
 stochastic sampling (eq. 7-8): fresh noise, and every phase modulo ``2**(scales - 1)``.
 All randomness comes from one numpy Generator (slice origins) and the config's seed (weights,
 filter bank), so a checkpoint (weights, Adam state, normalisation statistics, the Generator's
@@ -31,7 +33,7 @@ from .._files import atomic_write
 from ..errors import ParameterError
 from ..neighborhood import VIEW_AXES
 from .config import NeuralConfig, slice_side
-from .descriptor import gram, gram_loss, make_descriptor
+from .descriptor import gram, gram_loss, histogram_loss, histogram_target, make_descriptor
 from .generator import SolidGenerator
 
 __all__ = ["FORMAT", "NeuralModel", "default_device", "generate_block", "load_model", "model_bytes", "save_model",
@@ -156,13 +158,14 @@ def train_model(per_view: dict, config: NeuralConfig, rng: np.random.Generator, 
     device = default_device()
     generator.to(device)
     descriptor = make_descriptor(config, channels, mean).to(device)
-    targets = {}
+    sides = {v: slice_side(config, a.shape) for v, a in per_view.items()}
+    targets, values = {}, {}
     with torch.no_grad():
         for view, exemplar in per_view.items():
             image = torch.from_numpy(np.ascontiguousarray(exemplar.transpose(2, 0, 1)))[None].to(device)
             targets[view] = [gram(f) for f in descriptor(image)]
+            values[view] = [t.to(device) for t in histogram_target(image[0].cpu(), sides[view] ** 2)]
     optimizer = torch.optim.Adam(generator.parameters(), lr=config.learning_rate)
-    sides = {v: slice_side(config, a.shape) for v, a in per_view.items()}
     key = _key(config, per_view)
     start, history, seconds = 0, [], 0.0
     if checkpoint is not None and checkpoint.exists():
@@ -182,7 +185,10 @@ def train_model(per_view: dict, config: NeuralConfig, rng: np.random.Generator, 
         for v, view in enumerate(per_view):
             for b in range(config.batch):
                 block = generator(tuple(int(o) for o in origins[v, b]), _slice_shape(view, sides[view]))
-                loss = gram_loss(descriptor, _as_image(block, view), targets[view])
+                image = _as_image(block, view)
+                loss = gram_loss(descriptor, image, targets[view])
+                if config.histogram_weight:
+                    loss = loss + config.histogram_weight * histogram_loss(image, *values[view])
                 loss = loss / (len(per_view) * config.batch)
                 loss.backward()  # one slice at a time: memory of one slice, as in the paper
                 total += float(loss.detach())
@@ -288,6 +294,7 @@ def load_model(source) -> NeuralModel:
     settings = json.loads(payload["config"])
     settings["size"] = tuple(settings["size"])
     settings["views"] = tuple(settings["views"])
+    settings.setdefault("histogram_weight", 0.0)  # model files from before the histogram term
     config = NeuralConfig(**settings)
     generator = SolidGenerator(out_channels=int(payload["out_channels"]), seed=config.seed or 0,
                                **config.architecture)

@@ -72,6 +72,15 @@ _QUICK = dict(exemplars=("gravel64",), seeds=(0,), sizes=(8,), levels=1, crop=24
 _ANNEAL = (("relaxation", "anneal"), ("sampler", "metropolis"), ("schedule", "geometric"),
            ("proposals", 8))
 _QUICK_ANNEAL = (("proposals", 2),)
+#: The on-demand neural generator (seed 004) in the NP_K comparison. Full: the paper's network
+#: (85,003 parameters) trained for NEURAL_ITERATIONS steps of one 64^2 slice per view (about
+#: 1.5 s a step on one core for a grey exemplar, so about 4 minutes per exemplar; colour costs
+#: a little more). Quick: a tiny network (3 scales, about 1,000 parameters) for 3 steps.
+NEURAL_ITERATIONS = 150
+_NEURAL = Method("neural", "neural", (("iterations", NEURAL_ITERATIONS),))
+_QUICK_NEURAL = Method("neural", "neural", (
+    ("iterations", 3), ("scales", 3), ("noise_channels", 2), ("channel_step", 2), ("tile", 16),
+    ("filters", 6), ("descriptor_scales", 2), ("filter_size", 3), ("slice_size", 16)))
 
 
 def _m(name: str, algorithm: str = "npmrf", **params) -> Method:
@@ -205,7 +214,12 @@ NPK = Study(
           "the structureless control (voxels drawn independently from the exemplar): a method "
           "no better than it made no structure. 'default' is synth's default (the coherent "
           "NP-MRF sampler, ICM, 7x7 at every level); 'coherent-anneal' the same annealed over "
-          "its candidates (t0 1 to 0.05 per level); both on the full colours, no palette.",
+          "its candidates (t0 1 to 0.05 per level); both on the full colours, no palette. "
+          "'neural' is the on-demand 3D CNN generator "
+          "(seed 004; npmrf3d.neural) trained on the same exemplar (150 steps of one 64x64 "
+          "slice per view, Gram and value-histogram loss), its train and generate seconds "
+          "apart; it needs the optional extra npmrf3d[neural] (torch) and is left out, with a "
+          "note in study.json, where that is not installed.",
     common=(("heuristic", "ML_H2b"), ("window", 7), ("palette", 64), *_ANNEAL),
     methods=(
         _m("ML_H2b-anneal"),
@@ -215,13 +229,14 @@ NPK = Study(
         _m("coherent", "coherent"),
         _DEFAULT,
         _COHERENT_ANNEAL,
+        _NEURAL,
         _m("control", "control"),
     ),
     full=Scale(exemplars=STUDY_EXEMPLARS, seeds=(0,), sizes=(32,), levels=2, crop=64),
     quick=Scale(exemplars=("gravel64",), seeds=(0,), sizes=(8,), levels=1, crop=24,
                 common=(("window", 3), ("palette", 16), *_QUICK_ANNEAL),
                 methods=(_m("ML_H2b-anneal"), _m("NP_K", "kopf", window=4, iterations=1),
-                         _m("control", "control"))),
+                         _QUICK_NEURAL, _m("control", "control"))),
 )
 
 VIEWS = Study(

@@ -19,6 +19,10 @@ Registered methods (:data:`npmrf3d.methods.METHODS`) are called through their ``
   method's ``params`` plus ``size``, ``levels``, ``views`` and ``rng``.
 * ``control`` is the structureless control: voxels drawn independently from the exemplar.
 * ``real`` (ground-truth study only) is a crop of the real volume itself: the floor.
+* ``neural`` (and any method with an ``unavailable`` hook) needs an optional extra: where it is
+  not installed, :func:`npmrf3d.studies.runner.run_study` leaves its runs out and says so (on
+  the console and under ``left_out`` in ``study.json``). Only methods with pyramid levels get
+  ``levels``.
 
 Examples
 --------
@@ -155,8 +159,16 @@ class RunSpec:
         """Keyword arguments for the algorithm (without the exemplar and progress)."""
         out = dict(self.params)
         if self.algorithm in METHODS:
-            out.update(size=self.size, levels=self.levels, rng=self.seed)
+            out.update(size=self.size, rng=self.seed)
+            if "levels" in METHODS[self.algorithm].config_class.__dataclass_fields__:
+                out["levels"] = self.levels  # the neural method has no pyramid
         return out
+
+    def unavailable(self) -> str | None:
+        """Why this run's method cannot run here (its optional extra is missing), or None."""
+        method = METHODS.get(self.algorithm)
+        check = None if method is None else method.unavailable
+        return None if check is None else check()
 
     @property
     def views(self) -> tuple[str, ...]:

@@ -112,6 +112,8 @@ def _study_section(study_dir: pathlib.Path) -> str:
         ("started", info.get("started", "?")), ("finished", info.get("finished", "?")),
         ("wall time", f"{as_float(info.get('wall_seconds')):.1f} s"),
     ]
+    for item in info.get("left_out") or ():
+        facts.append((f"left out: {item['method']}", f"{item['runs']} runs; {item['reason']}"))
     versions = info.get("versions", {})
     facts.append(("versions", ", ".join(f"{k} {v}" for k, v in versions.items())))
     options = {k: v for k, v in (info.get("options") or {}).items() if v is not None}
@@ -122,7 +124,8 @@ def _study_section(study_dir: pathlib.Path) -> str:
     parts.append("<h3>Methods and parameters</h3>" + _params_table(declaration))
 
     columns = [c for c in ("run_id", "exemplar", "method", "seed", "size", "levels", "status",
-                           "seconds", "wall_seconds", "threads") if rows and c in rows[0]]
+                           "seconds", "train_seconds", "generate_seconds", "wall_seconds", "threads")
+               if rows and c in rows[0]]
     metric_cols = [c for c in metric_columns(rows)] + (
         ["largest_value_share"] if rows and "largest_value_share" in rows[0] else [])
     header = "".join(f"<th>{_esc(c.removeprefix('mean_'))}</th>" for c in columns + metric_cols)

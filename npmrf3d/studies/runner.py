@@ -6,7 +6,8 @@ the only code that uses them.)
 
 Layout of the output (``OUT`` is ``--out``)::
 
-    OUT/<study>/study.json            declaration, options, scheduler, versions, wall time
+    OUT/<study>/study.json            declaration, options, scheduler, versions, wall time,
+                                      methods left out (``left_out``: optional extra missing)
     OUT/<study>/results.csv           one row per run (status, timings, metrics)
     OUT/<study>/*.png, *.csv          figures and the numbers behind them
     OUT/<study>/<run_id>/             volume.npy, volume.tif, preview.png, run.json, metrics.json
@@ -63,6 +64,7 @@ __all__ = [
     "evaluate_metrics",
     "execute_run",
     "is_finished",
+    "leave_out_unavailable",
     "plan_workers",
     "read_results",
     "run_study",
@@ -352,6 +354,27 @@ def _run_serial(pending, study_dir, threads, echo, bar):
 
 # --------------------------------------------------------------------------- a study
 
+def leave_out_unavailable(specs) -> tuple[list[RunSpec], list[dict]]:
+    """(the runs whose method can run here, one note per method left out).
+
+    A method whose optional extra is not installed (the ``neural`` method without
+    ``npmrf3d[neural]``) is left out of the study rather than failing every one of its runs;
+    each note has the method's name, algorithm, number of runs left out and the reason (which
+    names the install command). Checked in this process: a remote cluster's workers must have
+    the same extras.
+    """
+    kept, notes = [], {}
+    for spec in specs:
+        reason = spec.unavailable()
+        if reason is None:
+            kept.append(spec)
+            continue
+        note = notes.setdefault(spec.method, {"method": spec.method, "algorithm": spec.algorithm,
+                                              "runs": 0, "reason": reason})
+        note["runs"] += 1
+    return kept, list(notes.values())
+
+
 @dataclasses.dataclass
 class StudyOutcome:
     """What :func:`run_study` did."""
@@ -419,6 +442,10 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
                              f"--volume FILE (.npy or .tif)")
     specs = study.runs(mode, seeds=seeds, exemplars=exemplars, sizes=sizes, levels=levels,
                        reference=reference, slice_axis=slice_axis, slice_index=slice_index)
+    specs, left_out = leave_out_unavailable(specs)
+    if not specs:
+        raise ParameterError(f"study {study.name}: no method can run here: "
+                             f"{'; '.join(item['reason'] for item in left_out)}")
     if scheduler not in (None, "local", "serial"):
         probe_scheduler(scheduler)
     try:
@@ -441,6 +468,8 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
         pending.append(spec)
     echo(f"study {study.name} ({mode}): {len(specs)} runs, {len(specs) - len(pending)} already "
          f"finished, {len(pending)} to run -> {study_dir}")
+    for item in left_out:
+        echo(f"left out: method {item['method']} ({item['runs']} runs): {item['reason']}")
 
     info = {"scheduler": "none (nothing to run)", "workers": 0, "threads": threads}
     if pending:
@@ -462,6 +491,7 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
         "options": {"seeds": seeds, "exemplars": exemplars, "sizes": sizes, "levels": levels,
                     "volume": reference, "slice_axis": slice_axis, "slice_index": slice_index},
         "runs": [s.to_dict() for s in specs],
+        "left_out": left_out,
         **info,
         "versions": io.package_versions(),
         "started": started,

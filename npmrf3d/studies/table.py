@@ -41,7 +41,10 @@ def make_row(spec: RunSpec, status: str, record: dict | None, measured: dict | N
         "study": spec.study, "run_id": spec.run_id, "exemplar": spec.exemplar,
         "method": spec.method, "algorithm": spec.algorithm, "seed": spec.seed,
         "size": spec.size, "levels": spec.levels, "status": status,
-        "seconds": timings.get("total", math.nan), "wall_seconds": record.get("wall_seconds", math.nan),
+        "seconds": timings.get("total", math.nan),
+        # methods that train, then generate (neural), time the two apart
+        **{f"{phase}_seconds": timings[phase] for phase in ("train", "generate") if phase in timings},
+        "wall_seconds": record.get("wall_seconds", math.nan),
         "threads": record.get("threads", ""),
         "largest_value_share": (measured or {}).get("largest_value_share", math.nan),
     }
@@ -68,8 +71,16 @@ def load_row(spec: RunSpec, run_dir: pathlib.Path) -> dict:
     return make_row(spec, "skipped", record, measured)
 
 
+#: Timing columns of methods that train, then generate (neural); in results.csv right after
+#: ``seconds`` when a row has them.
+PHASE_COLUMNS = ("train_seconds", "generate_seconds")
+
+
 def write_csv(path: pathlib.Path, rows: list[dict], head: Sequence[str] = ()) -> pathlib.Path:
     columns = list(head)
+    if "seconds" in columns:
+        at = columns.index("seconds") + 1
+        columns[at:at] = [c for c in PHASE_COLUMNS if any(c in row for row in rows)]
     for row in rows:
         columns += [k for k in row if k not in columns and k != "error"]
     if any("error" in row for row in rows):
