@@ -489,29 +489,43 @@ def test_same_seed_same_volume_at_one_and_two_threads(tmp_path):
     np.testing.assert_array_equal(volumes[0], volumes[1])
 
 
+def _period4_agreement(volume: np.ndarray) -> tuple[float, float]:
+    """Share of voxels equal to the voxel 4 (the stripes' period) and 2 (half of it) along j."""
+    v = volume[..., 0]
+    return float((v == np.roll(v, 4, axis=1)).mean()), float((v == np.roll(v, 2, axis=1)).mean())
+
+
+#: Stripes of period 4 along the columns; voxels drawn independently from it agree with the voxel
+#: 4 and the voxel 2 along j half of the time each (the structureless control).
+_STRIPES = np.tile(np.array([0, 0, 1, 1], dtype=np.uint8) * 255, (24, 6))
+
+
 def test_annealed_coherent_decision_explores_hot_and_settles_cold():
-    """Hot (T = 100 throughout) the voxels draw among their candidates almost uniformly and the
-    stripes' period breaks up; annealed from hot to cold it is kept as well as by the highest
-    score (T = 0)."""
-    stripes = np.tile(np.array([0, 0, 1, 1], dtype=np.uint8) * 255, (24, 6))  # period 4 along columns
+    """Hot (T = 1e4 throughout, draws almost uniform among the candidates) the stripes' period
+    breaks up more than at T = 0 (highest score); annealed from hot to cold it is kept. The
+    candidates of a periodic exemplar mostly agree, so even uniform draws keep most of the
+    period: the means over four seeds are compared, not one run (one seed's margin depends on
+    the CPU's rounding)."""
     same4 = {}
-    for t0, t_end in ((0.0, 0.05), (100.0, 100.0), (5.0, 0.01)):
-        v = coherent_synthesize(stripes, size=16, window=(4, 4), levels=2, iterations=(3, 3), views="front",
-                                t0=t0, t_end=t_end, rng=0).volume[..., 0]
-        same4[t0] = (v == np.roll(v, 4, axis=1)).mean()
-    assert same4[100.0] < same4[0.0] - 0.03
+    for t0, t_end in ((0.0, 0.05), (1e4, 1e4), (5.0, 0.01)):
+        same4[t0] = np.mean([
+            _period4_agreement(coherent_synthesize(
+                _STRIPES, size=16, window=(4, 4), levels=2, iterations=(3, 3), views="front",
+                t0=t0, t_end=t_end, rng=seed).volume)[0]
+            for seed in range(4)])
+    assert same4[1e4] < same4[0.0] - 0.03
     assert same4[5.0] > 0.9
 
 
 def test_periodic_exemplar_pattern_appears_in_the_constrained_slices():
-    stripes = np.tile(np.array([0, 0, 1, 1], dtype=np.uint8) * 255, (24, 6))  # period 4 along columns
-    res = chen_wang_synthesize(stripes, size=16, window=(4, 4), levels=2, iterations=3,
-                               views="front", rng=0)
-    v = res.volume[..., 0]
-    same4 = (v == np.roll(v, 4, axis=1)).mean()  # front slices: columns along j
-    same2 = (v == np.roll(v, 2, axis=1)).mean()
-    assert same4 > 0.9 and same2 < 0.2
-    assert 0.3 < v.mean() < 0.7
+    """Mean over three seeds: the period (agreement at 4) is kept and its half (agreement at 2)
+    is not, far from the control's 0.5 and 0.5."""
+    runs = [chen_wang_synthesize(_STRIPES, size=16, window=(4, 4), levels=2, iterations=3,
+                                 views="front", rng=seed).volume for seed in range(3)]
+    same4, same2 = np.mean([_period4_agreement(v) for v in runs], axis=0)
+    assert same4 > 0.8 and same2 < 0.15
+    for v in runs:
+        assert 0.3 < v.mean() < 0.7
 
 
 def test_progress_and_checkpoint_resume(tmp_path):
