@@ -26,7 +26,10 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0],
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     parser.add_argument("--size", type=int, default=64)
-    parser.add_argument("--variant", default="default")
+    parser.add_argument("--variant", default="default", choices=("default", "sharp", "literal"),
+                        help="a full-Parzen decision rule (default is an alias of sharp); the "
+                             "coherent sampler, synth's default, is timed by `npmrf3d synth "
+                             "--size 64` and benchmarks/bench_scaling.py")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
     ex = npmrf3d.load_exemplar(data.path("gravel64"))
