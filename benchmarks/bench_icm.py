@@ -18,6 +18,7 @@ import numpy as np
 
 import npmrf3d
 from npmrf3d import data
+from npmrf3d.config import VARIANT_ALIASES
 
 from _common import hardware, matmul_gflops
 
@@ -26,7 +27,8 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0],
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     parser.add_argument("--size", type=int, default=64)
-    parser.add_argument("--variant", default="default", choices=("default", "sharp", "literal"),
+    full_parzen = sorted(set(npmrf3d.VARIANTS) - {"coherent"}) + sorted(VARIANT_ALIASES)
+    parser.add_argument("--variant", default="default", choices=full_parzen,
                         help="a full-Parzen decision rule (default is an alias of sharp); the "
                              "coherent sampler, synth's default, is timed by `npmrf3d synth "
                              "--size 64` and benchmarks/bench_scaling.py")
