@@ -92,15 +92,20 @@ def build_view_models(
                    "h": rule.bandwidth * hopt, "h_centre": rule.centre_bandwidth * hopt}
     n_max = max(len(c) for _, c in per_view)
     m_c = per_view[0][0].shape[1]
+    n_labels = labels.shape[0]
     patches_t = np.zeros((len(views), m_c, n_max), dtype=np.float32)
     centre_labels = np.zeros((len(views), n_max), dtype=np.int32)
+    label_starts = np.zeros((len(views), n_labels + 1), dtype=np.int64)
     for a, (p, c) in enumerate(per_view):
-        patches_t[a, :, : len(c)] = p.T
-        centre_labels[a, : len(c)] = c
+        # grouped by centre label, so that the label stage sums each label's weights over one
+        # contiguous range (npmrf3d._kernels.parzen.label_weights); raster order within a label
+        order = np.argsort(c, kind="stable")
+        patches_t[a, :, : len(c)] = p[order].T
+        centre_labels[a, : len(c)] = c[order]
+        label_starts[a] = np.searchsorted(c[order], np.arange(n_labels + 1))
     inv_h2 = np.array([1.0 / (2.0 * info[v]["h"] ** 2) for v in views])
     inv_hc2 = np.array([1.0 / (2.0 * info[v]["h_centre"] ** 2) for v in views])
     log_norm = np.stack([label_log_norm_const(labels, x) for x in inv_hc2])
-    n_labels = labels.shape[0]
     if len(views) * n_labels**2 * 8 <= KERNEL_TABLE_BYTES:
         tables = np.stack([label_kernel_table(labels, x) for x in inv_hc2])
     else:
@@ -109,6 +114,7 @@ def build_view_models(
         offsets=np.stack([view_offsets(v, window) for v in views]),
         patches_t=patches_t,
         centre_labels=centre_labels,
+        label_starts=label_starts,
         n_patches=np.array([len(c) for _, c in per_view], dtype=np.int64),
         inv_two_h2=inv_h2,
         inv_two_hc2=inv_hc2,

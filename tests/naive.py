@@ -787,3 +787,12 @@ def naive_block_distances(volume, temps, sites, view_offsets3d, patches):
     """``D_p`` of every site (S, n) by the direct sum (the definition, float64)."""
     return np.array([naive_neighbour_distances(volume, temps, s, view_offsets3d, patches)
                      for s in sites])
+
+
+def naive_relative_weights(dist, d_min, inv, lowest):
+    """``exp(-(D_p - D_min) inv)`` in float64 of the float32 log weight the kernel forms, 0
+    below ``max(lowest, -87)`` (the kernel's float32 range)."""
+    lw = (np.float32(d_min) - np.asarray(dist, dtype=np.float32)) * np.float32(inv)
+    out = np.exp(lw.astype(np.float64))
+    out[lw < max(lowest, -87.0)] = 0.0
+    return out

@@ -24,7 +24,7 @@ from npmrf3d._kernels.gemm import (
 )
 from npmrf3d.config import DecisionRule
 from npmrf3d.parzen import PRUNE
-from npmrf3d.relax._sweep import resolve_distances
+from npmrf3d.relax._sweep import mean_class_sites, resolve_distances
 from tests import naive
 from tests.test_kernels import VIEWS3, assert_matches, make_case, naive_for, random_volume
 
@@ -36,6 +36,9 @@ EPS32 = float(np.finfo(np.float32).eps)
 def case(rng, channels, window, temps_mode, views=VIEWS3, rule=None, shape=(7, 8, 9)):
     labels, _, models, _, ref = make_case(rng, channels=channels, window=window, views=views,
                                           distinct_exemplars=True, rule=rule)
+    for r in ref.values():  # the models keep the patches grouped by centre label
+        order = np.argsort(r["centres"], kind="stable")
+        r["patches"], r["centres"] = r["patches"][order], r["centres"][order]
     volume, temps, _ = random_volume(rng, labels, shape, temps_mode)
     sites = np.stack([rng.integers(0, n, size=11) for n in shape], axis=1).astype(np.int64)
     return labels, models, ref, volume, temps, sites
@@ -222,15 +225,19 @@ def test_best_distances_match_naive_on_both_paths(temps_mode, rng):
     np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-5)
 
 
-def test_auto_distances_take_the_product_from_the_measured_dimension(rng):
+def test_auto_distances_take_the_product_from_the_measured_dimension_and_class_size(rng):
     grey = case(rng, 1, 5, "zeros")[1]  # d = 24
     colour = case(rng, 3, 7, "zeros", views=("front",))[1]  # d = 144
     assert resolve_distances("auto", grey) == "direct"
     assert resolve_distances("auto", colour) == "gemm"
     assert resolve_distances("direct", colour) == "direct"
     grey7 = case(rng, 1, 7, "zeros", views=("front",))[1]  # d = 48
-    assert resolve_distances("auto", grey7) == "direct"
-    assert resolve_distances("auto", grey7, trusted=True) == "gemm"
-    assert resolve_distances("auto", grey, trusted=True) == "direct"
+    assert resolve_distances("auto", grey7) == "gemm"
+    assert resolve_distances("auto", grey7, class_sites=4096) == "gemm"
+    assert resolve_distances("auto", grey7, class_sites=64) == "direct"  # less than one block
+    assert resolve_distances("auto", colour, class_sites=511) == "direct"
+    assert resolve_distances("gemm", colour, class_sites=64) == "gemm"
+    assert resolve_distances("auto", grey, class_sites=4096) == "direct"
+    assert mean_class_sites([np.zeros((3, 3)), np.zeros((5, 3))]) == 4.0
     with pytest.raises(ValueError, match="distances must be one of auto, gemm, direct; got 'blas'"):
         resolve_distances("blas", grey)

@@ -202,9 +202,15 @@ def test_build_view_models_matches_naive(compiled, channels, window):
         assert models.inv_two_h2[a] == pytest.approx(1 / (2 * r["h"] ** 2), rel=1e-9)
         assert models.inv_two_hc2[a] == pytest.approx(1 / (2 * r["h_centre"] ** 2), rel=1e-9)
         np.testing.assert_array_equal(models.offsets[a], r["offsets"])
+        # the patches are kept grouped by centre label (stable: raster order within a label)
+        order = np.argsort(r["centres"], kind="stable")
         patches = models.patches_t[a, :, :n].T.reshape(n, window * window - 1, channels)
-        np.testing.assert_array_equal(patches, r["patches"])
-        np.testing.assert_array_equal(models.centre_labels[a, :n], r["centres"])
+        np.testing.assert_array_equal(patches, r["patches"][order])
+        np.testing.assert_array_equal(models.centre_labels[a, :n], r["centres"][order])
+        starts = models.label_starts[a]
+        assert starts[0] == 0 and starts[-1] == n and len(starts) == len(labels) + 1
+        for j in range(len(labels)):
+            assert (models.centre_labels[a, starts[j]:starts[j + 1]] == j).all()
         np.testing.assert_allclose(models.log_norm_const[a], naive.naive_label_log_norm_const(
             labels, 1 / (2 * r["h_centre"] ** 2)), rtol=1e-6, atol=1e-9)
         assert_table_close(models.kernel_tables[a],

@@ -34,7 +34,7 @@ PINNED = {
         "d8188583ec25a2002eefc7b6788956cca79a1e5f2bc00d77cfafbe63f7876807"),
     "npmrf_icm_literal": (
         lambda: npmrf3d.synthesize(checker(), size=16, window=5, levels=2, variant="literal", rng=7),
-        "133d6b8c5539b2af7e2a5ce4b136d4504587e5ff6a9593dbd5154d452e95fbd3"),
+        "95ce180fe6640b9fc1e2c6a737c7676e7dccec1546a333122c6b42dc5a78dd3e"),
     "npmrf_icm_8of8_fixed": (
         lambda: npmrf3d.synthesize(checker(), size=16, window=3, levels=2, upsample="8/8",
                                    inherit="fixed", views="front,right", variant="sharp", rng=5),

@@ -273,6 +273,7 @@ def block_log_lcpdfs(volume, temps, sites, rows, n_rows, models, ops, adapt_eps,
     weights = np.zeros(n_labels, dtype=np.float64)
     nonzero = np.empty(n_labels, dtype=np.int64)
     log_weights = np.empty(n_labels, dtype=np.float64)
+    wbuf = np.empty((2, models.patches_t.shape[2]), dtype=np.float32)
     all_labels = query.shape[0] == 0
     for v in range(n_views):
         n = models.n_patches[v]
@@ -281,16 +282,16 @@ def block_log_lcpdfs(volume, temps, sites, rows, n_rows, models, ops, adapt_eps,
         for b in range(n_rows):
             if all_labels:
                 log_lcpdf_from_distances(
-                    product[b], n, models.centre_labels[v], models.labels,
+                    product[b], n, models.label_starts[v], models.labels,
                     models.inv_two_h2[v], models.inv_two_hc2[v], adapt_eps, min_two_h2, prune,
                     models.log_norm_const[v], models.kernel_tables[v], outlier, weights,
-                    nonzero, log_weights, log_l[b, v])
+                    nonzero, log_weights, wbuf, log_l[b, v])
             else:
                 log_lcpdf_at_labels(
-                    product[b], n, models.centre_labels[v], models.labels,
+                    product[b], n, models.label_starts[v], models.labels,
                     models.inv_two_h2[v], models.inv_two_hc2[v], adapt_eps, min_two_h2, prune,
                     models.log_norm_const[v], outlier, query[rows[b]], weights, nonzero,
-                    log_weights, log_l[b, v])
+                    log_weights, wbuf, log_l[b, v])
 
 
 @jit
@@ -523,7 +524,7 @@ def sites_best_distances_direct(volume, temps, sites, models, out):
     n_sites = sites.shape[0]
     for blk in prange((n_sites + BLOCK - 1) // BLOCK):
         buffers = make_buffers(models)
-        values, trust, dist, _, _, _, rows = buffers
+        values, trust, dist, _, _, _, rows, _ = buffers
         for q in range(blk * BLOCK, min(n_sites, (blk + 1) * BLOCK)):
             for v in range(models.offsets.shape[0]):
                 n = models.n_patches[v]

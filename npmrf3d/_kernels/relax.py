@@ -31,7 +31,10 @@ class ViewModels(NamedTuple):
 
     offsets : (V, M, 3) int64, volume offsets of each view's window (centre excluded)
     patches_t : (V, M*C, n_max) float32, transposed exemplar neighbour vectors
-    centre_labels : (V, n_max) int32, label index of each patch centre
+    centre_labels : (V, n_max) int32, label index of each patch centre (patches are grouped by
+        it: non-decreasing over the valid patches)
+    label_starts : (V, K + 1) int64, the patches of label ``j`` are ``label_starts[v, j] ..
+        label_starts[v, j + 1] - 1``
     n_patches : (V,) int64, valid patches per view
     inv_two_h2 : (V,) float64, 1 / (2 h^2) for the neighbour term
     inv_two_hc2 : (V,) float64, 1 / (2 h_c^2) for the centre term
@@ -44,6 +47,7 @@ class ViewModels(NamedTuple):
     offsets: np.ndarray
     patches_t: np.ndarray
     centre_labels: np.ndarray
+    label_starts: np.ndarray
     n_patches: np.ndarray
     inv_two_h2: np.ndarray
     inv_two_hc2: np.ndarray
@@ -167,17 +171,17 @@ def metropolis_accept(delta, temperature, u):
 def site_log_lcpdfs(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune, outlier,
                     buffers, log_l):
     """Per-view log-LCPDF of site (i, j, k) into ``log_l`` (V, K)."""
-    values, trust, dist, weights, nonzero, log_weights, rows = buffers
+    values, trust, dist, weights, nonzero, log_weights, rows, wbuf = buffers
     n_views = models.offsets.shape[0]
     for v in range(n_views):
         gather_neighbours(volume, temps, i, j, k, models.offsets[v], values, trust)
         n = models.n_patches[v]
         neighbour_distances(values, trust, models.patches_t[v], n, dist, rows)
         log_lcpdf_from_distances(
-            dist, n, models.centre_labels[v], models.labels, models.inv_two_h2[v],
+            dist, n, models.label_starts[v], models.labels, models.inv_two_h2[v],
             models.inv_two_hc2[v], adapt_eps, min_two_h2, prune, models.log_norm_const[v],
             models.kernel_tables[v], outlier,
-            weights, nonzero, log_weights, log_l[v],
+            weights, nonzero, log_weights, wbuf, log_l[v],
         )
 
 
@@ -185,21 +189,22 @@ def site_log_lcpdfs(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune
 def site_log_lcpdfs_at(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune, outlier,
                        query, buffers, log_q):
     """Per-view log-LCPDF of site (i, j, k) at the labels ``query`` (Q,) into ``log_q`` (V, Q)."""
-    values, trust, dist, weights, nonzero, log_weights, rows = buffers
+    values, trust, dist, weights, nonzero, log_weights, rows, wbuf = buffers
     for v in range(models.offsets.shape[0]):
         gather_neighbours(volume, temps, i, j, k, models.offsets[v], values, trust)
         n = models.n_patches[v]
         neighbour_distances(values, trust, models.patches_t[v], n, dist, rows)
         log_lcpdf_at_labels(
-            dist, n, models.centre_labels[v], models.labels, models.inv_two_h2[v],
+            dist, n, models.label_starts[v], models.labels, models.inv_two_h2[v],
             models.inv_two_hc2[v], adapt_eps, min_two_h2, prune, models.log_norm_const[v],
-            outlier, query, weights, nonzero, log_weights, log_q[v],
+            outlier, query, weights, nonzero, log_weights, wbuf, log_q[v],
         )
 
 
 @jit
 def make_buffers(models):
-    """Scratch arrays for one thread: values, trust, dist, weights, nonzero, log_weights, rows."""
+    """Scratch arrays for one thread: values, trust, dist, weights, nonzero, log_weights, rows,
+    wbuf (the label stage's float32 weights and their exponent bits)."""
     n_m = models.offsets.shape[1]
     n_labels = models.labels.shape[0]
     return (
@@ -210,6 +215,7 @@ def make_buffers(models):
         np.empty(n_labels, dtype=np.int64),
         np.empty(n_labels, dtype=np.float64),
         np.empty(models.patches_t.shape[1], dtype=np.int64),
+        np.empty((2, models.patches_t.shape[2]), dtype=np.float32),
     )
 
 

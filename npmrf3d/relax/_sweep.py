@@ -15,37 +15,42 @@ import numpy as np
 
 from .._kernels.relax import PARALLEL_MIN_SITES
 
-__all__ = ["DISTANCES", "GEMM_MIN_DIMENSION", "GEMM_MIN_DIMENSION_TRUSTED", "histogram_penalty",
-           "label_counts", "resolve_distances", "sweep"]
+__all__ = ["DISTANCES", "GEMM_MIN_CLASS_SITES", "GEMM_MIN_DIMENSION", "histogram_penalty",
+           "label_counts", "mean_class_sites", "resolve_distances", "sweep"]
 
 #: How the class kernels get the neighbour distances ``D_p`` (SPEC.md section 2): ``gemm``
 #: computes a block of sites at once as one float32 matrix product plus rank-one terms
 #: (:mod:`npmrf3d._kernels.gemm`); ``direct`` sums the squared differences site by site
 #: (:func:`npmrf3d._kernels.parzen.neighbour_distances`); ``auto`` (the default) picks ``gemm``
-#: when the patch dimension ``C (w^2 - 1)`` is at least :data:`GEMM_MIN_DIMENSION`
-#: (:data:`GEMM_MIN_DIMENSION_TRUSTED` for annealing). Same model;
+#: when the patch dimension ``C (w^2 - 1)`` is at least :data:`GEMM_MIN_DIMENSION` and the
+#: colour classes hold at least :data:`GEMM_MIN_CLASS_SITES` sites on average. Same model;
 #: the two round differently (they agree to float32 rounding, tests/test_gemm.py).
 DISTANCES = ("auto", "gemm", "direct")
-#: Measured (benchmarks/bench_parzen_blas.py, distance stage, gemm over direct): grey 5x5 (d = 24)
-#: 0.65-0.81x, grey 7x7 (48) 0.87-0.88x at ICM temperatures and 1.19-1.9x fully trusted, grey
-#: 11x11 (120) 1.3-1.85x, colour 7x7 (144) 1.5-1.9x, colour 11x11 (360) 2.3-4.7x. At ICM
-#: temperatures the product also carries one trust column per neighbour, and below about 100 its
-#: inner dimension is too small for sgemm to beat the direct loop (which also skips untrusted
-#: neighbours site by site); fully trusted (annealing) it wins from d = 48.
-GEMM_MIN_DIMENSION = 100
-#: :data:`GEMM_MIN_DIMENSION` when every neighbour is trusted (annealing).
-GEMM_MIN_DIMENSION_TRUSTED = 48
+#: Measured (benchmarks/bench_icm.py, the Figure-4 job, after the label stage was vectorised;
+#: AMD EPYC, 2 cores): grey 7x7 (d = 48) at 64^3 (4,096 sites per class) takes 58 s of level 0
+#: with gemm against 66 s direct; at 16^3 (64 sites per class, fewer than one block of
+#: :data:`npmrf3d._kernels.gemm.BLOCK` sites) 19 s against 9 s. Earlier (bench_parzen_blas.py,
+#: distance stage alone): grey 5x5 (d = 24) 0.65-0.81x, grey 11x11 (120) 1.3-1.85x, colour 7x7
+#: (144) 1.5-1.9x, colour 11x11 (360) 2.3-4.7x.
+GEMM_MIN_DIMENSION = 48
+#: Average sites per colour class below which ``auto`` keeps the direct loop (half-empty blocks).
+GEMM_MIN_CLASS_SITES = 512
 
 
-def resolve_distances(distances: str, models, *, trusted: bool = False) -> str:
-    """``gemm`` or ``direct`` for ``distances`` (one of :data:`DISTANCES`) and these view models;
-    ``trusted``: every neighbour has temperature 0 (annealing)."""
+def resolve_distances(distances: str, models, *, class_sites: float | None = None) -> str:
+    """``gemm`` or ``direct`` for ``distances`` (one of :data:`DISTANCES`), these view models and
+    ``class_sites`` sites per colour class on average (``None``: not known, large assumed)."""
     if distances not in DISTANCES:
         raise ValueError(f"distances must be one of {', '.join(DISTANCES)}; got {distances!r}")
     if distances != "auto":
         return distances
-    low = GEMM_MIN_DIMENSION_TRUSTED if trusted else GEMM_MIN_DIMENSION
-    return "gemm" if models.patches_t.shape[1] >= low else "direct"
+    large = class_sites is None or class_sites >= GEMM_MIN_CLASS_SITES
+    return "gemm" if models.patches_t.shape[1] >= GEMM_MIN_DIMENSION and large else "direct"
+
+
+def mean_class_sites(classes: list[np.ndarray]) -> float:
+    """Average number of sites per colour class."""
+    return sum(len(c) for c in classes) / max(len(classes), 1)
 
 #: ``update(sites, drawn, penalty, parallel, old, new)``: update one class in place; ``old`` and
 #: ``new`` receive each site's label before and after (``old = -2``: site not visited).

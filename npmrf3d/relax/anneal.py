@@ -45,7 +45,7 @@ from .._kernels.relax import (
     anneal_update_class,
     anneal_update_class_serial,
 )
-from ._sweep import label_counts, resolve_distances, sweep
+from ._sweep import label_counts, mean_class_sites, resolve_distances, sweep
 
 __all__ = ["AnnealOptions", "SAMPLERS", "SCHEDULES", "PROPOSALS", "geometric_schedule",
            "linear_schedule", "relax_anneal"]
@@ -166,7 +166,7 @@ def relax_anneal(
             candidates = rng.integers(0, n_labels, size=len(sites), dtype=np.int64)
         return candidates, rng.random(len(sites))
 
-    distances = resolve_distances(distances, models, trusted=True)
+    distances = resolve_distances(distances, models, class_sites=mean_class_sites(classes))
     ops = (make_gemm_operands(models.patches_t, models.n_patches, models.labels.shape[1])
            if distances == "gemm" else None)
 

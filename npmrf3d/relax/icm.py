@@ -18,7 +18,7 @@ import numpy as np
 from .._kernels._jit import single_threaded_blas
 from .._kernels.gemm import icm_update_class_gemm, icm_update_class_gemm_serial, make_gemm_operands
 from .._kernels.relax import ViewModels, icm_update_class, icm_update_class_serial
-from ._sweep import histogram_penalty, label_counts, resolve_distances, sweep
+from ._sweep import histogram_penalty, label_counts, mean_class_sites, resolve_distances, sweep
 
 __all__ = ["IcmOptions", "expected_sweeps", "histogram_penalty", "relax_icm"]
 
@@ -122,7 +122,7 @@ def relax_icm(
     updates = 0
     sweeps = 0
 
-    distances = resolve_distances(distances, models)
+    distances = resolve_distances(distances, models, class_sites=mean_class_sites(classes))
     ops = (make_gemm_operands(models.patches_t, models.n_patches, models.labels.shape[1])
            if distances == "gemm" else None)
 
