@@ -80,7 +80,8 @@ def test_catalog_declares_the_seven_studies_and_ground_truth():
                                                                 "ML_H2b"}
     npk = STUDIES["npk"].runs("full")
     assert {r.algorithm for r in npk} == {"npmrf", "kopf", "chen-wang", "coherent", "neural", "control"}
-    assert len({r.exemplar for r in npk}) >= 14
+    assert {r.exemplar for r in npk} == set(catalog.NPK_FULL_EXEMPLARS)
+    assert len({r.exemplar for r in STUDIES["npk"].runs("full", exemplars=catalog.STUDY_EXEMPLARS)}) >= 14
     assert all(dict(r.params)["relaxation"] == "anneal" for r in npk
                if r.algorithm == "npmrf" and r.method != "default")
     assert {r.method for r in npk} >= {"default", "coherent-anneal"}
@@ -92,13 +93,24 @@ def test_catalog_declares_the_seven_studies_and_ground_truth():
         STUDIES["groundtruth"].runs("quick")
 
 
+def test_full_variants_are_at_the_papers_scale_with_three_seeds():
+    """Issue 14, item 3: 64^3, 3 levels, 64 x 64 crops (the ground truth: the volume's slice),
+    3 seeds, in every study's full variant."""
+    for study in STUDIES.values():
+        full = study.scale("full")
+        assert full.sizes == (64,) and full.levels == 3 and full.seeds == (0, 1, 2), study.name
+        assert full.crop == (None if study.needs_volume else 64), study.name
+        assert len(full.exemplars) >= 1
+    assert set(catalog.NPK_FULL_EXEMPLARS) <= set(catalog.STUDY_EXEMPLARS)
+
+
 def test_npk_declares_the_neural_method_in_both_modes():
     """Declared whatever is installed; the runner leaves it out where torch is missing."""
     full = [r for r in STUDIES["npk"].runs("full") if r.algorithm == "neural"]
     quick = [r for r in STUDIES["npk"].runs("quick") if r.algorithm == "neural"]
-    assert len(full) == len(catalog.STUDY_EXEMPLARS) and len(quick) == 1
+    assert len(full) == 3 * len(catalog.NPK_FULL_EXEMPLARS) and len(quick) == 1
     kwargs = full[0].kwargs()
-    assert kwargs == {"iterations": catalog.NEURAL_ITERATIONS, "size": 32, "rng": 0}  # no "levels"
+    assert kwargs == {"iterations": catalog.NEURAL_ITERATIONS, "size": 64, "rng": 0}  # no "levels"
     assert 100 <= catalog.NEURAL_ITERATIONS <= 300
     tiny = quick[0].kwargs()
     assert tiny["iterations"] <= 5 and tiny["scales"] <= 3 and tiny["size"] == 8

@@ -12,7 +12,7 @@ import pathlib
 import sys
 
 from ..errors import ParameterError
-from ..studies.catalog import STUDIES, STUDY_EXEMPLARS, get_study
+from ..studies.catalog import NPK_FULL_EXEMPLARS, STUDIES, STUDY_EXEMPLARS, get_study
 from ..studies.report import write_report
 from ..studies.runner import run_study
 from ._common import (PROG, HelpFormatter, Parser, RunsProgress, guarded, non_negative_int,
@@ -45,16 +45,17 @@ def _add_study_options(parser: argparse.ArgumentParser) -> None:
                              "NUMBA_NUM_THREADS on an existing scheduler); workers x threads "
                              "never exceeds the cores")
     parser.add_argument("--seeds", type=non_negative_int, nargs="+", default=None, metavar="S",
-                        help="seeds to run (default: None = the study's: 0 1 in full mode, "
+                        help="seeds to run (default: None = the study's: 0 1 2 in full mode, "
                              "0 in quick mode)")
     parser.add_argument("--exemplars", nargs="+", default=None, metavar="NAME",
                         help="exemplars to run (default: None = the study's); bundled names, "
                              "'etr:NAME' for an installed Extreme Tux Racer terrain, or image "
-                             f"files; the NP_K study's list is {' '.join(STUDY_EXEMPLARS)}")
+                             f"files; the NP_K study's full list is {' '.join(STUDY_EXEMPLARS)} "
+                             f"(its full variant runs {' '.join(NPK_FULL_EXEMPLARS)})")
     parser.add_argument("--size", type=positive_int, nargs="+", default=None, metavar="N",
-                        help="volume sides (default: None = the study's: 32 in full mode)")
+                        help="volume sides (default: None = the study's: 64 in full mode)")
     parser.add_argument("--levels", type=positive_int, default=None, metavar="L",
-                        help="pyramid levels (default: None = the study's: 2 in full mode)")
+                        help="pyramid levels (default: None = the study's: 3 in full mode)")
     parser.add_argument("--volume", default=None, metavar="FILE",
                         help="real 3-D volume (.npy or .tif) for the groundtruth study "
                              "(default: None; required by groundtruth)")
