@@ -29,6 +29,13 @@ def choice(parameter: str, value, valid: Iterable[str]) -> str:
     return lookup[value.lower()]
 
 
+def boolean(parameter: str, value) -> bool:
+    """``True`` or ``False`` (numpy booleans accepted; nothing else)."""
+    if not isinstance(value, (bool, np.bool_)):
+        fail(f"{parameter} must be True or False; got {value!r}")
+    return bool(value)
+
+
 def integer(parameter: str, value, *, low: int | None = None, high: int | None = None) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         fail(f"{parameter} must be an integer; got {value!r}")

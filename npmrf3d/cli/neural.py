@@ -67,6 +67,7 @@ def _train(args: argparse.Namespace, argv) -> int:
         "iterations", "batch", "learning_rate", "scales", "noise_channels", "channel_step", "tile",
         "descriptor", "filters", "descriptor_scales", "filter_size", "histogram_weight", "checkpoint_every",
         "seed")}
+    options["calibrate"] = not args.no_calibrate
     try:
         config = neural.make_neural_config(views=args.views, slice_size=args.size,
                                            vgg19_weights=args.vgg19, **options)
@@ -177,6 +178,10 @@ def register(commands, formatter_class) -> None:
     desc.add_argument("--filter-size", type=int, default=_d("filter_size"), metavar="N", help="random filter side")
     desc.add_argument("--histogram-weight", type=float, default=_d("histogram_weight"), metavar="X",
                       help="weight of the value-histogram (sorted-value) loss term beside the Gram terms; 0: none")
+    desc.add_argument("--no-calibrate", action="store_true",
+                      help="keep the generator's raw values (default: after training, map each channel "
+                           "through a monotone quantile map fitted so that the value histogram matches "
+                           "the exemplar's; pointwise, so blocks still tile exactly)")
     views = train.add_argument_group("views and exemplars")
     views.add_argument("--views", default=",".join(_d("views")), metavar="V[,V...]",
                        help=f"constrained views, 1 to 3 of {', '.join(VIEWS)}")

@@ -60,6 +60,12 @@ class NeuralConfig:
         Weight of the value-histogram term of the loss (:func:`npmrf3d.neural.descriptor.
         histogram_loss`: sorted slice values against the exemplar's quantiles, per channel) beside
         the Gram terms; 0 leaves it out (the paper's loss).
+    calibrate : bool
+        After training, fit a monotone map per channel that takes the quantiles of a
+        calibration block of the generator's output to the exemplars' quantiles, and apply it
+        to every generated value (:func:`npmrf3d.neural.engine.fit_calibration`). The map is
+        pointwise, so blocks still tile exactly; it corrects the value histogram the Gram
+        descriptor leaves off (this project's addition; False: the paper's raw output).
     checkpoint_every : int
         Steps between two checkpoints (when a checkpoint file is given).
     seed : int or None
@@ -82,6 +88,7 @@ class NeuralConfig:
     descriptor_scales: int = 5
     filter_size: int = 5
     histogram_weight: float = 1.0
+    calibrate: bool = True
     checkpoint_every: int = 25
     seed: int | None = None
 
@@ -109,6 +116,7 @@ def make_neural_config(*, size=NeuralConfig.size, views=NeuralConfig.views,
                        descriptor_scales: int = NeuralConfig.descriptor_scales,
                        filter_size: int = NeuralConfig.filter_size,
                        histogram_weight: float = NeuralConfig.histogram_weight,
+                       calibrate: bool = NeuralConfig.calibrate,
                        checkpoint_every: int = NeuralConfig.checkpoint_every,
                        seed=NeuralConfig.seed) -> NeuralConfig:
     """Validate plain keyword arguments into a :class:`NeuralConfig` (``ParameterError``).
@@ -146,6 +154,7 @@ def make_neural_config(*, size=NeuralConfig.size, views=NeuralConfig.views,
         descriptor_scales=check.integer("descriptor_scales", descriptor_scales, low=1, high=8),
         filter_size=check.integer("filter_size", filter_size, low=1, high=15),
         histogram_weight=check.real("histogram_weight", histogram_weight, low=0.0, high=1000.0),
+        calibrate=check.boolean("calibrate", calibrate),
         checkpoint_every=check.integer("checkpoint_every", checkpoint_every, low=1),
         seed=seed)
 

@@ -36,8 +36,8 @@ from .config import NeuralConfig, slice_side
 from .descriptor import gram, gram_loss, histogram_loss, histogram_target, make_descriptor
 from .generator import SolidGenerator
 
-__all__ = ["FORMAT", "NeuralModel", "default_device", "generate_block", "load_model", "model_bytes", "save_model",
-           "train_model"]
+__all__ = ["FORMAT", "NeuralModel", "apply_calibration", "default_device", "fit_calibration", "generate_block",
+           "load_model", "model_bytes", "save_model", "train_model"]
 
 #: The ``format`` entry of a model file.
 FORMAT = "npmrf3d-neural-1"
@@ -65,6 +65,10 @@ class NeuralModel:
         ``train`` seconds (total over resumed runs).
     exemplars : dict
         View -> (H, W, C) of the exemplar it was trained on.
+    calibration : (C, 2, Q) float32 ndarray or None
+        Per channel, ``Q`` quantiles of the raw output (row 0, increasing) and the exemplars'
+        (row 1): every generated value is mapped through the piecewise-linear map between them
+        (:func:`fit_calibration`); None: the raw output.
     """
 
     generator: SolidGenerator
@@ -72,6 +76,7 @@ class NeuralModel:
     history: list = field(default_factory=list)
     timings: dict = field(default_factory=dict)
     exemplars: dict = field(default_factory=dict)
+    calibration: np.ndarray | None = None
 
     @property
     def channels(self) -> int:
@@ -202,8 +207,52 @@ def train_model(per_view: dict, config: NeuralConfig, rng: np.random.Generator, 
             progress(done, config.iterations, total)
     generator.eval()
     timings = {"train": seconds + time.perf_counter() - t0}
-    return NeuralModel(generator, config, history, timings,
-                       {v: tuple(int(n) for n in a.shape) for v, a in per_view.items()})
+    model = NeuralModel(generator, config, history, timings,
+                        {v: tuple(int(n) for n in a.shape) for v, a in per_view.items()})
+    if config.calibrate:
+        t1 = time.perf_counter()
+        model.calibration = fit_calibration(model, per_view)
+        model.timings["calibrate"] = time.perf_counter() - t1
+    return model
+
+
+# --------------------------------------------------------------------------- calibration
+
+#: Side of the block of raw output the calibration map is fitted on, and the quantiles kept.
+CALIBRATION_SIDE = 48
+CALIBRATION_QUANTILES = 257
+
+
+def fit_calibration(model: NeuralModel, per_view: dict) -> np.ndarray:
+    """The ``(C, 2, Q)`` quantile map of :attr:`NeuralModel.calibration`.
+
+    Raw output: the block ``[0, CALIBRATION_SIDE)^3`` of the model's own noise (110,592 voxels).
+    Target: every pixel of every view's exemplar, pooled. Row 0 is made strictly increasing
+    (flat stretches of the raw quantiles are spread by a few float32 steps) so that the map is a
+    function; values outside the raw range map to the exemplars' extremes.
+    """
+    raw = _raw_block(model, (0, 0, 0), (CALIBRATION_SIDE,) * 3, None)
+    channels = raw.shape[-1]
+    levels = np.linspace(0.0, 1.0, CALIBRATION_QUANTILES)
+    target = np.concatenate([a.reshape(-1, channels) for a in per_view.values()]).astype(np.float64)
+    out = np.empty((channels, 2, CALIBRATION_QUANTILES), dtype=np.float32)
+    for c in range(channels):
+        xs = np.quantile(raw[..., c].astype(np.float64), levels).astype(np.float32)
+        for q in range(1, len(xs)):
+            if not xs[q] > xs[q - 1]:
+                xs[q] = np.nextafter(xs[q - 1], np.float32(np.inf))
+        out[c, 0] = xs
+        out[c, 1] = np.quantile(target[:, c], levels)
+    return out
+
+
+def apply_calibration(values: np.ndarray, calibration: np.ndarray | None) -> np.ndarray:
+    """``values`` (..., C) float32 through the per-channel map, in place (pointwise)."""
+    if calibration is None:
+        return values
+    for c in range(values.shape[-1]):
+        values[..., c] = np.interp(values[..., c], calibration[c, 0], calibration[c, 1])
+    return values
 
 
 # --------------------------------------------------------------------------- generation
@@ -224,7 +273,13 @@ def _tile_values(generator: SolidGenerator, t0, tile: int, seed) -> np.ndarray:
 
 
 def generate_block(model: NeuralModel, origin, shape, *, seed: int | None = None) -> np.ndarray:
-    """The block ``origin + [0, shape)`` of the model's volume, float32 ``(N1, N2, N3, C)``.
+    """The block ``origin + [0, shape)`` of the model's volume, float32 ``(N1, N2, N3, C)``:
+    the generator's raw values (:func:`_raw_block`) through the model's calibration map."""
+    return apply_calibration(_raw_block(model, origin, shape, seed), model.calibration)
+
+
+def _raw_block(model: NeuralModel, origin, shape, seed) -> np.ndarray:
+    """The generator's own values of the block ``origin + [0, shape)``, float32 ``(N1, N2, N3, C)``.
 
     Computed tile by tile on the canonical grid of ``model.config.tile``: every tile is one
     forward pass of the same shape, cut to the block, so a block's values are the same whatever
@@ -264,7 +319,8 @@ def _payload(model: NeuralModel) -> dict:
     return {"format": FORMAT, "config": json.dumps(model.config.to_dict()),
             "out_channels": model.channels, "state": model.generator.state_dict(),
             "history": list(model.history), "timings": json.dumps(model.timings),
-            "exemplars": json.dumps(model.exemplars)}
+            "exemplars": json.dumps(model.exemplars),
+            "calibration": None if model.calibration is None else model.calibration.tolist()}
 
 
 def model_bytes(model: NeuralModel) -> bytes:
@@ -295,11 +351,13 @@ def load_model(source) -> NeuralModel:
     settings["size"] = tuple(settings["size"])
     settings["views"] = tuple(settings["views"])
     settings.setdefault("histogram_weight", 0.0)  # model files from before the histogram term
+    settings.setdefault("calibrate", False)  # and from before the calibration map
     config = NeuralConfig(**settings)
     generator = SolidGenerator(out_channels=int(payload["out_channels"]), seed=config.seed or 0,
                                **config.architecture)
     generator.load_state_dict(payload["state"])
     generator.to(default_device()).eval()
     exemplars = {v: tuple(s) for v, s in json.loads(payload["exemplars"]).items()}
+    calibration = payload.get("calibration")
     return NeuralModel(generator, config, list(payload["history"]), json.loads(payload["timings"]),
-                       exemplars)
+                       exemplars, None if calibration is None else np.asarray(calibration, dtype=np.float32))
