@@ -236,8 +236,8 @@ def log_lcpdf_from_distances(
     (exact to ~1e-270 relative), which spares the log-domain fallback.
 
     ``weights`` (K,) must be all zero on entry and is all zero again on exit; ``nonzero`` and
-    ``log_weights`` are scratch (K,), ``wbuf`` (2, >= n) float32 (:func:`label_weights`). Writes ``out`` (K,) and returns the number of distinct
-    centre labels that carried weight.
+    ``log_weights`` are scratch (K,), ``wbuf`` (2, >= n) float32 (:func:`label_weights`).
+    Writes ``out`` (K,) and returns the number of distinct centre labels that carried weight.
     """
     n_labels = labels.shape[0]
     n_nz, log_z = label_weights(dist, n_patches, label_starts, inv_two_h2, adapt_eps,
