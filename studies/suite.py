@@ -57,7 +57,7 @@ def main(argv=None) -> int:
     threads = None
     if args.scheduler == "local":
         workers, threads = plan_workers(args.workers, 1)
-        cluster = _start_local_cluster(workers, threads)
+        cluster = _start_local_cluster(workers)
         address = cluster.scheduler_address
         print(f"local cluster: {workers} workers x {threads} numba thread ({address})")
     out = pathlib.Path(args.out)

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import html.parser
 import json
-import logging
 import sys
 
 import numpy as np
@@ -55,10 +54,7 @@ def quick_results(tmp_path_factory, blobs):
 
 @pytest.fixture(scope="module")
 def cluster():
-    distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=":0", silence_logs=logging.ERROR,
-                                  env={"NUMBA_NUM_THREADS": "1"}) as local:
+    with runner._start_local_cluster(2) as local:
         yield local.scheduler_address
 
 
@@ -367,6 +363,44 @@ def test_cli_study_and_errors(tmp_path, capsys, blobs):
     assert cli.main(["report", str(tmp_path / "empty")]) == 2
     assert cli.main(["study", "--help"]) == 0
     assert "(default: local)" in capsys.readouterr().out
+
+
+_FRESH_COMPILE_SCRIPT = """
+import numba  # a study script imports numba before a spawned worker gets the Nanny's environment
+from npmrf3d.studies import runner
+
+
+def compile_fresh(x):
+    import numba
+
+    numba.set_num_threads(1)  # as execute_run does: the pool starts
+
+    @numba.njit
+    def twice(v):  # never cached: compiled in the worker, as on a fresh install
+        return 2 * v
+    return twice(x)
+
+
+if __name__ == "__main__":
+    from distributed import Client
+
+    with runner._start_local_cluster(1) as cluster, Client(cluster) as client:
+        print("result", client.submit(compile_fresh, 21).result())
+"""
+
+
+def test_local_cluster_workers_can_compile_from_a_script(tmp_path):
+    """Regression (fresh install, empty numba cache): workers of a cluster started by a study
+    script could not compile ("Cannot set NUMBA_NUM_THREADS ... once the threads have been
+    launched"), so every run of ``studies/suite.py`` failed."""
+    import subprocess
+
+    script = tmp_path / "suite_like.py"
+    script.write_text(_FRESH_COMPILE_SCRIPT)
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                          timeout=240, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "result 42" in done.stdout
 
 
 def test_study_script_entry_point(tmp_path):

@@ -234,12 +234,21 @@ def plan_workers(workers: int | None, threads: int | None, cores: int | None = N
                              f"cores of this machine; use fewer --workers or --threads")
     return workers, threads
 
-def _start_local_cluster(workers: int, threads: int):
+def _start_local_cluster(workers: int):
+    """A LocalCluster of ``workers`` processes of one Dask thread each.
+
+    The numba thread count is not put in the workers' environment as ``NUMBA_NUM_THREADS``: a spawned worker
+    imports the parent's main module (a study script imports numba) before the Nanny's
+    environment is applied, so numba's pool would be sized already and the first compilation in
+    the worker (a fresh install, an empty cache) would fail with "Cannot set NUMBA_NUM_THREADS
+    to a different value once the threads have been launched". Each run sets its numba threads
+    itself (:func:`execute_run` calls ``use_threads``) and BLAS runs single-threaded inside the
+    kernels (``single_threaded_blas``); the BLAS variables below are a default for anything else.
+    """
     from distributed import LocalCluster
 
     single = str(1)
-    env = {"NUMBA_NUM_THREADS": str(threads), "OMP_NUM_THREADS": single,
-           "OPENBLAS_NUM_THREADS": single, "MKL_NUM_THREADS": single}
+    env = {"OMP_NUM_THREADS": single, "OPENBLAS_NUM_THREADS": single, "MKL_NUM_THREADS": single}
     return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                         dashboard_address=":0", silence_logs=logging.WARNING, env=env)
 
@@ -256,7 +265,7 @@ def _run_dask(pending, study_dir, scheduler, workers, threads, echo, bar):
     cluster = None
     if scheduler in (None, "local"):
         workers, threads = plan_workers(workers, threads)
-        cluster = _start_local_cluster(workers, threads)
+        cluster = _start_local_cluster(workers)
         client = Client(cluster)
         where = f"local cluster: {workers} workers x {threads} numba threads"
         task_threads = threads
