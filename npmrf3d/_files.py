@@ -85,7 +85,11 @@ def _existing_file(path: str | os.PathLike[str], what: str) -> pathlib.Path:
     """Return ``path`` as a Path, or raise ParameterError if it is not an existing file."""
     path = pathlib.Path(path)
     if not path.exists():
-        raise ParameterError(f"{what} '{path}' does not exist")
+        from npmrf3d import data
+
+        hint = (f" (the bundled exemplar of that name is 'bundled:{path}')"
+                if str(path) in data.available() else "")
+        raise ParameterError(f"{what} '{path}' does not exist{hint}")
     if not path.is_file():
         raise ParameterError(f"{what} '{path}' is not a file (it is a directory or special file)")
     return path

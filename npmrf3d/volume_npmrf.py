@@ -24,6 +24,7 @@ neighbourhood values at level ``l`` are read from the exemplar smoothed for that
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -38,10 +39,16 @@ __all__ = ["NpmrfVolumeConfig", "make_npmrf_volume_config", "npmrf_volume_synthe
 
 @dataclass(frozen=True)
 class NpmrfVolumeConfig(VolumeConfig):
-    """:class:`npmrf3d.volume_synthesis.VolumeConfig` plus the Parzen decision's bandwidths."""
+    """:class:`npmrf3d.volume_synthesis.VolumeConfig` plus the Parzen decision's bandwidths.
 
+    ``usage`` is 0 and not an option: the Parzen decision has no position histogram."""
+
+    usage: float = 0.0
     adaptive: float = 0.1
     centre_bandwidth: float = 0.1
+
+    #: Fields of the base configuration this method does not use (no command-line option).
+    unused: ClassVar[tuple[str, ...]] = ("usage",)
 
 
 DEFAULTS = NpmrfVolumeConfig()
@@ -59,7 +66,8 @@ def make_npmrf_volume_config(*, size=DEFAULTS.size, levels=DEFAULTS.levels, wind
                    f"got {vector_field!r}")
     base = make_volume_config(size=size, levels=levels, window=window, pca_dims=pca_dims, k=k,
                               exclude=exclude, passes=passes, neighbourhood=neighbourhood,
-                              jitter=jitter, fine_jitter=fine_jitter, angle=angle, seed=seed)
+                              jitter=jitter, fine_jitter=fine_jitter, usage=0.0, angle=angle,
+                              seed=seed)
     return NpmrfVolumeConfig(**base.to_dict(),
                              adaptive=check.real("adaptive", adaptive, low=0.0, low_open=True),
                              centre_bandwidth=check.real("centre_bandwidth", centre_bandwidth,

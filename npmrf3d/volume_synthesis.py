@@ -30,8 +30,9 @@ border); coordinates are rounded after up-sampling and jitter; the similarity se
 (exact ``cKDTree``) for and among the valid voxels of a stride-2 lattice (1/8 of them), the
 exclusion rule applied to all earlier members, and the other voxels take their lattice voxel's
 set shifted by their offset; the correction keeps the current coordinate as a candidate
-and reads the sub-pass's input (Jacobi), so results do not depend on the thread count; the output
-is toroidal; colours are the exemplar's full-resolution values at the final coordinates.
+and reads the sub-pass's input (Jacobi), so results do not depend on the thread count; a position
+histogram (``usage``, this project's addition after Chen & Wang 2010: :func:`cell_usage`) keeps
+non-stationary exemplars from collapsing onto one homogeneous region; the output is toroidal; colours are the exemplar's full-resolution values at the final coordinates.
 """
 
 from __future__ import annotations
@@ -82,6 +83,7 @@ class VolumeConfig:
     neighbourhood: str = "faces"
     jitter: float = 0.7
     fine_jitter: float = 0.0
+    usage: float = 1.0
     vector_field: str = "none"
     angle: float = 180.0
     seed: int | None = None
@@ -98,8 +100,8 @@ def make_volume_config(*, size=DEFAULTS.size, levels=DEFAULTS.levels, window=DEF
                        pca_dims=DEFAULTS.pca_dims, k=DEFAULTS.k, exclude=DEFAULTS.exclude,
                        passes=DEFAULTS.passes, neighbourhood=DEFAULTS.neighbourhood,
                        jitter=DEFAULTS.jitter, fine_jitter=DEFAULTS.fine_jitter,
-                       vector_field=DEFAULTS.vector_field, angle=DEFAULTS.angle,
-                       seed=None) -> VolumeConfig:
+                       usage=DEFAULTS.usage, vector_field=DEFAULTS.vector_field,
+                       angle=DEFAULTS.angle, seed=None) -> VolumeConfig:
     """Validate plain keyword arguments into a frozen :class:`VolumeConfig` (``vector_field``: a
     name of :data:`npmrf3d.fields.FIELDS`, ``array`` or ``file:PATH`` as :func:`field_input`
     records it)."""
@@ -122,6 +124,7 @@ def make_volume_config(*, size=DEFAULTS.size, levels=DEFAULTS.levels, window=DEF
         neighbourhood=check.choice("neighbourhood", neighbourhood, tuple(NEIGHBOURHOODS)),
         jitter=check.real("jitter", jitter, low=0.0, high=4.0),
         fine_jitter=check.real("fine_jitter", fine_jitter, low=0.0, high=4.0),
+        usage=check.real("usage", usage, low=0.0, high=100.0),
         vector_field=vector_field, angle=check.real("angle", angle, low=-3600.0, high=3600.0), seed=seed)
 
 
@@ -216,22 +219,53 @@ def jittered(coords: np.ndarray, h: int, amount: float, uniforms: np.ndarray, lo
 
 
 def correction_pass(coords: np.ndarray, frames: np.ndarray, feat: np.ndarray, kset: np.ndarray,
-                    h: int, lo, hi, offsets: np.ndarray = _k.DIAGONALS) -> tuple[np.ndarray, float]:
+                    h: int, lo, hi, offsets: np.ndarray = _k.DIAGONALS,
+                    usage: float = 0.0) -> tuple[np.ndarray, float]:
     """One correction pass: the 8 parity sub-passes in a fixed order; returns the coordinates and
-    the mean matching distance.
+    the mean matching score.
 
     A sub-pass reads ``coords`` and writes its parity class into ``out``, which is then copied
-    back into ``coords`` (an eighth of the voxels), so every sub-pass reads its input unchanged."""
+    back into ``coords`` (an eighth of the voxels), so every sub-pass reads its input unchanged.
+    ``usage`` is the strength of the position histogram (:func:`cell_usage`), recounted before
+    every sub-pass; 0 is seed 002's rule."""
     coords = np.array(coords, dtype=np.int64, order="C")  # a copy: the caller's array stays
     out = np.empty_like(coords)
     feat = np.ascontiguousarray(feat)
     positions = set_positions(kset, feat.shape[:3])
     cost = np.zeros(coords.shape[:3])
+    weight = float(usage) * usage_scale(feat, offsets)
     for parity in np.ndindex(2, 2, 2):
-        _k.correct(coords, out, frames, feat, positions, h, lo, hi, offsets, np.array(parity, dtype=np.int64), cost)
+        counts, even = cell_usage(coords, feat.shape[:3], h, lo, hi)
+        _k.correct(coords, out, frames, feat, positions, h, lo, hi, offsets,
+                   np.array(parity, dtype=np.int64), cost, counts, even, weight)
         cls = tuple(slice(p, None, 2) for p in parity)
         coords[cls] = out[cls]
     return coords, float(cost.mean())
+
+
+def usage_scale(feat: np.ndarray, offsets: np.ndarray) -> float:
+    """The distance scale of the position-histogram penalty: half the expected matching distance
+    of two random exemplar voxels, ``len(offsets) * sum_e var(feat[..., e])``."""
+    return float(len(offsets) * feat.reshape(-1, feat.shape[-1]).var(axis=0).sum())
+
+
+def cell_usage(coords: np.ndarray, shape, h: int, lo, hi) -> tuple[np.ndarray, float]:
+    """The position histogram of a level: how many voxels' coordinates fall in each ``h``-cell
+    ``u // h`` of the exemplar (float64, ``ceil(shape / h)``), and ``even``, the count of every
+    cell that meets the valid box if all were used equally.
+
+    This project's addition after Chen & Wang 2010's position histogram (seed 002 has none, and
+    relies on a stationary exemplar): the correction adds ``usage * s * max(0, c / even - 1)`` to
+    a candidate's distance (``s``: :func:`usage_scale`), so that no part of the exemplar is
+    copied far more often than the rest. Without it a non-stationary exemplar (a scan with a homogeneous region)
+    collapses onto that region: uniform neighbourhoods match each other best
+    (``docs/volume.md``). Cells of the level's spacing make ``even`` the same at every level,
+    the ratio of output voxels to exemplar voxels."""
+    cells = tuple(-(-int(n) // h) for n in shape)
+    flat = np.ravel_multi_index(tuple((coords.reshape(-1, 3) // h).T), cells)
+    counts = np.bincount(flat, minlength=int(np.prod(cells))).astype(np.float64).reshape(cells)
+    valid = int(np.prod([int(hi[a]) // h - int(lo[a]) // h + 1 for a in range(3)]))
+    return counts, coords[..., 0].size / valid
 
 
 def set_positions(kset: np.ndarray, shape) -> np.ndarray:
@@ -277,7 +311,8 @@ def volume_synthesize(exemplar, *, size=DEFAULTS.size, levels: int = DEFAULTS.le
                       window: int = DEFAULTS.window, pca_dims: int = DEFAULTS.pca_dims,
                       k: int = DEFAULTS.k, exclude: int = DEFAULTS.exclude, passes: int = DEFAULTS.passes,
                       neighbourhood: str = DEFAULTS.neighbourhood, jitter: float = DEFAULTS.jitter,
-                      fine_jitter: float = DEFAULTS.fine_jitter, vector_field=DEFAULTS.vector_field,
+                      fine_jitter: float = DEFAULTS.fine_jitter, usage: float = DEFAULTS.usage,
+                      vector_field=DEFAULTS.vector_field,
                       angle: float = DEFAULTS.angle, exemplar_kind: str = "auto", spacing=None,
                       rng=None, progress: ProgressCallback | None = None,
                       checkpoint: str | Path | None = None) -> SynthesisResult:
@@ -312,6 +347,11 @@ def volume_synthesize(exemplar, *, size=DEFAULTS.size, levels: int = DEFAULTS.le
         paper: 0.7).
     fine_jitter : float
         Jitter amplitude at the finest level (0: none, chosen by measurement, docs/volume.md).
+    usage : float
+        Strength of the position histogram (:func:`cell_usage`): ``usage * s * max(0, c / even -
+        1)`` is added to a candidate's distance, ``c`` the voxels already copying its exemplar
+        cell, ``s`` half the distance of two random exemplar neighbourhoods. 0 is seed 002's rule, which collapses onto one homogeneous region of a
+        non-stationary scan (``docs/volume.md``).
     vector_field : str, path or array
         ``none``, ``twist``, ``bend``, ``radial`` (:mod:`npmrf3d.fields`), a ``.npy`` file, or an
         array: directions ``(N1, N2, N3, 3)`` or frames ``(N1, N2, N3, 3, 3)``.
@@ -347,7 +387,7 @@ def volume_synthesize(exemplar, *, size=DEFAULTS.size, levels: int = DEFAULTS.le
     field_name, field_array = field_input(vector_field, dims)
     config = make_volume_config(size=size, levels=levels, window=window, pca_dims=pca_dims, k=k,
                                 exclude=exclude, passes=passes, neighbourhood=neighbourhood,
-                                jitter=jitter, fine_jitter=fine_jitter,
+                                jitter=jitter, fine_jitter=fine_jitter, usage=usage,
                                 vector_field=field_name, angle=angle, seed=seed)
     generator = check.rng(rng)
     volume = load_volume_exemplar(exemplar, exemplar_kind=exemplar_kind, spacing=spacing)
@@ -409,7 +449,8 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
         for p in range(config.passes):
             if parzen is None:
                 coords, mean_cost = correction_pass(coords, frames, feat, kset, h, lo, hi,
-                                                    NEIGHBOURHOODS[config.neighbourhood])
+                                                    NEIGHBOURHOODS[config.neighbourhood],
+                                                    usage=config.usage)
             else:
                 coords, mean_cost = parzen_pass(coords, frames, feat, values, kset, h, lo, hi,
                                                 NEIGHBOURHOODS[config.neighbourhood], config.window,

@@ -696,12 +696,29 @@ def naive_similarity_sets(neighbours: np.ndarray, coords: np.ndarray, k: int, ex
     return out
 
 
-def naive_correct(coords, frames, feat, kset, h, lo, hi, offsets, parity):
+def naive_cell_usage(coords, shape, h, lo, hi):
+    """Twin of ``cell_usage``: a dictionary of counts per exemplar cell ``u // h`` and the even
+    count (output voxels over the cells that meet the valid box)."""
+    counts = {}
+    for u in coords.reshape(-1, 3):
+        cell = tuple(int(x) // h for x in u)
+        counts[cell] = counts.get(cell, 0) + 1
+    cells = {tuple(int(x) // h for x in u) for u in itertools.product(*[range(lo[a], hi[a] + 1) for a in range(3)])}
+    return counts, coords[..., 0].size / len(cells)
+
+
+def naive_correct(coords, frames, feat, kset, h, lo, hi, offsets, parity, weight=0.0):
     """One correction sub-pass, straight from the docstring of the kernel: (new coords, costs)."""
     out = coords.copy()
     cost = np.zeros(coords.shape[:3])
     shape = feat.shape[:3]
     n = coords.shape[:3]
+    counts, even = naive_cell_usage(coords, shape, h, lo, hi)
+
+    def penalty(u, current):
+        cell = tuple(int(x) // h for x in u)
+        c = counts.get(cell, 0) - (cell == tuple(int(x) // h for x in current))
+        return weight * max(0.0, c / even - 1.0)
 
     def clamp_box(u):
         return np.minimum(np.maximum(u, lo), hi)
@@ -719,7 +736,8 @@ def naive_correct(coords, frames, feat, kset, h, lo, hi, offsets, parity):
         for d, s in zip(offsets, sources):
             for q in kset[np.ravel_multi_index(tuple(s), shape)]:
                 candidates.append(clamp_box(np.array(np.unravel_index(q, shape)) - h * d))
-        dists = [((exemplar_neighbourhood(np.asarray(u)) - neigh) ** 2).sum() for u in candidates]
+        dists = [((exemplar_neighbourhood(np.asarray(u)) - neigh) ** 2).sum() + penalty(u, coords[p])
+                 for u in candidates]
         best = int(np.argmin(dists))
         out[p] = candidates[best]
         cost[p] = dists[best]

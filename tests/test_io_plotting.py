@@ -92,6 +92,13 @@ def test_read_array_missing_file(tmp_path):
         io.read_array(tmp_path / "nope.png", what="exemplar file")
 
 
+def test_missing_file_named_like_a_bundled_exemplar_says_how_to_name_it(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ParameterError, match=r"'gravel64' does not exist \(the bundled exemplar of "
+                                             r"that name is 'bundled:gravel64'\)"):
+        io.read_array("gravel64", what="exemplar file")
+
+
 def test_read_array_directory(tmp_path):
     folder = tmp_path / "dir.png"
     folder.mkdir()

@@ -127,8 +127,28 @@ def _distance_flat(flat_feat, base, flat_offsets, neigh, bound):
     return total
 
 
+@jit
+def _usage_penalty(counts, h, ua, ub, uc, own, even, weight):
+    """Position-histogram penalty ``weight * max(0, c / even - 1)`` of candidate ``u``: ``c`` is
+    the count of the exemplar cell ``u // h`` (``counts``), less one if it is the cell ``own`` of
+    the voxel's current coordinate (its own use)."""
+    if weight == 0.0:
+        return 0.0
+    ca, cb, cc = ua // h, ub // h, uc // h
+    c = counts[ca, cb, cc]
+    if (ca * counts.shape[1] + cb) * counts.shape[2] + cc == own:
+        c -= 1.0
+    return weight * max(0.0, c / even - 1.0)
+
+
+#: Early termination stops at ``best - penalty`` raised by this share of ``best``, so that a
+#: partial sum that stops can never have been a winner once its penalty is added (rounding).
+BOUND_SLACK = 1e-9
+
+
 @jit_parallel
-def correct(coords, out, frames, feat, kset, h, lo, hi, offsets, parity, cost):
+def correct(coords, out, frames, feat, kset, h, lo, hi, offsets, parity, cost, counts, even,
+            weight):
     """One correction sub-pass over the voxels ``(i, j, k)`` with ``(i % 2, j % 2, k % 2) ==
     parity`` (seed 002, section 3.2.4).
 
@@ -136,8 +156,10 @@ def correct(coords, out, frames, feat, kset, h, lo, hi, offsets, parity, cost):
     warped neighbours ``I_D = p + floor(R(p) D + 0.5)`` (toroidal), the
     neighbourhood vector ``[feat[coords[I_D]]]_D``; candidates ``kset[coords[I_D]][j] - h D``
     (clamped to the valid box) and the current coordinate; the candidate ``u`` minimising
-    ``sum_D ||feat[u + h D] - feat[coords[I_D]]||^2`` (first on ties) is written to ``out[p]``
-    and its distance to ``cost[p]``. ``frames`` is ``(N1, N2, N3, 3, 3)`` or ``(1, 1, 1, 3, 3)``
+    ``sum_D ||feat[u + h D] - feat[coords[I_D]]||^2 + P(u)`` (first on ties) is written to
+    ``out[p]`` and that score to ``cost[p]``. ``P`` is the position-histogram penalty
+    (:func:`_usage_penalty`: ``counts`` holds how many voxels use each ``h``-cell of the
+    exemplar, ``even`` the count of an even use; ``weight = 0`` gives ``P = 0``, seed 002's rule). ``frames`` is ``(N1, N2, N3, 3, 3)`` or ``(1, 1, 1, 3, 3)``
     (one frame for all voxels).
 
     A candidate equal to one already scored is skipped: its distance is the same, and only a
@@ -189,10 +211,12 @@ def correct(coords, out, frames, feat, kset, h, lo, hi, offsets, parity, cost):
                         neigh[d, e] = feat[src[d, 0], src[d, 1], src[d, 2], e]
                 ba, bb, bc = coords[i, j, kk, 0], coords[i, j, kk, 1], coords[i, j, kk, 2]
                 seen[0] = (ba * shape[1] + bb) * shape[2] + bc
+                own = ((ba // h) * counts.shape[1] + bb // h) * counts.shape[2] + bc // h
                 if inside:
                     best = _distance_flat(flat_feat, seen[0], flat_offsets, neigh, np.inf)
                 else:
                     best = _distance(feat, ba, bb, bc, h, offsets, neigh, shape, np.inf)
+                best += _usage_penalty(counts, h, ba, bb, bc, own, even, weight)
                 n_seen = 1
                 for d in range(n_off):
                     flat = (src[d, 0] * shape[1] + src[d, 1]) * shape[2] + src[d, 2]
@@ -210,10 +234,14 @@ def correct(coords, out, frames, feat, kset, h, lo, hi, offsets, parity, cost):
                             continue
                         seen[n_seen] = key
                         n_seen += 1
+                        penalty = _usage_penalty(counts, h, ua, ub, uc, own, even, weight)
+                        bound = best - penalty + BOUND_SLACK * best if penalty != 0.0 else best
                         if inside:
-                            dist = _distance_flat(flat_feat, key, flat_offsets, neigh, best)
+                            dist = _distance_flat(flat_feat, key, flat_offsets, neigh, bound)
                         else:
-                            dist = _distance(feat, ua, ub, uc, h, offsets, neigh, shape, best)
+                            dist = _distance(feat, ua, ub, uc, h, offsets, neigh, shape, bound)
+                        if penalty != 0.0:
+                            dist += penalty
                         if dist < best:
                             best = dist
                             ba, bb, bc = ua, ub, uc

@@ -41,6 +41,10 @@ FIELD_HELP = {
                      "faces (those and the 6 face neighbours)",
     "jitter": "jitter amplitude at the coarser levels, in units of the level's spacing (the paper: 0.7)",
     "fine_jitter": "jitter amplitude at the finest level",
+    "usage": "strength of the position histogram: a candidate copying an over-used part of the "
+             "exemplar pays usage x (half the distance of two random neighbourhoods) per excess "
+             "use (0: seed 002's rule, which collapses onto one homogeneous region of a "
+             "non-stationary scan)",
     "angle": "degrees of rotation of the named fields twist and bend",
     "adaptive": "Parzen bandwidth: 2h^2 = adaptive * the smallest neighbourhood distance, > 0",
     "centre_bandwidth": "width of the kernel on candidate centre values, times the exemplar's "
@@ -88,7 +92,7 @@ def _add(commands, name, method, formatter_class, *, help, description) -> None:
                              "by 2**(levels-1)")
     group = parser.add_argument_group("method")
     for name, f in fields.items():
-        if name in _OWN:
+        if name in _OWN or name in getattr(config_class, "unused", ()):
             continue
         kind = {int: int, float: float}.get(type(f.default))
         if kind is None:
@@ -136,7 +140,8 @@ def _spacing(text):
 
 def _handler(args: argparse.Namespace, argv: list[str], method) -> int:
     t_start = time.perf_counter()
-    fields = [f.name for f in dataclasses.fields(method.config_class) if f.name not in _OWN]
+    fields = [f.name for f in dataclasses.fields(method.config_class)
+              if f.name not in _OWN and f.name not in getattr(method.config_class, "unused", ())]
     options = {name: getattr(args, name) for name in fields}
     size = parse_size(args.size)
     extra = {}
