@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from npmrf3d import data
 from npmrf3d.errors import ParameterError
 
 __all__ = [
@@ -85,8 +86,6 @@ def _existing_file(path: str | os.PathLike[str], what: str) -> pathlib.Path:
     """Return ``path`` as a Path, or raise ParameterError if it is not an existing file."""
     path = pathlib.Path(path)
     if not path.exists():
-        from npmrf3d import data
-
         hint = (f" (the bundled exemplar of that name is 'bundled:{path}')"
                 if str(path) in data.available() else "")
         raise ParameterError(f"{what} '{path}' does not exist{hint}")
