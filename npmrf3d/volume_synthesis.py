@@ -13,7 +13,8 @@ voxel of the 3D exemplar: the synthesised volume is a field of exemplar coordina
    PCA keeps ``pca_dims`` = 8 dimensions (the paper: 375 -> 8).
 2. **Similarity sets** (``k = 3``): the voxel itself, then the nearest voxels in appearance space
    with each new one outside the ``7 x 7 x 7`` neighbourhood (``exclude = 3``) of the earlier ones.
-3. **Coordinate pyramid**: the coarsest level starts from uniformly random valid coordinates;
+3. **Coordinate pyramid**: the coarsest level starts from the exemplar tiled at its spacing
+   with a random offset and jitter (``start = "tiled"``; ``"random"``: uniform coordinates);
    each level's children take ``S[parent] + floor(h R^T (delta - 1/2) + 1/2)`` (``delta`` in
    {0, 1}^3, ``R`` the child's frame), then a **jitter** ``floor(h r U + 1/2)``, ``U`` uniform in
    [-1, 1]^3 (``r = jitter``, the paper's 0.7), then ``passes`` **correction** passes of 8
@@ -24,7 +25,8 @@ voxel of the 3D exemplar: the synthesised volume is a field of exemplar coordina
    ``R D``: the structure turns with the field.
 
 Choices where the paper is silent (also in ``docs/volume.md``): a coarsest level of
-``size / 2**(levels-1)`` voxels with random coordinates instead of one voxel; the valid box keeps
+``size / 2**(levels-1)`` voxels holding the exemplar tiled at its spacing (what one voxel
+up-sampled would give) with a random offset and jitter; the valid box keeps
 coordinates ``window // 2`` voxels from the exemplar's faces (the paper discards 2 voxels per
 border); coordinates are rounded after up-sampling and jitter; the similarity sets are searched
 (exact ``cKDTree``) for and among the valid voxels of a stride-2 lattice (1/8 of them), the
@@ -65,6 +67,9 @@ PCA_SAMPLES = 20000
 #: Stride of the lattice the similarity sets are searched in, and the neighbours queried.
 SET_STRIDE = 2
 SET_QUERY = 48
+#: How the coarsest level starts: the exemplar tiled (the paper's coordinate pyramid, from one
+#: voxel) with a random offset and jitter, or uniformly random coordinates.
+STARTS = ("tiled", "random")
 #: The synthesis neighbourhoods: the paper's 8 diagonal neighbours, or those and the 6 faces.
 NEIGHBOURHOODS = {"diagonal": _k.DIAGONALS, "faces": np.concatenate([_k.DIAGONALS, _k.FACES])}
 
@@ -84,6 +89,7 @@ class VolumeConfig:
     jitter: float = 0.7
     fine_jitter: float = 0.0
     usage: float = 1.0
+    start: str = "tiled"
     vector_field: str = "none"
     angle: float = 180.0
     seed: int | None = None
@@ -100,8 +106,9 @@ def make_volume_config(*, size=DEFAULTS.size, levels=DEFAULTS.levels, window=DEF
                        pca_dims=DEFAULTS.pca_dims, k=DEFAULTS.k, exclude=DEFAULTS.exclude,
                        passes=DEFAULTS.passes, neighbourhood=DEFAULTS.neighbourhood,
                        jitter=DEFAULTS.jitter, fine_jitter=DEFAULTS.fine_jitter,
-                       usage=DEFAULTS.usage, vector_field=DEFAULTS.vector_field,
-                       angle=DEFAULTS.angle, seed=None) -> VolumeConfig:
+                       usage=DEFAULTS.usage, start=DEFAULTS.start,
+                       vector_field=DEFAULTS.vector_field, angle=DEFAULTS.angle,
+                       seed=None) -> VolumeConfig:
     """Validate plain keyword arguments into a frozen :class:`VolumeConfig` (``vector_field``: a
     name of :data:`npmrf3d.fields.FIELDS`, ``array`` or ``file:PATH`` as :func:`field_input`
     records it)."""
@@ -125,6 +132,7 @@ def make_volume_config(*, size=DEFAULTS.size, levels=DEFAULTS.levels, window=DEF
         jitter=check.real("jitter", jitter, low=0.0, high=4.0),
         fine_jitter=check.real("fine_jitter", fine_jitter, low=0.0, high=4.0),
         usage=check.real("usage", usage, low=0.0, high=100.0),
+        start=check.choice("start", start, STARTS),
         vector_field=vector_field, angle=check.real("angle", angle, low=-3600.0, high=3600.0), seed=seed)
 
 
@@ -211,6 +219,25 @@ def upsample(coords: np.ndarray, frames: np.ndarray, h: int, lo, hi) -> np.ndarr
     rt = np.swapaxes(frames.astype(np.float64), -1, -2)
     offset = np.floor(h * np.einsum("...rc,...c->...r", rt, delta) + 0.5).astype(np.int64)
     return np.clip(child + offset, lo, hi)
+
+
+def initial_coordinates(shape, h: int, lo, hi, start: str, jitter: float,
+                        rng: np.random.Generator) -> np.ndarray:
+    """The coarsest level's coordinates ``(*shape, 3)`` int64 in the valid box ``[lo, hi]``.
+
+    ``tiled``: the exemplar laid out at the level's spacing, ``lo + (h p + o) mod (hi - lo + 1)``
+    with one random offset ``o``, then jittered (:func:`jittered`, amplitude ``jitter``) — what the
+    paper's pyramid from a single voxel gives, with wrap-around seams for the correction to mend.
+    ``random``: every coordinate uniform in the box (the exemplar's parts mixed voxel by voxel,
+    from which the correction drifts to the parts easiest to match: ``docs/volume.md``)."""
+    lo, hi = np.asarray(lo, dtype=np.int64), np.asarray(hi, dtype=np.int64)
+    if start == "random":
+        return np.stack([rng.integers(lo[a], hi[a] + 1, size=shape) for a in range(3)], axis=-1)
+    extent = hi - lo + 1
+    offset = rng.integers(0, extent)
+    grid = np.stack(np.meshgrid(*[np.arange(n, dtype=np.int64) for n in shape], indexing="ij"), axis=-1)
+    uniforms = rng.uniform(-1.0, 1.0, size=tuple(shape) + (3,)).astype(np.float32)
+    return jittered(lo + (grid * h + offset) % extent, h, jitter, uniforms, lo, hi)
 
 
 def jittered(coords: np.ndarray, h: int, amount: float, uniforms: np.ndarray, lo, hi) -> np.ndarray:
@@ -312,7 +339,7 @@ def volume_synthesize(exemplar, *, size=DEFAULTS.size, levels: int = DEFAULTS.le
                       k: int = DEFAULTS.k, exclude: int = DEFAULTS.exclude, passes: int = DEFAULTS.passes,
                       neighbourhood: str = DEFAULTS.neighbourhood, jitter: float = DEFAULTS.jitter,
                       fine_jitter: float = DEFAULTS.fine_jitter, usage: float = DEFAULTS.usage,
-                      vector_field=DEFAULTS.vector_field,
+                      start: str = DEFAULTS.start, vector_field=DEFAULTS.vector_field,
                       angle: float = DEFAULTS.angle, exemplar_kind: str = "auto", spacing=None,
                       rng=None, progress: ProgressCallback | None = None,
                       checkpoint: str | Path | None = None) -> SynthesisResult:
@@ -352,6 +379,9 @@ def volume_synthesize(exemplar, *, size=DEFAULTS.size, levels: int = DEFAULTS.le
         1)`` is added to a candidate's distance, ``c`` the voxels already copying its exemplar
         cell, ``s`` half the distance of two random exemplar neighbourhoods. 0 is seed 002's rule, which collapses onto one homogeneous region of a
         non-stationary scan (``docs/volume.md``).
+    start : {"tiled", "random"}
+        The coarsest level: the exemplar tiled at its spacing with a random offset and jitter
+        (the paper's pyramid), or uniformly random coordinates.
     vector_field : str, path or array
         ``none``, ``twist``, ``bend``, ``radial`` (:mod:`npmrf3d.fields`), a ``.npy`` file, or an
         array: directions ``(N1, N2, N3, 3)`` or frames ``(N1, N2, N3, 3, 3)``.
@@ -387,7 +417,7 @@ def volume_synthesize(exemplar, *, size=DEFAULTS.size, levels: int = DEFAULTS.le
     field_name, field_array = field_input(vector_field, dims)
     config = make_volume_config(size=size, levels=levels, window=window, pca_dims=pca_dims, k=k,
                                 exclude=exclude, passes=passes, neighbourhood=neighbourhood,
-                                jitter=jitter, fine_jitter=fine_jitter, usage=usage,
+                                jitter=jitter, fine_jitter=fine_jitter, usage=usage, start=start,
                                 vector_field=field_name, angle=angle, seed=seed)
     generator = check.rng(rng)
     volume = load_volume_exemplar(exemplar, exemplar_kind=exemplar_kind, spacing=spacing)
@@ -437,7 +467,7 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
         kset = similarity_sets(feat, lo, hi, config.k, config.exclude)
         t_model = time.perf_counter() - t0
         if coords is None:
-            coords = np.stack([rng.integers(lo[a], hi[a] + 1, size=shape) for a in range(3)], axis=-1)
+            coords = initial_coordinates(shape, h, lo, hi, config.start, config.jitter, rng)
         else:
             coords = upsample(coords, frames, h, lo, hi)
             uniforms = rng.uniform(-1.0, 1.0, size=shape + (3,)).astype(np.float32)

@@ -14,8 +14,8 @@ from npmrf3d._kernels import volume as _k
 from npmrf3d.errors import ParameterError
 from npmrf3d.methods import get_method
 from npmrf3d.resources import ResourceError
-from npmrf3d.volume_synthesis import (NEIGHBOURHOODS, appearance_space, cell_usage, make_volume_config,
-                                      set_positions, volume_synthesize)
+from npmrf3d.volume_synthesis import (NEIGHBOURHOODS, appearance_space, cell_usage, initial_coordinates,
+                                      make_volume_config, set_positions, volume_synthesize)
 from tests import naive
 
 RNG_SEED = 15
@@ -245,8 +245,9 @@ def test_npmrf_3d_keeps_the_layers_and_refuses_a_field():
 
 def test_position_histogram_keeps_the_phases_of_a_non_stationary_exemplar():
     """A grain texture (two phases, about half each) beside a homogeneous slab of 3/8 of the
-    exemplar: seed 002's rule (``usage = 0``) drifts towards the darker phase, whose matches
-    are easier; the position histogram keeps the bright phase's share near the exemplar's."""
+    exemplar, from random coarsest coordinates: seed 002's rule (``usage = 0``) drifts towards
+    the darker phase, whose matches are easier; the position histogram keeps the bright phase's
+    share near the exemplar's."""
     from scipy import ndimage
 
     noise = ndimage.gaussian_filter(np.random.default_rng(5).normal(size=(32, 32, 32)), 1.5, mode="wrap")
@@ -254,6 +255,21 @@ def test_position_histogram_keeps_the_phases_of_a_non_stationary_exemplar():
     ex[:12] = 0.0
     share = float(np.mean(ex == 1.0))
     for seed in (0, 1, 2):
-        errors = [abs(float(np.mean(volume_synthesize(ex, size=16, levels=2, rng=seed, usage=u)
-                                    .volume == 1.0)) - share) for u in (0.0, 1.0)]
+        errors = [abs(float(np.mean(volume_synthesize(ex, size=16, levels=2, rng=seed, usage=u,
+                                                      start="random").volume == 1.0)) - share)
+                  for u in (0.0, 1.0)]
         assert errors[1] < 0.07 < errors[0], errors
+
+
+@pytest.mark.parametrize("start", ["tiled", "random"])
+def test_initial_coordinates_lie_in_the_valid_box_and_tiled_ones_are_coherent(start):
+    lo, hi = np.array([2, 2, 3]), np.array([29, 25, 40])
+    coords = initial_coordinates((8, 6, 10), 4, lo, hi, start, 0.0, np.random.default_rng(1))
+    assert coords.shape == (8, 6, 10, 3) and coords.dtype == np.int64
+    assert (coords >= lo).all() and (coords <= hi).all()
+    step = np.diff(coords[..., 2], axis=2)  # neighbours along axis 2, coordinate along axis 2
+    coherent = np.mean(step == 4)
+    if start == "tiled":  # steps of h, but where the tiling wraps round the valid box
+        assert coherent >= 0.85 and set(np.unique(step)) <= {4, 4 - (hi[2] - lo[2] + 1)}
+    else:
+        assert coherent < 0.2
