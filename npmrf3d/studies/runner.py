@@ -237,11 +237,11 @@ def plan_workers(workers: int | None, threads: int | None, cores: int | None = N
 def _start_local_cluster(workers: int):
     """A LocalCluster of ``workers`` processes of one Dask thread each.
 
-    The numba thread count is not put in the workers' environment as ``NUMBA_NUM_THREADS``: a spawned worker
-    imports the parent's main module (a study script imports numba) before the Nanny's
-    environment is applied, so numba's pool would be sized already and the first compilation in
-    the worker (a fresh install, an empty cache) would fail with "Cannot set NUMBA_NUM_THREADS
-    to a different value once the threads have been launched". Each run sets its numba threads
+    The numba thread count is not put in the workers' environment as ``NUMBA_NUM_THREADS``: a
+    spawned worker imports the parent's main module (a study script imports numba) before the
+    Nanny's environment is applied, so numba's pool would be sized already and the first
+    compilation in the worker (a fresh install, an empty cache) would fail with "Cannot set
+    NUMBA_NUM_THREADS to a different value once the threads have been launched". Each run sets its numba threads
     itself (:func:`execute_run` calls ``use_threads``) and BLAS runs single-threaded inside the
     kernels (``single_threaded_blas``); the BLAS variables below are a default for anything else.
     """
