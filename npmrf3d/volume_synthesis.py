@@ -34,7 +34,8 @@ exclusion rule applied to all earlier members, and the other voxels take their l
 set shifted by their offset; the correction keeps the current coordinate as a candidate
 and reads the sub-pass's input (Jacobi), so results do not depend on the thread count; a position
 histogram (``usage``, this project's addition after Chen & Wang 2010: :func:`cell_usage`) keeps
-non-stationary exemplars from collapsing onto one homogeneous region; the output is toroidal; colours are the exemplar's full-resolution values at the final coordinates.
+non-stationary exemplars from collapsing onto one homogeneous region; the output is toroidal;
+colours are the exemplar's full-resolution values at the final coordinates.
 """
 
 from __future__ import annotations
@@ -261,8 +262,10 @@ def correction_pass(coords: np.ndarray, frames: np.ndarray, feat: np.ndarray, ks
     positions = set_positions(kset, feat.shape[:3])
     cost = np.zeros(coords.shape[:3])
     weight = float(usage) * usage_scale(feat, offsets)
+    counts, even = np.zeros((1, 1, 1)), 1.0  # read only when weight > 0
     for parity in np.ndindex(2, 2, 2):
-        counts, even = cell_usage(coords, feat.shape[:3], h, lo, hi)
+        if weight:
+            counts, even = cell_usage(coords, feat.shape[:3], h, lo, hi)
         _k.correct(coords, out, frames, feat, positions, h, lo, hi, offsets,
                    np.array(parity, dtype=np.int64), cost, counts, even, weight)
         cls = tuple(slice(p, None, 2) for p in parity)
@@ -284,8 +287,8 @@ def cell_usage(coords: np.ndarray, shape, h: int, lo, hi) -> tuple[np.ndarray, f
     This project's addition after Chen & Wang 2010's position histogram (seed 002 has none, and
     relies on a stationary exemplar): the correction adds ``usage * s * max(0, c / even - 1)`` to
     a candidate's distance (``s``: :func:`usage_scale`), so that no part of the exemplar is
-    copied far more often than the rest. Without it a non-stationary exemplar (a scan with a homogeneous region)
-    collapses onto that region: uniform neighbourhoods match each other best
+    copied far more often than the rest. Without it a non-stationary exemplar (a scan with a
+    homogeneous region) collapses onto that region: uniform neighbourhoods match each other best
     (``docs/volume.md``). Cells of the level's spacing make ``even`` the same at every level,
     the ratio of output voxels to exemplar voxels."""
     cells = tuple(-(-int(n) // h) for n in shape)

@@ -159,8 +159,8 @@ def correct(coords, out, frames, feat, kset, h, lo, hi, offsets, parity, cost, c
     ``sum_D ||feat[u + h D] - feat[coords[I_D]]||^2 + P(u)`` (first on ties) is written to
     ``out[p]`` and that score to ``cost[p]``. ``P`` is the position-histogram penalty
     (:func:`_usage_penalty`: ``counts`` holds how many voxels use each ``h``-cell of the
-    exemplar, ``even`` the count of an even use; ``weight = 0`` gives ``P = 0``, seed 002's rule). ``frames`` is ``(N1, N2, N3, 3, 3)`` or ``(1, 1, 1, 3, 3)``
-    (one frame for all voxels).
+    exemplar, ``even`` the count of an even use; ``weight = 0`` gives ``P = 0``, seed 002's rule).
+    ``frames`` is ``(N1, N2, N3, 3, 3)`` or ``(1, 1, 1, 3, 3)`` (one frame for all voxels).
 
     A candidate equal to one already scored is skipped: its distance is the same, and only a
     strictly smaller one wins, so the choice is that of scoring every candidate (coherent

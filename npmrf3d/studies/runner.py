@@ -241,9 +241,10 @@ def _start_local_cluster(workers: int):
     spawned worker imports the parent's main module (a study script imports numba) before the
     Nanny's environment is applied, so numba's pool would be sized already and the first
     compilation in the worker (a fresh install, an empty cache) would fail with "Cannot set
-    NUMBA_NUM_THREADS to a different value once the threads have been launched". Each run sets its numba threads
-    itself (:func:`execute_run` calls ``use_threads``) and BLAS runs single-threaded inside the
-    kernels (``single_threaded_blas``); the BLAS variables below are a default for anything else.
+    NUMBA_NUM_THREADS to a different value once the threads have been launched". Each run sets
+    its numba threads itself (:func:`execute_run` calls ``use_threads``) and BLAS runs
+    single-threaded inside the kernels (``single_threaded_blas``); the BLAS variables below are a
+    default for anything else.
     """
     from distributed import LocalCluster
 
