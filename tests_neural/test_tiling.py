@@ -80,3 +80,18 @@ def test_unpadded_blocks_trim_what_the_plan_says():
     g = SolidGenerator(scales=3, channel_step=2, noise_channels=2, out_channels=1).eval()
     with torch.no_grad():
         assert g((-3, 0, 7), (5, 1, 2)).shape == (1, 1, 5, 1, 2)
+
+
+def test_channels_last_layout_gives_the_same_volume_up_to_rounding():
+    """Generation runs channels-last (1x1x1 convolutions as matrix products); the values must be
+    those of the contiguous layout the model trains in, and the model must come back contiguous."""
+    g = random_generator(out_channels=3)
+    with torch.no_grad():
+        contiguous = g((3, -5, 7), (20, 20, 20), seed=2)
+        last = g.channels_last(True)((3, -5, 7), (20, 20, 20), seed=2)
+    assert g.is_channels_last
+    assert last.shape == contiguous.shape
+    np.testing.assert_allclose(last.numpy(), contiguous.numpy(), rtol=0, atol=1e-4)
+    model = _model(tile=32)
+    generate_block(model, (0, 0, 0), (8, 8, 8))
+    assert not model.generator.is_channels_last

@@ -79,11 +79,29 @@ class Conv3d(nn.Conv3d):
     :data:`MIN_CHANNELS` (same parameters and state as :class:`torch.nn.Conv3d`)."""
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if self.kernel_size == (1, 1, 1) and _is_channels_last(x):
+            return _pointwise(x, self.weight, self.bias)
         extra = MIN_CHANNELS - self.in_channels
         if extra <= 0:
             return super().forward(x)
         pad = (0, 0) * 3 + (0, extra)
         return F.conv3d(F.pad(x, pad), F.pad(self.weight, pad), self.bias)
+
+
+def _is_channels_last(x: torch.Tensor) -> bool:
+    """Whether ``x`` is stored channels-last (and not also contiguous, as one channel would be)."""
+    return x.dim() == 5 and x.shape[1] > 1 and x.stride(1) == 1 and not x.is_contiguous()
+
+
+def _pointwise(x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor | None) -> torch.Tensor:
+    """A 1x1x1 convolution of a channels-last tensor as one matrix product over its voxels
+    (CPU libraries run this case 5x slower as a convolution: measured 54 ms against 10 ms for
+    24 -> 24 channels on 64^3). The result is channels-last too."""
+    b, c, n0, n1, n2 = x.shape
+    rows = x.permute(0, 2, 3, 4, 1).reshape(-1, c)
+    w = weight.reshape(weight.shape[0], c).t()
+    y = rows @ w if bias is None else torch.addmm(bias, rows, w)
+    return y.view(b, n0, n1, n2, -1).permute(0, 4, 1, 2, 3)
 
 
 def _conv_block(c_in: int, c_out: int, slope: float) -> nn.Sequential:
@@ -132,6 +150,20 @@ class SolidGenerator(nn.Module):
     def device(self) -> torch.device:
         return self.final.weight.device
 
+    @property
+    def is_channels_last(self) -> bool:
+        """Whether the parameters (and so the activations of :meth:`forward`) are channels-last."""
+        return self.after_blocks[0][0].weight.stride(1) == 1 if self.scales > 1 else False
+
+    def channels_last(self, enabled: bool = True) -> "SolidGenerator":
+        """Store the parameters channels-last (``enabled``) or contiguous, in place.
+
+        Generation on a CPU is about 1.5x faster channels-last (measured on a 64^3 tile: 0.65 s
+        against 0.43 s on one core); the values differ from the contiguous layout's in the last
+        bits only, and a given layout gives the same values for every block.
+        """
+        return self.to(memory_format=torch.channels_last_3d if enabled else torch.contiguous_format)
+
     def forward(self, origin, shape, seed: int | None = None) -> torch.Tensor:
         """The block ``origin + [0, shape)`` of the volume: a ``(1, C, *shape)`` tensor."""
         p = plan(origin, shape, self.scales)
@@ -142,14 +174,17 @@ class SolidGenerator(nn.Module):
             return noise_block(p.noise_start[k], p.noise_shape[k], scale=k,
                                channels=self.noise_channels, seed=seed, device=self.device, dtype=dtype)
 
+        # the generator's parameters in channels-last order (see :meth:`channels_last`) mean its
+        # activations are stored that way too: the CPU library's fast path for 3D convolutions
+        fmt = torch.channels_last_3d if self.is_channels_last else torch.contiguous_format
         top = self.scales - 1
-        x = self.noise_blocks[top](noise(top))
+        x = self.noise_blocks[top](noise(top).contiguous(memory_format=fmt))
         for k in range(top - 1, -1, -1):
             b, c, n0, n1, n2 = x.shape  # nearest-neighbour up-sampling by 2, one copy
             up = x[:, :, :, None, :, None, :, None].expand(b, c, n0, 2, n1, 2, n2, 2)
             up = up.reshape(b, c, 2 * n0, 2 * n1, 2 * n2)
             (c0, c1, c2), (n0, n1, n2) = p.crop[k], p.concat_shape[k]
-            up = up[:, :, c0:c0 + n0, c1:c1 + n1, c2:c2 + n2]
-            y = self.noise_blocks[k](noise(k))
+            up = up[:, :, c0:c0 + n0, c1:c1 + n1, c2:c2 + n2].contiguous(memory_format=fmt)
+            y = self.noise_blocks[k](noise(k).contiguous(memory_format=fmt))
             x = self.after_blocks[k](torch.cat([self.norm_coarse[k](up), self.norm_noise[k](y)], dim=1))
         return self.final(x)
