@@ -73,15 +73,16 @@ def test_the_map_is_saved_and_old_files_load_without_it(tmp_path, exemplar_rgb, 
     neural.save_model(model, tmp_path / "m.pt")
     loaded = neural.load_model(tmp_path / "m.pt")
     np.testing.assert_array_equal(loaded.calibration, model.calibration)
+    np.testing.assert_array_equal(loaded.colour_basis, model.colour_basis)
     np.testing.assert_array_equal(neural.generate(loaded, 5, 12), neural.generate(model, 5, 12))
     payload = engine._payload(model)
-    del payload["calibration"]
+    del payload["calibration"], payload["colour_basis"]
     settings = json.loads(payload["config"])
     del settings["calibrate"]
     payload["config"] = json.dumps(settings)
     torch.save(payload, tmp_path / "old.pt")
     old = neural.load_model(tmp_path / "old.pt")
-    assert old.calibration is None and old.config.calibrate is False
+    assert old.calibration is None and old.colour_basis is None and old.config.calibrate is False
 
 
 def test_the_command_line_can_leave_it_out(tmp_path, exemplar):
@@ -94,3 +95,35 @@ def test_the_command_line_can_leave_it_out(tmp_path, exemplar):
     assert neural.load_model(tmp_path / "a.pt").calibration is not None
     assert neural.load_model(tmp_path / "b.pt").calibration is None
     assert neural.make_neural_config().calibrate is True
+
+
+def _off_line(colours, origin, direction) -> np.ndarray:
+    d = colours.reshape(-1, 3) - origin
+    return np.linalg.norm(d - np.outer(d @ direction, direction), axis=1)
+
+
+def test_colours_are_mapped_per_principal_component_and_stay_in_the_exemplars_gamut(tiny_options):
+    """An exemplar whose colours all lie on one line of RGB space (a brown-to-cream ramp, two
+    modes): after calibration the generated colours lie on that line too. A map per channel
+    (the same quantile matching, written here independently) leaves it: it pairs one channel's
+    high values with another's low ones, colours the exemplar does not have."""
+    rng = np.random.default_rng(4)
+    origin, direction = np.array([0.30, 0.18, 0.10]), np.array([0.6, 0.6, 0.52])
+    direction /= np.linalg.norm(direction)
+    t = np.where(rng.random((24, 24)) < 0.4, 0.9, 0.2) + rng.normal(0, 0.03, (24, 24))
+    exemplar = (origin + t[..., None] * direction).astype(np.float32)
+    model = neural.train(exemplar, rng=0, **{**tiny_options, "iterations": 4, "seed": 1})
+    basis = model.colour_basis
+    assert basis.shape == (4, 3)
+    np.testing.assert_allclose(basis[:3] @ basis[:3].T, np.eye(3), atol=1e-5)  # orthonormal
+    np.testing.assert_allclose(np.abs(basis[0]), direction, atol=1e-3)          # the ramp's axis
+    np.testing.assert_allclose(basis[3], exemplar.reshape(-1, 3).mean(axis=0), atol=1e-5)
+    block = neural.generate(model, (40, -8, 3), 20)
+    assert _off_line(block, origin, direction).max() < 1e-3
+    raw = engine._raw_block(model, (40, -8, 3), (20, 20, 20), None).reshape(-1, 3)
+    calib = engine._raw_block(model, (0, 0, 0), (engine.CALIBRATION_SIDE,) * 3, None).reshape(-1, 3)
+    q = np.linspace(0, 1, 257)
+    pooled = np.concatenate([exemplar.reshape(-1, 3)] * 3)
+    per_channel = np.stack([np.interp(raw[:, c], np.quantile(calib[:, c], q), np.quantile(pooled[:, c], q))
+                            for c in range(3)], axis=1)
+    assert np.median(_off_line(per_channel, origin, direction)) > 10 * np.median(_off_line(block, origin, direction)) + 1e-3

@@ -61,7 +61,8 @@ class NeuralConfig:
         histogram_loss`: sorted slice values against the exemplar's quantiles, per channel) beside
         the Gram terms; 0 leaves it out (the paper's loss).
     calibrate : bool
-        After training, fit a monotone map per channel that takes the quantiles of a
+        After training, fit a monotone map per channel (per principal component of the
+        exemplars' colours, for colour) that takes the quantiles of a
         calibration block of the generator's output to the exemplars' quantiles, and apply it
         to every generated value (:func:`npmrf3d.neural.engine.fit_calibration`). The map is
         pointwise, so blocks still tile exactly; it corrects the value histogram the Gram

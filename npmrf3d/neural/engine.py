@@ -36,7 +36,7 @@ from .config import NeuralConfig, slice_side
 from .descriptor import gram, gram_loss, histogram_loss, histogram_target, make_descriptor
 from .generator import SolidGenerator
 
-__all__ = ["FORMAT", "NeuralModel", "apply_calibration", "default_device", "fit_calibration", "generate_block",
+__all__ = ["FORMAT", "NeuralModel", "apply_calibration", "colour_basis", "default_device", "fit_calibration", "generate_block",
            "load_model", "model_bytes", "save_model", "train_model"]
 
 #: The ``format`` entry of a model file.
@@ -66,9 +66,13 @@ class NeuralModel:
     exemplars : dict
         View -> (H, W, C) of the exemplar it was trained on.
     calibration : (C, 2, Q) float32 ndarray or None
-        Per channel, ``Q`` quantiles of the raw output (row 0, increasing) and the exemplars'
-        (row 1): every generated value is mapped through the piecewise-linear map between them
-        (:func:`fit_calibration`); None: the raw output.
+        Per colour component, ``Q`` quantiles of the raw output (row 0, increasing) and the
+        exemplars' (row 1): every generated value is mapped through the piecewise-linear map
+        between them (:func:`fit_calibration`); None: the raw output.
+    colour_basis : (C + 1, C) float32 ndarray or None
+        The components the map works on: rows ``0 .. C-1`` an orthonormal basis (the principal
+        axes of the exemplars' colours), row ``C`` their mean; None: the channels themselves
+        (grey models, and model files from before the basis).
     """
 
     generator: SolidGenerator
@@ -77,6 +81,7 @@ class NeuralModel:
     timings: dict = field(default_factory=dict)
     exemplars: dict = field(default_factory=dict)
     calibration: np.ndarray | None = None
+    colour_basis: np.ndarray | None = None
 
     @property
     def channels(self) -> int:
@@ -211,7 +216,7 @@ def train_model(per_view: dict, config: NeuralConfig, rng: np.random.Generator, 
                         {v: tuple(int(n) for n in a.shape) for v, a in per_view.items()})
     if config.calibrate:
         t1 = time.perf_counter()
-        model.calibration = fit_calibration(model, per_view)
+        model.calibration, model.colour_basis = fit_calibration(model, per_view)
         model.timings["calibrate"] = time.perf_counter() - t1
     return model
 
@@ -223,35 +228,72 @@ CALIBRATION_SIDE = 48
 CALIBRATION_QUANTILES = 257
 
 
-def fit_calibration(model: NeuralModel, per_view: dict) -> np.ndarray:
-    """The ``(C, 2, Q)`` quantile map of :attr:`NeuralModel.calibration`.
+def colour_basis(colours: np.ndarray) -> np.ndarray | None:
+    """The ``(C + 1, C)`` principal axes (rows, largest variance first) and mean of ``colours``
+    ``(N, C)``; None for one channel. Each axis's sign makes its largest entry positive."""
+    colours = np.asarray(colours, dtype=np.float64)
+    if colours.shape[1] < 2:
+        return None
+    mean = colours.mean(axis=0)
+    _, vectors = np.linalg.eigh(np.cov(colours - mean, rowvar=False))
+    axes = vectors[:, ::-1].T
+    axes *= np.where(axes[np.arange(len(axes)), np.abs(axes).argmax(axis=1)] < 0, -1.0, 1.0)[:, None]
+    return np.vstack([axes, mean]).astype(np.float32)
+
+
+def _to_components(values: np.ndarray, basis: np.ndarray | None) -> np.ndarray:
+    if basis is None:
+        return values
+    c = values.shape[-1]
+    return (values.astype(np.float64) - basis[c]) @ basis[:c].astype(np.float64).T
+
+
+def fit_calibration(model: NeuralModel, per_view: dict) -> tuple[np.ndarray, np.ndarray | None]:
+    """The ``(C, 2, Q)`` quantile map of :attr:`NeuralModel.calibration` and the colour basis
+    it works in (:attr:`NeuralModel.colour_basis`).
 
     Raw output: the block ``[0, CALIBRATION_SIDE)^3`` of the model's own noise (110,592 voxels).
-    Target: every pixel of every view's exemplar, pooled. Row 0 is made strictly increasing
-    (flat stretches of the raw quantiles are spread by a few float32 steps) so that the map is a
-    function; values outside the raw range map to the exemplars' extremes.
+    Target: every pixel of every view's exemplar, pooled. Colour models are mapped per
+    principal component of the exemplars' colours (:func:`colour_basis`), not per channel: the
+    components of a natural image's colours are nearly independent, its channels are not, so
+    a per-channel map can make colours the exemplar never has (a red channel at its maximum
+    where green is at its minimum: magenta), while a map per component keeps the chroma within
+    the exemplar's range. Row 0 is made strictly increasing (flat stretches of the raw quantiles
+    are spread by a few float32 steps) so that the map is a function; values outside the raw
+    range map to the exemplars' extremes.
     """
     raw = _raw_block(model, (0, 0, 0), (CALIBRATION_SIDE,) * 3, None)
     channels = raw.shape[-1]
     levels = np.linspace(0.0, 1.0, CALIBRATION_QUANTILES)
     target = np.concatenate([a.reshape(-1, channels) for a in per_view.values()]).astype(np.float64)
+    basis = colour_basis(target)
+    raw, target = _to_components(raw.reshape(-1, channels), basis), _to_components(target, basis)
     out = np.empty((channels, 2, CALIBRATION_QUANTILES), dtype=np.float32)
     for c in range(channels):
-        xs = np.quantile(raw[..., c].astype(np.float64), levels).astype(np.float32)
+        xs = np.quantile(raw[:, c].astype(np.float64), levels).astype(np.float32)
         for q in range(1, len(xs)):
             if not xs[q] > xs[q - 1]:
                 xs[q] = np.nextafter(xs[q - 1], np.float32(np.inf))
         out[c, 0] = xs
         out[c, 1] = np.quantile(target[:, c], levels)
-    return out
+    return out, basis
 
 
-def apply_calibration(values: np.ndarray, calibration: np.ndarray | None) -> np.ndarray:
-    """``values`` (..., C) float32 through the per-channel map, in place (pointwise)."""
+def apply_calibration(values: np.ndarray, calibration: np.ndarray | None,
+                      basis: np.ndarray | None = None) -> np.ndarray:
+    """``values`` (..., C) float32 through the map of each component (in place, pointwise):
+    the channels themselves, or the components in ``basis`` (:func:`colour_basis`)."""
     if calibration is None:
         return values
-    for c in range(values.shape[-1]):
-        values[..., c] = np.interp(values[..., c], calibration[c, 0], calibration[c, 1])
+    if basis is None:
+        for c in range(values.shape[-1]):
+            values[..., c] = np.interp(values[..., c], calibration[c, 0], calibration[c, 1])
+        return values
+    c = values.shape[-1]
+    comps = _to_components(values.reshape(-1, c), basis)
+    for i in range(c):
+        comps[:, i] = np.interp(comps[:, i], calibration[i, 0], calibration[i, 1])
+    values[...] = (comps @ basis[:c].astype(np.float64) + basis[c]).reshape(values.shape)
     return values
 
 
@@ -275,7 +317,8 @@ def _tile_values(generator: SolidGenerator, t0, tile: int, seed) -> np.ndarray:
 def generate_block(model: NeuralModel, origin, shape, *, seed: int | None = None) -> np.ndarray:
     """The block ``origin + [0, shape)`` of the model's volume, float32 ``(N1, N2, N3, C)``:
     the generator's raw values (:func:`_raw_block`) through the model's calibration map."""
-    return apply_calibration(_raw_block(model, origin, shape, seed), model.calibration)
+    return apply_calibration(_raw_block(model, origin, shape, seed), model.calibration,
+                             model.colour_basis)
 
 
 def _raw_block(model: NeuralModel, origin, shape, seed) -> np.ndarray:
@@ -323,7 +366,8 @@ def _payload(model: NeuralModel) -> dict:
             "out_channels": model.channels, "state": model.generator.state_dict(),
             "history": list(model.history), "timings": json.dumps(model.timings),
             "exemplars": json.dumps(model.exemplars),
-            "calibration": None if model.calibration is None else model.calibration.tolist()}
+            "calibration": None if model.calibration is None else model.calibration.tolist(),
+            "colour_basis": None if model.colour_basis is None else model.colour_basis.tolist()}
 
 
 def model_bytes(model: NeuralModel) -> bytes:
@@ -361,6 +405,7 @@ def load_model(source) -> NeuralModel:
     generator.load_state_dict(payload["state"])
     generator.to(default_device()).eval()
     exemplars = {v: tuple(s) for v, s in json.loads(payload["exemplars"]).items()}
-    calibration = payload.get("calibration")
+    calibration, basis = payload.get("calibration"), payload.get("colour_basis")
     return NeuralModel(generator, config, list(payload["history"]), json.loads(payload["timings"]),
-                       exemplars, None if calibration is None else np.asarray(calibration, dtype=np.float32))
+                       exemplars, None if calibration is None else np.asarray(calibration, dtype=np.float32),
+                       None if basis is None else np.asarray(basis, dtype=np.float32))
