@@ -381,11 +381,18 @@ def compile_fresh(x):
     return twice(x)
 
 
+def allocator_setting():
+    import os
+
+    return os.environ.get("MALLOC_MMAP_THRESHOLD_")
+
+
 if __name__ == "__main__":
     from distributed import Client
 
     with runner._start_local_cluster(1) as cluster, Client(cluster) as client:
         print("result", client.submit(compile_fresh, 21).result())
+        print("mmap threshold", client.submit(allocator_setting).result())
 """
 
 
@@ -401,6 +408,11 @@ def test_local_cluster_workers_can_compile_from_a_script(tmp_path):
                           timeout=240, cwd=tmp_path)
     assert done.returncode == 0, done.stderr[-2000:]
     assert "result 42" in done.stdout
+    # and the allocator setting of npmrf3d._cluster reached the worker before it started
+    # (without it a worker's every large allocation is a fresh, zeroed mmap: 41 % kernel time)
+    from npmrf3d._cluster import MMAP_THRESHOLD
+
+    assert f"mmap threshold {MMAP_THRESHOLD}" in done.stdout
 
 
 def test_study_script_entry_point(tmp_path):

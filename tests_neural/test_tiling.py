@@ -95,3 +95,22 @@ def test_channels_last_layout_gives_the_same_volume_up_to_rounding():
     model = _model(tile=32)
     generate_block(model, (0, 0, 0), (8, 8, 8))
     assert not model.generator.is_channels_last
+
+
+def test_the_inference_copy_folds_every_norm_and_computes_the_same_function():
+    g = random_generator(out_channels=3)
+    with torch.no_grad():  # norms with their own scale and shift, not the identity
+        for m in g.modules():
+            if isinstance(m, torch.nn.BatchNorm3d):
+                m.weight.uniform_(0.5, 1.5)
+                m.bias.uniform_(-0.3, 0.3)
+        before = {k: v.clone() for k, v in g.state_dict().items()}
+        reference = g((-7, 2, 30), (18, 18, 18), seed=5)
+        fused = g.for_inference()
+        out = fused((-7, 2, 30), (18, 18, 18), seed=5)
+    assert not any(isinstance(m, torch.nn.BatchNorm3d) for m in fused.modules())
+    assert fused.is_channels_last and not g.is_channels_last
+    for k, v in g.state_dict().items():  # the model itself is untouched
+        torch.testing.assert_close(v, before[k], rtol=0, atol=0)
+    np.testing.assert_allclose(out.numpy(), reference.numpy(), rtol=0, atol=1e-4)
+    assert float(reference.std()) > 1e-2  # a non-trivial function, so the match means something

@@ -330,8 +330,9 @@ def _raw_block(model: NeuralModel, origin, shape, seed) -> np.ndarray:
     depends on the shape of a call, so uncut blocks of other shapes would differ in the last
     bits). Tiles run in parallel on ``torch.get_num_threads()`` threads, each tile on one
     (the library's own threading also changes the last bits), so the values do not depend on
-    the thread count either. The tiles are computed channels-last
-    (:meth:`SolidGenerator.channels_last`), the layout a CPU convolves fastest.
+    the thread count either. The tiles are computed by :meth:`SolidGenerator.for_inference`
+    (normalisations folded into the convolutions, channels-last: the layout a CPU convolves
+    fastest).
     """
     generator, tile = model.generator, model.config.tile
     generator.eval()
@@ -340,9 +341,9 @@ def _raw_block(model: NeuralModel, origin, shape, seed) -> np.ndarray:
         torch.backends.cudnn.deterministic = True
     out = np.empty((*shape, model.channels), dtype=np.float32)
     corners = [(a * tile, b * tile, c * tile) for a, b, c in itertools.product(*_tiles(origin, shape, tile))]
+    generator = generator.for_inference()  # norms folded, channels-last: a copy
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
-    generator.channels_last(True)  # the CPU's fast layout; restored below
     try:
         with ThreadPoolExecutor(max_workers=threads) as pool:
             for first in range(0, len(corners), threads):
@@ -354,7 +355,6 @@ def _raw_block(model: NeuralModel, origin, shape, seed) -> np.ndarray:
                         values[tuple(slice(l - t, h - t) for l, h, t in zip(lo, hi, t0))]
     finally:
         torch.set_num_threads(threads)
-        generator.channels_last(False)
     return out
 
 

@@ -19,6 +19,7 @@ per-channel affine map) when generating (:meth:`SolidGenerator.eval`).
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import torch
@@ -104,6 +105,28 @@ def _pointwise(x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor | None)
     return y.view(b, n0, n1, n2, -1).permute(0, 4, 1, 2, 3)
 
 
+def _affine(norm: nn.BatchNorm3d) -> tuple[torch.Tensor, torch.Tensor]:
+    """The evaluation-mode map ``x -> scale * x + shift`` of a batch normalisation (float64)."""
+    scale = norm.weight.double() / torch.sqrt(norm.running_var.double() + norm.eps)
+    return scale, norm.bias.double() - norm.running_mean.double() * scale
+
+
+def _fold_after(conv: nn.Conv3d, scale: torch.Tensor, shift: torch.Tensor) -> None:
+    """``conv`` followed by the per-output-channel affine map, as one convolution (in place)."""
+    w = conv.weight.double() * scale.view(-1, 1, 1, 1, 1)
+    conv.weight.copy_(w.to(conv.weight.dtype))
+    conv.bias.copy_((conv.bias.double() * scale + shift).to(conv.bias.dtype))
+
+
+def _fold_before(conv: nn.Conv3d, scale: torch.Tensor, shift: torch.Tensor) -> None:
+    """The per-input-channel affine map followed by the unpadded ``conv``, as one convolution
+    (in place): ``W' = W * scale_i``, ``b' = b + sum_{i, taps} W * shift_i``."""
+    w = conv.weight.double()
+    conv.bias.copy_((conv.bias.double() + (w * shift.view(1, -1, 1, 1, 1)).sum(dim=(1, 2, 3, 4)))
+                    .to(conv.bias.dtype))
+    conv.weight.copy_((w * scale.view(1, -1, 1, 1, 1)).to(conv.weight.dtype))
+
+
 def _conv_block(c_in: int, c_out: int, slope: float) -> nn.Sequential:
     layers = []
     for i, k in enumerate((3, 3, 1)):
@@ -154,6 +177,24 @@ class SolidGenerator(nn.Module):
     def is_channels_last(self) -> bool:
         """Whether the parameters (and so the activations of :meth:`forward`) are channels-last."""
         return self.after_blocks[0][0].weight.stride(1) == 1 if self.scales > 1 else False
+
+    def for_inference(self) -> "SolidGenerator":
+        """A copy for generation: every batch normalisation (a fixed per-channel affine map in
+        evaluation mode) folded into the convolution next to it, and the parameters
+        channels-last (:meth:`channels_last`). The same function up to float32 rounding, with
+        two passes over each activation fewer; ``self`` is left as it is."""
+        g = copy.deepcopy(self).eval()
+        with torch.no_grad():
+            for block in (*g.noise_blocks, *g.after_blocks):
+                for i in range(0, len(block), 3):   # (conv, norm, relu) triples
+                    scale, shift = _affine(block[i + 1])
+                    _fold_after(block[i], scale, shift)
+                    block[i + 1] = nn.Identity()
+            for k in range(self.scales - 1):       # the norms before each concatenation
+                (sc, tc), (sn, tn) = _affine(g.norm_coarse[k]), _affine(g.norm_noise[k])
+                _fold_before(g.after_blocks[k][0], torch.cat([sc, sn]), torch.cat([tc, tn]))
+                g.norm_coarse[k], g.norm_noise[k] = nn.Identity(), nn.Identity()
+        return g.channels_last(True)
 
     def channels_last(self, enabled: bool = True) -> "SolidGenerator":
         """Store the parameters channels-last (``enabled``) or contiguous, in place.

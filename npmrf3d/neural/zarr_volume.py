@@ -24,8 +24,9 @@ import shutil
 
 import torch
 import zarr
-from dask.distributed import Client, LocalCluster, as_completed
+from dask.distributed import Client, as_completed
 
+from .._cluster import local_cluster
 from ..errors import ParameterError
 from .config import ZARR_BLOCK, ZARR_WORKERS
 from .engine import generate_block, load_model
@@ -121,8 +122,7 @@ def write_zarr(model_path, out, *, size, block: int = ZARR_BLOCK, scheduler: str
     todo = [i for i in indices if i not in finished]
     cluster = None
     if scheduler is None:
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None)
+        cluster = local_cluster(workers, dashboard_address=None)
         client = Client(cluster)
     else:
         client = Client(scheduler)

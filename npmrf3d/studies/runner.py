@@ -33,7 +33,6 @@ Behaviour
 from __future__ import annotations
 
 import dataclasses
-import logging
 import math
 import os
 import pathlib
@@ -45,6 +44,7 @@ from datetime import datetime, timezone
 
 import numpy as np
 
+from npmrf3d._cluster import local_cluster
 from npmrf3d._kernels import _jit
 from npmrf3d.errors import ParameterError
 from npmrf3d.exemplar import exemplar_slice, named_exemplar
@@ -235,7 +235,8 @@ def plan_workers(workers: int | None, threads: int | None, cores: int | None = N
     return workers, threads
 
 def _start_local_cluster(workers: int):
-    """A LocalCluster of ``workers`` processes of one Dask thread each.
+    """A LocalCluster of ``workers`` processes of one Dask thread each
+    (:func:`npmrf3d._cluster.local_cluster`).
 
     The numba thread count is not put in the workers' environment as ``NUMBA_NUM_THREADS``: a
     spawned worker imports the parent's main module (a study script imports numba) before the
@@ -243,15 +244,10 @@ def _start_local_cluster(workers: int):
     compilation in the worker (a fresh install, an empty cache) would fail with "Cannot set
     NUMBA_NUM_THREADS to a different value once the threads have been launched". Each run sets
     its numba threads itself (:func:`execute_run` calls ``use_threads``) and BLAS runs
-    single-threaded inside the kernels (``single_threaded_blas``); the BLAS variables below are a
-    default for anything else.
+    single-threaded inside the kernels (``single_threaded_blas``).
     """
-    from distributed import LocalCluster
+    return local_cluster(workers)
 
-    single = str(1)
-    env = {"OMP_NUM_THREADS": single, "OPENBLAS_NUM_THREADS": single, "MKL_NUM_THREADS": single}
-    return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                        dashboard_address=":0", silence_logs=logging.WARNING, env=env)
 
 def _dashboard(client) -> str:
     try:
