@@ -7,8 +7,8 @@ positions for every weight), generates a ``--size``^3 volume and measures it wit
 Wasserstein; lower is better), with NP_K (:func:`npmrf3d.kopf_synthesize`, seed 0, 2 levels,
 window 8) on the same exemplar and size as the reference. Every trained model is measured twice:
 its raw output (``neural w=X``) and through its calibration map (``neural w=X calibrated``, the
-default since stop 21: the same network, values mapped per channel onto the exemplar's
-quantiles). Writes ``OUT.json`` (numbers, timings, value ranges) and ``OUT.png`` (each exemplar,
+default since stop 21: the same network, values mapped onto the exemplar's quantiles along
+the principal components of its colours, one component of a grey exemplar). Writes ``OUT.json`` (numbers, timings, value ranges) and ``OUT.png`` (each exemplar,
 then the middle front slice of every volume).
 
 Usage: ``OMP_NUM_THREADS=1 python benchmarks/bench_neural_histogram.py [--exemplars gravel64 lawn
