@@ -273,3 +273,37 @@ def test_initial_coordinates_lie_in_the_valid_box_and_tiled_ones_are_coherent(st
         assert coherent >= 0.85 and set(np.unique(step)) <= {4, 4 - (hi[2] - lo[2] + 1)}
     else:
         assert coherent < 0.2
+
+
+# --------------------------------------------------------------------------- stationarity
+
+
+def test_octant_fractions_and_the_stationarity_warning(rng):
+    from npmrf3d.materials import octant_fractions, stationarity_warning
+
+    v = rng.random((5, 6, 7))
+    got = octant_fractions(v, threshold=0.5)
+    for octant in np.ndindex(2, 2, 2):  # odd sides: the middle plane goes to the upper half
+        box = tuple(slice(0, n // 2) if o == 0 else slice(n // 2, n) for o, n in zip(octant, v.shape))
+        assert got[octant] == pytest.approx((v[box] > 0.5).mean())
+    noise = (rng.random((32, 32, 32)) < 0.5).astype(np.float32)
+    assert stationarity_warning(noise) is None
+    corner = noise.copy()
+    corner[:16, :16, :16] = 0.0  # a phase missing from one octant: a scan's outside
+    corner[16:, 16:, 16:] = 1.0
+    message = stationarity_warning(corner)
+    assert message is not None and "0.00 in one octant and 1.00 in another" in message
+
+
+def test_cli_warns_of_a_non_stationary_exemplar(tmp_path):
+    even = np.random.default_rng(3).random((24, 24, 24)) < 0.5
+    edge = even.copy()
+    edge[:12] = False  # half the scan is background
+    np.save(tmp_path / "edge.npy", (edge * 255).astype(np.uint8))
+    np.save(tmp_path / "even.npy", (even * 255).astype(np.uint8))
+    cmd = [sys.executable, "-m", "npmrf3d", "volume", "--size", "16", "--levels", "2", "--dry-run"]
+    edge = subprocess.run([*cmd, str(tmp_path / "edge.npy")], capture_output=True, text=True, timeout=300)
+    assert edge.returncode == 0, edge.stderr
+    assert "npmrf3d volume: warning: the exemplar is not stationary" in edge.stderr
+    even = subprocess.run([*cmd, str(tmp_path / "even.npy")], capture_output=True, text=True, timeout=300)
+    assert even.returncode == 0 and "warning" not in even.stderr

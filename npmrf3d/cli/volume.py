@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import pathlib
+import sys
 import time
 
 import numpy as np
@@ -18,6 +19,7 @@ import numpy as np
 from ..errors import ParameterError
 from ..exemplar import exemplar_source
 from ..fields import FIELDS, field_input
+from ..materials import stationarity_warning
 from ..methods import check_resources
 from ..runs import RUN_FILES
 from ..volume import load_volume_exemplar
@@ -166,6 +168,9 @@ def _handler(args: argparse.Namespace, argv: list[str], method) -> int:
     exemplar = load_volume_exemplar(source, exemplar_kind=args.exemplar_kind,
                                     spacing=_spacing(args.spacing))
     per_view = {"volume": exemplar}
+    warning = stationarity_warning(exemplar)
+    if warning is not None and not args.quiet:
+        print(f"npmrf3d {args.command}: warning: {warning}", file=sys.stderr)
     if args.dry_run:
         return dry_run(method, config, per_view)
     check_resources(method, config, per_view,
