@@ -37,9 +37,10 @@ class NeuralConfig:
     iterations : int
         Optimiser steps (one step: ``batch`` slices per view). The default, 1,000, was 300 until
         stop 24: on ``gravel64`` 1,200 steps took the orientation KL from 0.18 (100 steps) to
-        0.042 and on ``lawn`` 1,000 from 0.22 to 0.12, every other metric better too, and 1,000
-        steps fit issue 16's 30-minute budget on 2 CPU cores (about 12-16 min for a 64x64
-        exemplar, 25 for a 128x128 one; README, "Quality, longer training").
+        0.042 and on ``lawn`` 1,000 from 0.22 to 0.12, every other metric better too. On 2 CPU
+        cores (AMD EPYC) 1,000 steps take 12-14 min for a 64x64 exemplar and about 45 min for a
+        128x128 one (2.7 s a step); 600 steps keep the latter inside issue 16's 30 minutes
+        (README, "Quality, longer training").
     slice_size : int or None
         Side of the training slices; None: the exemplar's side, at most 128.
     batch : int
