@@ -231,13 +231,13 @@ def octant_fractions(volume, *, threshold="otsu") -> np.ndarray:
     return out
 
 
-def stationarity_warning(volume, *, threshold="otsu") -> str | None:
+def stationarity_warning(volume) -> str | None:
     """A one-line warning when a 3D exemplar is far from stationary, else None: when the share of
     its phase above Otsu's threshold differs between two octants by more than
     :data:`OCTANT_SPREAD`. ``volume-lh`` and ``npmrf-3d`` copy neighbourhoods as if every part of
     the exemplar were alike; a phase that lies in one region only (the outside of a head, a
     scan's edge) is then lost (``docs/volume.md``)."""
-    fractions = octant_fractions(volume, threshold=threshold)
+    fractions = octant_fractions(volume)
     low, high = float(fractions.min()), float(fractions.max())
     if high - low <= OCTANT_SPREAD:
         return None

@@ -302,8 +302,8 @@ def test_cli_warns_of_a_non_stationary_exemplar(tmp_path):
     np.save(tmp_path / "edge.npy", (edge * 255).astype(np.uint8))
     np.save(tmp_path / "even.npy", (even * 255).astype(np.uint8))
     cmd = [sys.executable, "-m", "npmrf3d", "volume", "--size", "16", "--levels", "2", "--dry-run"]
-    edge = subprocess.run([*cmd, str(tmp_path / "edge.npy")], capture_output=True, text=True, timeout=300)
-    assert edge.returncode == 0, edge.stderr
-    assert "npmrf3d volume: warning: the exemplar is not stationary" in edge.stderr
-    even = subprocess.run([*cmd, str(tmp_path / "even.npy")], capture_output=True, text=True, timeout=300)
-    assert even.returncode == 0 and "warning" not in even.stderr
+    warned = subprocess.run([*cmd, str(tmp_path / "edge.npy")], capture_output=True, text=True, timeout=300)
+    assert warned.returncode == 0, warned.stderr
+    assert "npmrf3d volume: warning: the exemplar is not stationary" in warned.stderr
+    quiet = subprocess.run([*cmd, str(tmp_path / "even.npy")], capture_output=True, text=True, timeout=300)
+    assert quiet.returncode == 0 and "warning" not in quiet.stderr

@@ -11,7 +11,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import pathlib
-import sys
 import time
 
 import numpy as np
@@ -26,7 +25,7 @@ from ..volume import load_volume_exemplar
 from ..volume_npmrf import METHOD as NPMRF_METHOD
 from ..volume_synthesis import METHOD
 from ._common import (claim_output, check_checkpoint, dry_run, output_folder, parse_size, run_method,
-                      write_result)
+                      say, write_result)
 
 __all__ = ["FIELD_HELP", "register"]
 
@@ -170,7 +169,7 @@ def _handler(args: argparse.Namespace, argv: list[str], method) -> int:
     per_view = {"volume": exemplar}
     warning = stationarity_warning(exemplar)
     if warning is not None and not args.quiet:
-        print(f"npmrf3d {args.command}: warning: {warning}", file=sys.stderr)
+        say(f"npmrf3d {args.command}: warning: {warning}", error=True)
     if args.dry_run:
         return dry_run(method, config, per_view)
     check_resources(method, config, per_view,
