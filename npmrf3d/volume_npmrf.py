@@ -41,16 +41,17 @@ __all__ = ["NpmrfVolumeConfig", "make_npmrf_volume_config", "npmrf_volume_synthe
 class NpmrfVolumeConfig(VolumeConfig):
     """:class:`npmrf3d.volume_synthesis.VolumeConfig` plus the Parzen decision's bandwidths.
 
-    ``usage`` is 0 and ``start`` is ``random``, neither an option: the Parzen decision has no
-    position histogram, and its measured numbers (``docs/volume.md``) are from random starts."""
+    ``usage`` and ``balance`` are 0 and ``start`` is ``random``, none an option: the Parzen
+    decision has neither histogram, and its measured numbers (``docs/volume.md``) are from random starts."""
 
     usage: float = 0.0
+    balance: float = 0.0
     start: str = "random"
     adaptive: float = 0.1
     centre_bandwidth: float = 0.1
 
     #: Fields of the base configuration this method does not use (no command-line option).
-    unused: ClassVar[tuple[str, ...]] = ("usage", "start")
+    unused: ClassVar[tuple[str, ...]] = ("usage", "balance", "start")
 
 
 DEFAULTS = NpmrfVolumeConfig()
@@ -68,7 +69,7 @@ def make_npmrf_volume_config(*, size=DEFAULTS.size, levels=DEFAULTS.levels, wind
                    f"got {vector_field!r}")
     base = make_volume_config(size=size, levels=levels, window=window, pca_dims=pca_dims, k=k,
                               exclude=exclude, passes=passes, neighbourhood=neighbourhood,
-                              jitter=jitter, fine_jitter=fine_jitter, usage=0.0, start="random",
+                              jitter=jitter, fine_jitter=fine_jitter, usage=0.0, balance=0.0, start="random",
                               angle=angle,
                               seed=seed)
     return NpmrfVolumeConfig(**base.to_dict(),

@@ -707,8 +707,21 @@ def naive_cell_usage(coords, shape, h, lo, hi):
     return counts, coords[..., 0].size / len(cells)
 
 
-def naive_correct(coords, frames, feat, kset, h, lo, hi, offsets, parity, weight=0.0):
-    """One correction sub-pass, straight from the docstring of the kernel: (new coords, costs)."""
+def naive_class_balance(coords, classes, share, weight):
+    """Twin of ``class_balance``: count the classes the volume's coordinates hold, voxel by voxel."""
+    held = [0] * len(share)
+    for u in coords.reshape(-1, 3):
+        held[int(classes[tuple(u)])] += 1
+    cost = np.zeros(classes.shape)
+    for idx in itertools.product(*[range(n) for n in classes.shape]):
+        c = int(classes[idx])
+        cost[idx] = weight * max(0.0, held[c] / coords[..., 0].size / share[c] - 1.0)
+    return cost
+
+
+def naive_correct(coords, frames, feat, kset, h, lo, hi, offsets, parity, weight=0.0, bias=None):
+    """One correction sub-pass, straight from the docstring of the kernel: (new coords, costs);
+    ``bias`` (exemplar-shaped, or None) is added to each candidate's distance."""
     out = coords.copy()
     cost = np.zeros(coords.shape[:3])
     shape = feat.shape[:3]
@@ -718,7 +731,7 @@ def naive_correct(coords, frames, feat, kset, h, lo, hi, offsets, parity, weight
     def penalty(u, current):
         cell = tuple(int(x) // h for x in u)
         c = counts.get(cell, 0) - (cell == tuple(int(x) // h for x in current))
-        return weight * max(0.0, c / even - 1.0)
+        return weight * max(0.0, c / even - 1.0) + (0.0 if bias is None else bias[tuple(u)])
 
     def clamp_box(u):
         return np.minimum(np.maximum(u, lo), hi)

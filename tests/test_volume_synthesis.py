@@ -14,8 +14,10 @@ from npmrf3d._kernels import volume as _k
 from npmrf3d.errors import ParameterError
 from npmrf3d.methods import get_method
 from npmrf3d.resources import ResourceError
-from npmrf3d.volume_synthesis import (NEIGHBOURHOODS, appearance_space, cell_usage, initial_coordinates,
+from npmrf3d.volume_synthesis import (NEIGHBOURHOODS, appearance_space, cell_usage, class_balance, initial_coordinates,
                                       make_volume_config, set_positions, volume_synthesize)
+from npmrf3d.materials import otsu_threshold
+from npmrf3d.volume_synthesis import value_classes
 from tests import naive
 
 RNG_SEED = 15
@@ -58,7 +60,8 @@ def test_similarity_sets_match_naive(rng, k, exclude):
 @pytest.mark.parametrize("twisted", [False, True])
 @pytest.mark.parametrize("h", [1, 2])
 @pytest.mark.parametrize("weight", [0.0, 1.5])
-def test_correct_matches_naive(rng, neighbourhood, twisted, h, weight):
+@pytest.mark.parametrize("biased", [False, True])
+def test_correct_matches_naive(rng, neighbourhood, twisted, h, weight, biased):
     shape, n = (7, 6, 8), (4, 6, 5)
     feat = rng.normal(size=shape + (3,))
     lo, hi = np.array([1, 1, 1]), np.array([5, 4, 6])
@@ -70,12 +73,60 @@ def test_correct_matches_naive(rng, neighbourhood, twisted, h, weight):
     for parity in [(0, 0, 0), (1, 0, 1)]:
         out, cost = coords.copy(), np.zeros(n)
         counts, even = cell_usage(coords, shape, h, lo, hi)
+        bias = rng.random(shape) * 3.0 if biased else None
         _k.correct(coords, out, frames, feat, set_positions(kset, shape), h, lo, hi, offsets,
-                   np.array(parity), cost, counts, even, weight)
+                   np.array(parity), cost, counts, even, weight, np.zeros((1, 1, 1)) if bias is None else bias)
         want, want_cost = naive.naive_correct(coords, frames, feat, kset, h, lo, hi, offsets, parity,
-                                              weight=weight)
+                                              weight=weight, bias=bias)
         np.testing.assert_array_equal(out, want)
         np.testing.assert_allclose(cost, want_cost, atol=1e-9)
+
+
+def test_value_classes_are_the_phases_of_a_segmented_exemplar_and_the_otsu_sides_otherwise(rng):
+    lo, hi = np.array([1, 1, 1]), np.array([6, 6, 6])
+    seg = (rng.random((8, 8, 8, 1)) < 0.3).astype(np.float32)
+    classes, share = value_classes(seg, lo, hi)
+    np.testing.assert_array_equal(classes, seg[..., 0].astype(np.int64))
+    assert share[1] == pytest.approx(seg[1:7, 1:7, 1:7].mean())
+    labels = rng.integers(0, 3, size=(8, 8, 8, 1)).astype(np.float32) * 0.5
+    np.testing.assert_array_equal(value_classes(labels, lo, hi)[0], (labels[..., 0] * 2).astype(np.int64))
+    # grey: two phases, the sides of Otsu's threshold of the valid box
+    grey = np.where(rng.random((8, 8, 8, 1)) < 0.4, 0.2, 0.8) + rng.normal(0, 0.05, size=(8, 8, 8, 1))
+    classes, share = value_classes(grey, lo, hi)
+    t = otsu_threshold(grey[1:7, 1:7, 1:7])
+    assert 0.3 < t < 0.7
+    np.testing.assert_array_equal(classes, (grey[..., 0] > t).astype(np.int64))
+    assert share.sum() == pytest.approx(1.0)
+    # colour: the first principal component orders the phases (equal channels: their mean)
+    c3, _ = value_classes(np.repeat(grey, 3, axis=3), lo, hi)
+    c3 = c3 if c3[0, 0, 0] == classes[0, 0, 0] else 1 - c3
+    assert np.mean(c3 != classes) < 0.02  # Otsu's 256 bins fall a little apart on the scaled axis
+
+
+def test_class_balance_matches_naive_and_charges_only_the_overused_class(rng):
+    classes = rng.integers(0, 3, size=(6, 5, 7))
+    share = np.array([0.2, 0.5, 0.3])
+    coords = np.stack([rng.integers(0, n, size=(4, 4, 3)) for n in classes.shape], axis=-1)
+    got = class_balance(coords, classes, share, 2.5)
+    np.testing.assert_allclose(got, naive.naive_class_balance(coords, classes, share, 2.5), atol=1e-12)
+    # every coordinate in class 0: class 0 pays 2.5 * (1 / 0.2 - 1), the others nothing
+    zero = np.argwhere(classes == 0)[0]
+    flat = np.broadcast_to(zero, (4, 4, 3, 3))
+    cost = class_balance(flat, classes, share, 2.5)
+    np.testing.assert_allclose(cost[classes == 0], 10.0)
+    assert np.all(cost[classes != 0] == 0)
+
+
+def test_the_phase_histogram_keeps_a_thin_minority_phase(rng):
+    # a network of thin pores (a minority phase) in grain: without the histogram it erodes
+    from scipy import ndimage
+    noise = ndimage.gaussian_filter(rng.normal(size=(32, 32, 32)), 2.0, mode="wrap")
+    pores = (np.abs(noise) < 0.25 * noise.std()).astype(np.float32)
+    share = float(pores[2:-2, 2:-2, 2:-2].mean())
+    free = volume_synthesize(pores, size=32, levels=3, rng=1, balance=0.0).volume.mean()
+    kept = volume_synthesize(pores, size=32, levels=3, rng=1, balance=4.0).volume.mean()
+    assert abs(kept - share) < abs(free - share)
+    assert abs(kept - share) < 0.25 * share
 
 
 def test_appearance_space_is_the_pca_of_the_neighbourhoods(rng):
@@ -247,7 +298,8 @@ def test_position_histogram_keeps_the_phases_of_a_non_stationary_exemplar():
     """A grain texture (two phases, about half each) beside a homogeneous slab of 3/8 of the
     exemplar, from random coarsest coordinates: seed 002's rule (``usage = 0``) drifts towards
     the darker phase, whose matches are easier; the position histogram keeps the bright phase's
-    share near the exemplar's."""
+    share near the exemplar's. (The phase histogram, ``balance``, is off: it alone would keep the
+    shares too, ``test_the_phase_histogram_keeps_a_thin_minority_phase``.)"""
     from scipy import ndimage
 
     noise = ndimage.gaussian_filter(np.random.default_rng(5).normal(size=(32, 32, 32)), 1.5, mode="wrap")
@@ -256,7 +308,7 @@ def test_position_histogram_keeps_the_phases_of_a_non_stationary_exemplar():
     share = float(np.mean(ex == 1.0))
     for seed in (0, 1, 2):
         errors = [abs(float(np.mean(volume_synthesize(ex, size=16, levels=2, rng=seed, usage=u,
-                                                      start="random").volume == 1.0)) - share)
+                                                      balance=0.0, start="random").volume == 1.0)) - share)
                   for u in (0.0, 1.0)]
         assert errors[1] < 0.07 < errors[0], errors
 

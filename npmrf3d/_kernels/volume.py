@@ -148,7 +148,7 @@ BOUND_SLACK = 1e-9
 
 @jit_parallel
 def correct(coords, out, frames, feat, kset, h, lo, hi, offsets, parity, cost, counts, even,
-            weight):
+            weight, bias):
     """One correction sub-pass over the voxels ``(i, j, k)`` with ``(i % 2, j % 2, k % 2) ==
     parity`` (seed 002, section 3.2.4).
 
@@ -159,7 +159,9 @@ def correct(coords, out, frames, feat, kset, h, lo, hi, offsets, parity, cost, c
     ``sum_D ||feat[u + h D] - feat[coords[I_D]]||^2 + P(u)`` (first on ties) is written to
     ``out[p]`` and that score to ``cost[p]``. ``P`` is the position-histogram penalty
     (:func:`_usage_penalty`: ``counts`` holds how many voxels use each ``h``-cell of the
-    exemplar, ``even`` the count of an even use; ``weight = 0`` gives ``P = 0``, seed 002's rule).
+    exemplar, ``even`` the count of an even use; ``weight = 0`` gives ``P = 0``, seed 002's rule)
+    plus ``bias[u]``, a non-negative cost of the exemplar voxel itself (the value-histogram
+    balance, ``volume_synthesis.class_balance``); a ``(1, 1, 1)`` ``bias`` means none.
     ``frames`` is ``(N1, N2, N3, 3, 3)`` or ``(1, 1, 1, 3, 3)`` (one frame for all voxels).
 
     A candidate equal to one already scored is skipped: its distance is the same, and only a
@@ -175,6 +177,7 @@ def correct(coords, out, frames, feat, kset, h, lo, hi, offsets, parity, cost, c
     n1, n2, n3 = coords.shape[0], coords.shape[1], coords.shape[2]
     shape = np.array([feat.shape[0], feat.shape[1], feat.shape[2]], dtype=np.int64)
     single = frames.shape[0] == 1
+    biased = bias.shape[0] > 1
     dims = feat.shape[3]
     k = kset.shape[1]
     n_off = offsets.shape[0]
@@ -217,6 +220,8 @@ def correct(coords, out, frames, feat, kset, h, lo, hi, offsets, parity, cost, c
                 else:
                     best = _distance(feat, ba, bb, bc, h, offsets, neigh, shape, np.inf)
                 best += _usage_penalty(counts, h, ba, bb, bc, own, even, weight)
+                if biased:
+                    best += bias[ba, bb, bc]
                 n_seen = 1
                 for d in range(n_off):
                     flat = (src[d, 0] * shape[1] + src[d, 1]) * shape[2] + src[d, 2]
@@ -235,6 +240,8 @@ def correct(coords, out, frames, feat, kset, h, lo, hi, offsets, parity, cost, c
                         seen[n_seen] = key
                         n_seen += 1
                         penalty = _usage_penalty(counts, h, ua, ub, uc, own, even, weight)
+                        if biased:
+                            penalty += bias[ua, ub, uc]
                         bound = best - penalty + BOUND_SLACK * best if penalty != 0.0 else best
                         if inside:
                             dist = _distance_flat(flat_feat, key, flat_offsets, neigh, bound)

@@ -1,0 +1,151 @@
+"""From a real micro-CT scan (issue 15's first target): ``volume-lh`` makes 128^3 from a 64^3 crop,
+judged against the spread of the scan's own held-out 64^3 crops.
+
+The scan is any segmented (two-phase) volume as ``.npy`` or a TIFF stack, read as
+``npmrf3d volume`` reads it. The ones measured here are not bundled (see ``docs/volume.md``,
+"Real micro-CT scans"): the Imperial College Berea sandstone (400^3) and Ketton limestone (256^3)
+segmented micro-CT images, as ``berea.tif`` and ``ketton.tif`` in
+``data/<name>/original/raw/<name>.zip`` of github.com/LukasMosser/PorousMediaGan.
+
+The scan is split along axis 0: the exemplar is the 64^3 crop at ``--corner`` of the first half
+(``--downsample`` 2 averages 2^3 voxels first, for coarse-grained rock in a 64^3 crop), and the
+real spread is every 64^3 crop of the second half (stride ``--stride``), which no run has seen.
+Each volume and crop is judged at the scan's threshold (0.5 of the scaled values, so
+``phase`` is the bright phase: grain): volume fraction, specific surface area (marching cubes)
+and radial two-point correlation S2(r), r = 0..16, each "inside" when it lies within the crops'
+min-max.
+
+Usage::
+
+    python benchmarks/bench_volume_microct.py --scan berea.tif --name berea --out figures/volume3d
+
+Prints one row per (balance, seed) and writes ``NAME.json`` and ``NAME.png`` into ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pathlib
+import platform
+import sys
+import time
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from npmrf3d.errors import ParameterError  # noqa: E402
+from npmrf3d.volume import load_volume_exemplar  # noqa: E402
+from npmrf3d.volume_synthesis import VolumeConfig, volume_synthesize  # noqa: E402
+
+sys.path.insert(0, str(pathlib.Path(__file__).parent))
+from bench_volume_scan import MAX_R, inside, statistics  # noqa: E402
+
+THRESHOLDS = {"grain|pore": 0.5}
+
+
+def crops_of(volume: np.ndarray, stride: int, side: int = 64):
+    n0, n1, n2 = volume.shape
+    for i in range(0, n0 - side + 1, stride):
+        for j in range(0, n1 - side + 1, stride):
+            for k in range(0, n2 - side + 1, stride):
+                yield volume[i:i + side, j:j + side, k:k + side]
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument("--scan", required=True, help="the segmented scan (.npy or TIFF stack)")
+    p.add_argument("--downsample", type=int, default=1, choices=(1, 2, 4),
+                   help="average this many voxels per side before cutting crops")
+    p.add_argument("--corner", default="0,0,0", help="corner of the exemplar crop in the first half")
+    p.add_argument("--stride", type=int, default=32, help="stride of the held-out crops")
+    p.add_argument("--seeds", type=int, nargs="+", default=[0])
+    p.add_argument("--balance", type=float, nargs="+", default=[VolumeConfig.balance],
+                   help="value-histogram strengths to run (0: the phase fractions are left free)")
+    p.add_argument("--size", type=int, default=128)
+    p.add_argument("--name", default="microct", help="name of the JSON and PNG written")
+    p.add_argument("--out", default="figures/volume3d")
+    args = p.parse_args(argv)
+    try:
+        scan = load_volume_exemplar(args.scan, exemplar_kind="volume")[..., 0]
+    except ParameterError as exc:
+        print(f"bench_volume_microct: error: {exc}", file=sys.stderr)
+        return 2
+    f = args.downsample
+    if f > 1:
+        s = [n // f * f for n in scan.shape]
+        scan = scan[:s[0], :s[1], :s[2]].reshape(s[0] // f, f, s[1] // f, f, s[2] // f, f).mean(axis=(1, 3, 5))
+    half = scan.shape[0] // 2
+    a, b, c = (int(x) for x in args.corner.split(","))
+    if a + 64 > half or b + 64 > scan.shape[1] or c + 64 > scan.shape[2]:
+        print(f"bench_volume_microct: error: the 64^3 crop at {args.corner} does not fit in the first half "
+              f"({half} x {scan.shape[1]} x {scan.shape[2]})", file=sys.stderr)
+        return 2
+    exemplar = scan[a:a + 64, b:b + 64, c:c + 64]
+    crops = [statistics(crop, THRESHOLDS) for crop in crops_of(scan[half:], args.stride)]
+    if len(crops) < 2:
+        print("bench_volume_microct: error: the second half holds fewer than two 64^3 crops", file=sys.stderr)
+        return 2
+    spread = {name: {key: [np.min([cr[name][key] for cr in crops], axis=0).tolist(),
+                           np.max([cr[name][key] for cr in crops], axis=0).tolist()]
+                     for key in ("fraction", "surface_area", "s2")} for name in THRESHOLDS}
+    ex_stats = statistics(exemplar, THRESHOLDS)
+    print(f"exemplar: {args.scan} crop at {(a, b, c)} (downsample {f}), fraction "
+          f"{ex_stats['grain|pore']['fraction']:.3f}, surface {ex_stats['grain|pore']['surface_area']:.4f}; "
+          f"{len(crops)} held-out crops")
+    for name in THRESHOLDS:
+        sp = spread[name]
+        print(f"  crops, {name}: fraction {sp['fraction'][0]:.3f}-{sp['fraction'][1]:.3f}, "
+              f"surface area {sp['surface_area'][0]:.4f}-{sp['surface_area'][1]:.4f}")
+    runs = []
+    for balance, seed in [(b, s_) for b in args.balance for s_ in args.seeds]:
+        t0 = time.perf_counter()
+        res = volume_synthesize(exemplar[..., None], size=args.size, rng=seed, balance=balance)
+        seconds = time.perf_counter() - t0
+        vol = res.volume[..., 0]
+        st = statistics(vol, THRESHOLDS)
+        verdict = {name: {key: inside(st[name][key], *spread[name][key])
+                          for key in ("fraction", "surface_area", "s2")} for name in THRESHOLDS}
+        runs.append({"balance": balance, "seed": seed, "seconds": round(seconds, 1), "statistics": st, "inside": verdict,
+                     "slice": vol[:, :, args.size // 2]})
+        parts = [f"fraction {st[n]['fraction']:.3f}{'' if verdict[n]['fraction'] else ' (out)'}, "
+                 f"surface {st[n]['surface_area']:.4f}{'' if verdict[n]['surface_area'] else ' (out)'}, "
+                 f"S2 {'inside' if verdict[n]['s2'] else 'out'}" for n in THRESHOLDS]
+        print(f"balance {balance:g} seed {seed}: {seconds:.1f} s; " + "; ".join(parts), flush=True)
+    out = pathlib.Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    record = {"scan": str(args.scan), "downsample": f, "corner": [a, b, c], "size": args.size,
+              "crops": len(crops), "stride": args.stride, "exemplar_statistics": ex_stats, "spread": spread,
+              "runs": [{k: v for k, v in r.items() if k != "slice"} for r in runs],
+              "threads": os.environ.get("NUMBA_NUM_THREADS", "all cores"),
+              "machine": platform.platform(), "processor": platform.processor()}
+    (out / f"{args.name}.json").write_text(json.dumps(record, indent=2))
+    fig, ax = plt.subplots(1, 2 + len(runs), figsize=(3.2 * (2 + len(runs)), 3.4))
+    ax[0].imshow(exemplar[:, :, 32], cmap="gray", vmin=0, vmax=1)
+    ax[0].set_title(f"exemplar: {pathlib.Path(args.scan).stem} 64³", fontsize=9)
+    for i, r in enumerate(runs):
+        ax[1 + i].imshow(r["slice"], cmap="gray", vmin=0, vmax=1)
+        ax[1 + i].set_title(f"volume-lh {args.size}³, balance {r['balance']:g}, seed {r['seed']}", fontsize=9)
+    for a_ in ax[:1 + len(runs)]:
+        a_.axis("off")
+    rr = np.arange(MAX_R + 1)
+    ax[-1].fill_between(rr, *spread["grain|pore"]["s2"], color="0.8", label=f"{len(crops)} held-out crops")
+    for r in runs:
+        ax[-1].plot(rr, r["statistics"]["grain|pore"]["s2"], label=f"balance {r['balance']:g}, seed {r['seed']}")
+    ax[-1].set_title("S2(r), grain phase")
+    ax[-1].set_xlabel("r (voxels)")
+    ax[-1].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / f"{args.name}.png", dpi=80)
+    plt.close(fig)
+    print(f"wrote {out / (args.name + '.json')} and {out / (args.name + '.png')}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
