@@ -49,10 +49,11 @@ FIELD_HELP = {
              "exemplar pays usage x (half the distance of two random neighbourhoods) per excess "
              "use (0: seed 002's rule, which collapses onto one homogeneous region of a "
              "non-stationary scan)",
-    "balance": "strength of the value histogram: a candidate whose phase (or value bin) the "
-               "volume already holds more often than the exemplar pays balance x (half the "
-               "distance of two random neighbourhoods) per excess share (0: the phase fractions "
-               "drift; a thin minority phase such as a rock's pores erodes)",
+    "balance": "strength of the phase histogram: a candidate whose phase (a segmented scan's "
+               "value, or a side of a grey scan's Otsu threshold) the volume already holds more "
+               "often than the exemplar pays balance x (half the distance of two random "
+               "neighbourhoods) per excess share (0: the phase fractions drift; a thin minority "
+               "phase such as a rock's pores erodes)",
     "angle": "degrees of rotation of the named fields twist and bend",
     "adaptive": "Parzen bandwidth: 2h^2 = adaptive * the smallest neighbourhood distance, > 0",
     "centre_bandwidth": "width of the kernel on candidate centre values, times the exemplar's "
