@@ -25,17 +25,13 @@ Prints one row per (balance, seed) and writes ``NAME.json`` and ``NAME.png`` int
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import pathlib
-import platform
 import sys
 import time
 
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from npmrf3d.errors import ParameterError  # noqa: E402
@@ -43,7 +39,7 @@ from npmrf3d.volume import load_volume_exemplar  # noqa: E402
 from npmrf3d.volume_synthesis import VolumeConfig, volume_synthesize  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
-from bench_volume_scan import MAX_R, inside, statistics  # noqa: E402
+from bench_volume_scan import inside, report, statistics  # noqa: E402
 
 THRESHOLDS = {"grain|pore": 0.5}
 
@@ -118,31 +114,11 @@ def main(argv=None) -> int:
                  f"S2 {'inside' if verdict[n]['s2'] else 'out'}" for n in THRESHOLDS]
         print(f"balance {balance:g} seed {seed}: {seconds:.1f} s; " + "; ".join(parts), flush=True)
     out = pathlib.Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     record = {"scan": str(args.scan), "downsample": f, "corner": [a, b, c], "size": args.size,
-              "crops": len(crops), "stride": args.stride, "exemplar_statistics": ex_stats, "spread": spread,
-              "runs": [{k: v for k, v in r.items() if k != "slice"} for r in runs],
-              "threads": os.environ.get("NUMBA_NUM_THREADS", "all cores"),
-              "machine": platform.platform(), "processor": platform.processor()}
-    (out / f"{args.name}.json").write_text(json.dumps(record, indent=2))
-    fig, ax = plt.subplots(1, 2 + len(runs), figsize=(3.2 * (2 + len(runs)), 3.4))
-    ax[0].imshow(exemplar[:, :, 32], cmap="gray", vmin=0, vmax=1)
-    ax[0].set_title(f"exemplar: {pathlib.Path(args.scan).stem} 64³", fontsize=9)
-    for i, r in enumerate(runs):
-        ax[1 + i].imshow(r["slice"], cmap="gray", vmin=0, vmax=1)
-        ax[1 + i].set_title(f"volume-lh {args.size}³, balance {r['balance']:g}, seed {r['seed']}", fontsize=9)
-    for a_ in ax[:1 + len(runs)]:
-        a_.axis("off")
-    rr = np.arange(MAX_R + 1)
-    ax[-1].fill_between(rr, *spread["grain|pore"]["s2"], color="0.8", label=f"{len(crops)} held-out crops")
-    for r in runs:
-        ax[-1].plot(rr, r["statistics"]["grain|pore"]["s2"], label=f"balance {r['balance']:g}, seed {r['seed']}")
-    ax[-1].set_title("S2(r), grain phase")
-    ax[-1].set_xlabel("r (voxels)")
-    ax[-1].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(out / f"{args.name}.png", dpi=80)
-    plt.close(fig)
+              "crops": len(crops), "stride": args.stride, "exemplar_statistics": ex_stats, "spread": spread}
+    report(out, args.name, record, runs, exemplar[:, :, 32], f"exemplar: {pathlib.Path(args.scan).stem} 64³",
+           lambda r: f"volume-lh {args.size}³, balance {r['balance']:g}, seed {r['seed']}",
+           lambda r: f"balance {r['balance']:g}, seed {r['seed']}", f"{len(crops)} held-out crops")
     print(f"wrote {out / (args.name + '.json')} and {out / (args.name + '.png')}")
     return 0
 

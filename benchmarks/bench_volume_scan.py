@@ -61,6 +61,38 @@ def inside(value, low, high) -> bool:
     return bool(np.all((np.asarray(value) >= np.asarray(low) - 1e-12) & (np.asarray(value) <= np.asarray(high) + 1e-12)))
 
 
+def report(out: pathlib.Path, name: str, record: dict, runs: list[dict], exemplar_slice: np.ndarray,
+           exemplar_title: str, slice_title, curve_label, crop_label: str) -> None:
+    """Write ``NAME.json`` (``record`` plus the runs without their slices, threads, machine) and
+    ``NAME.png`` (the exemplar's slice, each run's centre slice, and per threshold the runs' S2
+    over the crops' band) into ``out``; ``slice_title(run)`` and ``curve_label(run)`` name them."""
+    out.mkdir(parents=True, exist_ok=True)
+    record = dict(record, runs=[{k: v for k, v in r.items() if k != "slice"} for r in runs],
+                  threads=os.environ.get("NUMBA_NUM_THREADS", "all cores"),
+                  machine=platform.platform(), processor=platform.processor())
+    (out / f"{name}.json").write_text(json.dumps(record, indent=2))
+    names = list(record["spread"])
+    fig, ax = plt.subplots(1, 1 + len(runs) + len(names), figsize=(3.2 * (1 + len(runs) + len(names)), 3.4))
+    ax[0].imshow(exemplar_slice, cmap="gray", vmin=0, vmax=1)
+    ax[0].set_title(exemplar_title, fontsize=9)
+    for i, r in enumerate(runs):
+        ax[1 + i].imshow(r["slice"], cmap="gray", vmin=0, vmax=1)
+        ax[1 + i].set_title(slice_title(r), fontsize=9)
+    for a_ in ax[:1 + len(runs)]:
+        a_.axis("off")
+    rr = np.arange(MAX_R + 1)
+    for a_, key in zip(ax[1 + len(runs):], names):
+        a_.fill_between(rr, *record["spread"][key]["s2"], color="0.8", label=crop_label)
+        for r in runs:
+            a_.plot(rr, r["statistics"][key]["s2"], label=curve_label(r))
+        a_.set_title(f"S2(r), {key}")
+        a_.set_xlabel("r (voxels)")
+        a_.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / f"{name}.png", dpi=80)
+    plt.close(fig)
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
@@ -131,33 +163,13 @@ def main(argv=None) -> int:
                      f"S2 {'inside' if verdict[name]['s2'] else 'out'}" for name in thresholds]
             print(f"usage {usage:g} start {start} seed {seed}: {seconds:.1f} s; " + "; ".join(parts),
                   flush=True)
-    out = pathlib.Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     record = {"exemplar": f"Colin27 block at {corner} (0.5 mm, averaged to 1 mm), 64^3",
-              "size": args.size, "crops": len(crops), "thresholds": thresholds, "spread": spread,
-              "runs": [{k: v for k, v in r.items() if k != "slice"} for r in runs],
-              "threads": os.environ.get("NUMBA_NUM_THREADS", "all cores"),
-              "machine": platform.platform(), "processor": platform.processor()}
-    (out / f"{args.name}.json").write_text(json.dumps(record, indent=2))
-    fig, ax = plt.subplots(1, 3 + len(runs), figsize=(3.2 * (3 + len(runs)), 3.4))
-    ax[0].imshow(block[:, :, 32], cmap="gray", vmin=0, vmax=1)
-    ax[0].set_title(f"exemplar: Colin27 block at {corner}", fontsize=9)
-    for i, r in enumerate(runs):
-        ax[1 + i].imshow(r["slice"], cmap="gray", vmin=0, vmax=1)
-        ax[1 + i].set_title(f"{args.size}³, usage {r['usage']:g}, {r['start']}", fontsize=9)
-    for a_ in ax[:1 + len(runs)]:
-        a_.axis("off")
-    rr = np.arange(MAX_R + 1)
-    for a_, name in zip(ax[1 + len(runs):], thresholds):
-        a_.fill_between(rr, *spread[name]["s2"], color="0.8", label=f"{len(crops)} template crops")
-        for r in runs:
-            a_.plot(rr, r["statistics"][name]["s2"], label=f"usage {r['usage']:g}, {r['start']}, seed {r['seed']}")
-        a_.set_title(f"S2(r), {name}")
-        a_.set_xlabel("r (voxels)")
-        a_.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(out / f"{args.name}.png", dpi=80)
-    plt.close(fig)
+              "size": args.size, "crops": len(crops), "thresholds": thresholds, "spread": spread}
+    report(pathlib.Path(args.out), args.name, record, runs, block[:, :, 32],
+           f"exemplar: Colin27 block at {corner}",
+           lambda r: f"{args.size}³, usage {r['usage']:g}, {r['start']}",
+           lambda r: f"usage {r['usage']:g}, {r['start']}, seed {r['seed']}", f"{len(crops)} template crops")
+    out = pathlib.Path(args.out)
     print(f"wrote {out / (args.name + '.json')} and {out / (args.name + '.png')}")
     return 0
 
