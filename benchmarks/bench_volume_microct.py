@@ -39,7 +39,7 @@ from npmrf3d.volume import load_volume_exemplar  # noqa: E402
 from npmrf3d.volume_synthesis import VolumeConfig, volume_synthesize  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
-from bench_volume_scan import inside, report, statistics  # noqa: E402
+from bench_volume_scan import inside, print_spread, report, spread_of, statistics  # noqa: E402
 
 THRESHOLDS = {"grain|pore": 0.5}
 
@@ -87,17 +87,12 @@ def main(argv=None) -> int:
     if len(crops) < 2:
         print("bench_volume_microct: error: the second half holds fewer than two 64^3 crops", file=sys.stderr)
         return 2
-    spread = {name: {key: [np.min([cr[name][key] for cr in crops], axis=0).tolist(),
-                           np.max([cr[name][key] for cr in crops], axis=0).tolist()]
-                     for key in ("fraction", "surface_area", "s2")} for name in THRESHOLDS}
+    spread = spread_of(crops)
     ex_stats = statistics(exemplar, THRESHOLDS)
     print(f"exemplar: {args.scan} crop at {(a, b, c)} (downsample {f}), fraction "
           f"{ex_stats['grain|pore']['fraction']:.3f}, surface {ex_stats['grain|pore']['surface_area']:.4f}; "
           f"{len(crops)} held-out crops")
-    for name in THRESHOLDS:
-        sp = spread[name]
-        print(f"  crops, {name}: fraction {sp['fraction'][0]:.3f}-{sp['fraction'][1]:.3f}, "
-              f"surface area {sp['surface_area'][0]:.4f}-{sp['surface_area'][1]:.4f}")
+    print_spread(spread)
     runs = []
     for balance, seed in [(b, s_) for b in args.balance for s_ in args.seeds]:
         t0 = time.perf_counter()

@@ -61,6 +61,19 @@ def inside(value, low, high) -> bool:
     return bool(np.all((np.asarray(value) >= np.asarray(low) - 1e-12) & (np.asarray(value) <= np.asarray(high) + 1e-12)))
 
 
+def spread_of(crops: list[dict]) -> dict:
+    """Per threshold and statistic, the crops' ``[min, max]`` (elementwise for S2)."""
+    return {name: {key: [np.min([c[name][key] for c in crops], axis=0).tolist(),
+                         np.max([c[name][key] for c in crops], axis=0).tolist()]
+                   for key in ("fraction", "surface_area", "s2")} for name in crops[0]}
+
+
+def print_spread(spread: dict) -> None:
+    for name, sp in spread.items():
+        print(f"  crops, {name}: fraction {sp['fraction'][0]:.3f}-{sp['fraction'][1]:.3f}, "
+              f"surface area {sp['surface_area'][0]:.4f}-{sp['surface_area'][1]:.4f}")
+
+
 def report(out: pathlib.Path, name: str, record: dict, runs: list[dict], exemplar_slice: np.ndarray,
            exemplar_title: str, slice_title, curve_label, crop_label: str) -> None:
     """Write ``NAME.json`` (``record`` plus the runs without their slices, threads, machine) and
@@ -135,15 +148,10 @@ def main(argv=None) -> int:
                 crop = normalised(mm[i:i + 64, j:j + 64, k:k + 64])
                 if np.ptp(mm[i:i + 64, j:j + 64, k:k + 64]) > 0 and abs(float(np.mean(crop <= t_bg)) - share) <= 0.1:
                     crops.append(statistics(crop, thresholds))
-    spread = {name: {key: [np.min([c[name][key] for c in crops], axis=0).tolist(),
-                           np.max([c[name][key] for c in crops], axis=0).tolist()]
-                     for key in ("fraction", "surface_area", "s2")} for name in thresholds}
+    spread = spread_of(crops)
     print(f"exemplar: the Colin27 block ({block.shape}, background share {share:.3f}); "
           f"{len(crops)} template crops; thresholds {t_bg:.3f} (background|tissue), {t_wm:.3f} (grey|white)")
-    for name in thresholds:
-        sp = spread[name]
-        print(f"  crops, {name}: fraction {sp['fraction'][0]:.3f}-{sp['fraction'][1]:.3f}, "
-              f"surface area {sp['surface_area'][0]:.4f}-{sp['surface_area'][1]:.4f}")
+    print_spread(spread)
     runs = []
     variants = [(usage, start) for usage in args.usage for start in args.start]
     for usage, start in variants:
