@@ -450,6 +450,40 @@ def test_two_point_and_fractions_against_brute_force():
     assert rho[0] == pytest.approx(1.0) and np.all(np.abs(rho[1:]) < 0.1)
 
 
+def test_fraction_free_two_point_against_brute_force():
+    # the mean over the pairs inside the volume of (I(s) - phi)(I(s + r) - phi) / (phi - phi^2),
+    # I the phase indicator and phi the whole volume's fraction, written out pair by pair
+    rng = np.random.default_rng(1)
+    volume = (rng.random((10, 12, 8)) < 0.35).astype(np.float32)
+    phases = np.array([0.0, 1.0])
+    phi = float(volume.mean())
+    for axis in range(3):
+        curve = groundtruth.two_point(volume, axis, 3, phases, normalised=True)[0]
+        v = np.moveaxis(volume.astype(np.float64), axis, 0)
+        for r in range(4):
+            pairs = [(v[(i,) + rest] - phi) * (v[(i + r,) + rest] - phi)
+                     for i in range(v.shape[0] - r) for rest in np.ndindex(*v.shape[1:])]
+            assert curve[r] == pytest.approx(sum(pairs) / len(pairs) / (phi - phi ** 2))
+        assert curve[0] == pytest.approx(1.0)
+
+
+def test_fraction_free_two_point_does_not_rank_a_structureless_volume_above_structure(blobs):
+    real = groundtruth.load_reference(blobs)
+    exemplar = groundtruth.exemplar_slice(real, 0)
+    control = runner.structureless(exemplar, 32, 0)  # the right fraction, no structure
+    # a volume with the real structure but a phase fraction drifted (eroded by one voxel)
+    from scipy import ndimage
+    labels = real[..., 0] > 0.5
+    eroded = ndimage.binary_erosion(labels, iterations=1).astype(np.float32)[..., None]
+    noise = groundtruth.compare(control, real, exemplar)
+    shrunk = groundtruth.compare(eroded, real, exemplar)
+    assert shrunk["fraction_l1"] > noise["fraction_l1"]
+    # raw S2 follows the fraction and ranks the structureless volume first (why the shape exists)
+    assert shrunk["two_point_l2_mean"] > noise["two_point_l2_mean"]
+    assert shrunk["two_point_shape_l2_mean"] < noise["two_point_shape_l2_mean"]
+    assert set(shrunk["two_point_shape_l2"]) == {"axis0", "axis1", "axis2"}
+
+
 def test_ground_truth_compare_ranks_structure(blobs):
     real = groundtruth.load_reference(blobs)
     exemplar = groundtruth.exemplar_slice(real, 0)

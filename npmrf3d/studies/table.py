@@ -60,6 +60,8 @@ def make_row(spec: RunSpec, status: str, record: dict | None, measured: dict | N
             for axis, value in truth["two_point_l2"].items():
                 row[f"two_point_l2_{axis}"] = value
             row["two_point_l2"] = truth["two_point_l2_mean"]
+            if "two_point_shape_l2_mean" in truth:  # runs measured before stop 25 lack it
+                row["two_point_shape_l2"] = truth["two_point_shape_l2_mean"]
             row["fraction_l1"] = truth["fraction_l1"]
     row["error"] = error
     return row
@@ -123,7 +125,7 @@ def metric_columns(rows: list[dict]) -> list[str]:
         for key in row:
             if key.startswith("mean_") and key not in names:
                 names.append(key)
-    extra = [k for k in ("two_point_l2", "fraction_l1") if any(k in r for r in rows)]
+    extra = [k for k in ("two_point_l2", "two_point_shape_l2", "fraction_l1") if any(k in r for r in rows)]
     return names + extra
 
 
