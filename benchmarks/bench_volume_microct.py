@@ -17,7 +17,9 @@ min-max.
 
 Usage::
 
-    python benchmarks/bench_volume_microct.py --scan berea.tif --name berea --out figures/volume3d
+    python benchmarks/bench_volume_microct.py --scan berea.tif --downsample 2 --name berea \
+        --write-block berea_d2_block.npy
+    npmrf3d study groundtruth --volume berea_d2_block.npy --slice-axis 0   # the 2D -> 3D part
 
 Prints one row per (balance, seed) and writes ``NAME.json`` and ``NAME.png`` into ``--out``.
 """
@@ -66,6 +68,9 @@ def main(argv=None) -> int:
     p.add_argument("--size", type=int, default=128)
     p.add_argument("--name", default="microct", help="name of the JSON and PNG written")
     p.add_argument("--out", default="figures/volume3d")
+    p.add_argument("--write-block", default=None, metavar="PATH.npy",
+                   help="also save the 64^3 exemplar crop (float32 in [0, 1]) here, for "
+                        "'npmrf3d study groundtruth --volume PATH.npy'")
     args = p.parse_args(argv)
     try:
         scan = load_volume_exemplar(args.scan, exemplar_kind="volume")[..., 0]
@@ -83,6 +88,9 @@ def main(argv=None) -> int:
               f"({half} x {scan.shape[1]} x {scan.shape[2]})", file=sys.stderr)
         return 2
     exemplar = scan[a:a + 64, b:b + 64, c:c + 64]
+    if args.write_block:
+        np.save(args.write_block, exemplar.astype(np.float32))
+        print(f"wrote the exemplar crop to {args.write_block}")
     crops = [statistics(crop, THRESHOLDS) for crop in crops_of(scan[half:], args.stride)]
     if len(crops) < 2:
         print("bench_volume_microct: error: the second half holds fewer than two 64^3 crops", file=sys.stderr)
