@@ -17,8 +17,10 @@ from npmrf3d import cli, io
 from npmrf3d._files import CHECKSUM
 from npmrf3d.errors import ParameterError
 
-#: Two levels, long enough (seconds each) to be interrupted in the middle of the finest.
-RUN = ["synth", "--size", "24", "--levels", "2", "--window", "5", "--seed", "3", "--quiet"]
+#: Two levels, the finest long enough to be interrupted in its middle: about 6 s on one thread
+#: of the 2-core EPYC (at 24^3 it took about 2 s, and a resumed run sometimes finished before
+#: the SIGINT half a second after its lock arrived: a flaky failure, stop 25).
+RUN = ["synth", "--size", "48", "--levels", "2", "--window", "5", "--seed", "3", "--quiet"]
 
 
 def _start(cwd: pathlib.Path, *extra: str) -> subprocess.Popen:
