@@ -41,17 +41,10 @@ from npmrf3d.volume import load_volume_exemplar  # noqa: E402
 from npmrf3d.volume_synthesis import VolumeConfig, volume_synthesize  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
-from bench_volume_scan import inside, print_spread, report, spread_of, statistics  # noqa: E402
+from bench_volume_scan import (block_mean, crops_of, inside, print_spread, report, spread_of,  # noqa: E402
+                               statistics)
 
 THRESHOLDS = {"grain|pore": 0.5}
-
-
-def crops_of(volume: np.ndarray, stride: int, side: int = 64):
-    n0, n1, n2 = volume.shape
-    for i in range(0, n0 - side + 1, stride):
-        for j in range(0, n1 - side + 1, stride):
-            for k in range(0, n2 - side + 1, stride):
-                yield volume[i:i + side, j:j + side, k:k + side]
 
 
 def main(argv=None) -> int:
@@ -64,7 +57,7 @@ def main(argv=None) -> int:
     p.add_argument("--stride", type=int, default=32, help="stride of the held-out crops")
     p.add_argument("--seeds", type=int, nargs="+", default=[0])
     p.add_argument("--balance", type=float, nargs="+", default=[VolumeConfig.balance],
-                   help="value-histogram strengths to run (0: the phase fractions are left free)")
+                   help="phase-histogram strengths to run (0: the phase fractions are left free)")
     p.add_argument("--size", type=int, default=128)
     p.add_argument("--name", default="microct", help="name of the JSON and PNG written")
     p.add_argument("--out", default="figures/volume3d")
@@ -78,9 +71,7 @@ def main(argv=None) -> int:
         print(f"bench_volume_microct: error: {exc}", file=sys.stderr)
         return 2
     f = args.downsample
-    if f > 1:
-        s = [n // f * f for n in scan.shape]
-        scan = scan[:s[0], :s[1], :s[2]].reshape(s[0] // f, f, s[1] // f, f, s[2] // f, f).mean(axis=(1, 3, 5))
+    scan = block_mean(scan, f)
     half = scan.shape[0] // 2
     a, b, c = (int(x) for x in args.corner.split(","))
     if a + 64 > half or b + 64 > scan.shape[1] or c + 64 > scan.shape[2]:

@@ -61,6 +61,24 @@ def inside(value, low, high) -> bool:
     return bool(np.all((np.asarray(value) >= np.asarray(low) - 1e-12) & (np.asarray(value) <= np.asarray(high) + 1e-12)))
 
 
+def block_mean(volume: np.ndarray, factor: int) -> np.ndarray:
+    """The mean of every ``factor^3`` block (the sides cut to multiples of ``factor``)."""
+    if factor == 1:
+        return volume
+    s = [n // factor * factor for n in volume.shape]
+    return volume[:s[0], :s[1], :s[2]].reshape(s[0] // factor, factor, s[1] // factor, factor,
+                                               s[2] // factor, factor).mean(axis=(1, 3, 5))
+
+
+def crops_of(volume: np.ndarray, stride: int, side: int = 64):
+    """Every ``side^3`` crop of ``volume`` whose corner lies on the ``stride`` lattice."""
+    n0, n1, n2 = volume.shape
+    for i in range(0, n0 - side + 1, stride):
+        for j in range(0, n1 - side + 1, stride):
+            for k in range(0, n2 - side + 1, stride):
+                yield volume[i:i + side, j:j + side, k:k + side]
+
+
 def spread_of(crops: list[dict]) -> dict:
     """Per threshold and statistic, the crops' ``[min, max]`` (elementwise for S2)."""
     return {name: {key: [np.min([c[name][key] for c in crops], axis=0).tolist(),
@@ -134,20 +152,17 @@ def main(argv=None) -> int:
     data = np.asarray(nibabel.load(args.template).dataobj, dtype=np.float32)
     corner = tuple(int(x) for x in args.corner.split(","))
     a, b, c = corner
-    block = normalised(data[a:a + 128, b:b + 128, c:c + 128].reshape(64, 2, 64, 2, 64, 2).mean(axis=(1, 3, 5)))
-    s = [n // 2 * 2 for n in data.shape]
-    mm = data[:s[0], :s[1], :s[2]].reshape(s[0] // 2, 2, s[1] // 2, 2, s[2] // 2, 2).mean(axis=(1, 3, 5))
+    block = normalised(block_mean(data[a:a + 128, b:b + 128, c:c + 128], 2))
+    mm = block_mean(data, 2)
     t_bg = materials.otsu_threshold(block)
     t_wm = materials.otsu_threshold(block[block > t_bg])
     thresholds = {"background|tissue": t_bg, "grey|white": t_wm}
     share = float(np.mean(block <= t_bg))
     crops = []
-    for i in range(0, mm.shape[0] - 63, args.stride):
-        for j in range(0, mm.shape[1] - 63, args.stride):
-            for k in range(0, mm.shape[2] - 63, args.stride):
-                crop = normalised(mm[i:i + 64, j:j + 64, k:k + 64])
-                if np.ptp(mm[i:i + 64, j:j + 64, k:k + 64]) > 0 and abs(float(np.mean(crop <= t_bg)) - share) <= 0.1:
-                    crops.append(statistics(crop, thresholds))
+    for raw in crops_of(mm, args.stride):
+        crop = normalised(raw)
+        if np.ptp(raw) > 0 and abs(float(np.mean(crop <= t_bg)) - share) <= 0.1:
+            crops.append(statistics(crop, thresholds))
     spread = spread_of(crops)
     print(f"exemplar: the Colin27 block ({block.shape}, background share {share:.3f}); "
           f"{len(crops)} template crops; thresholds {t_bg:.3f} (background|tissue), {t_wm:.3f} (grey|white)")

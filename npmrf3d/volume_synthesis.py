@@ -54,6 +54,7 @@ from . import _validation as check
 from ._files import load_checkpoint, save_checkpoint
 from ._kernels import _jit
 from ._kernels import volume as _k
+from .coherence import pca_project
 from .config import SynthesisMethod, SynthesisResult
 from .fields import FIELDS, field_input, level_frames
 from .materials import otsu_threshold
@@ -259,8 +260,8 @@ def correction_pass(coords: np.ndarray, frames: np.ndarray, feat: np.ndarray, ks
     A sub-pass reads ``coords`` and writes its parity class into ``out``, which is then copied
     back into ``coords`` (an eighth of the voxels), so every sub-pass reads its input unchanged.
     ``usage`` is the strength of the position histogram (:func:`cell_usage`), recounted before
-    every sub-pass; 0 is seed 002's rule. ``balance`` is the strength of the value histogram
-    (:func:`class_balance`, of ``classes = value_classes(...)``), also recounted before every
+    every sub-pass; 0 is seed 002's rule. ``balance`` is the strength of the phase histogram
+    (:func:`class_balance`, of ``classes = phase_classes(...)``), also recounted before every
     sub-pass."""
     coords = np.array(coords, dtype=np.int64, order="C")  # a copy: the caller's array stays
     out = np.empty_like(coords)
@@ -272,7 +273,7 @@ def correction_pass(coords: np.ndarray, frames: np.ndarray, feat: np.ndarray, ks
     counts, even = np.zeros((1, 1, 1)), 1.0  # read only when weight > 0
     bias = np.zeros((1, 1, 1))  # none
     if balance and classes is None:
-        check.fail("balance > 0 needs the exemplar's value classes (classes=value_classes(...))")
+        check.fail("balance > 0 needs the exemplar's phases (classes=phase_classes(...))")
     for parity in np.ndindex(2, 2, 2):
         if weight:
             counts, even = cell_usage(coords, feat.shape[:3], h, lo, hi)
@@ -314,7 +315,7 @@ def cell_usage(coords: np.ndarray, shape, h: int, lo, hi) -> tuple[np.ndarray, f
 MAX_PHASES = 8
 
 
-def value_classes(exemplar: np.ndarray, lo, hi, phases: int = MAX_PHASES) -> tuple[np.ndarray, np.ndarray]:
+def phase_classes(exemplar: np.ndarray, lo, hi, phases: int = MAX_PHASES) -> tuple[np.ndarray, np.ndarray]:
     """The phase of every exemplar voxel, ``(D, H, W)`` int64, and each phase's share of the
     valid box ``[lo, hi]`` (float64, every share > 0).
 
@@ -326,12 +327,7 @@ def value_classes(exemplar: np.ndarray, lo, hi, phases: int = MAX_PHASES) -> tup
     into speckle, ``docs/volume.md``.)"""
     ex = np.asarray(exemplar, dtype=np.float64)
     flat = ex.reshape(-1, ex.shape[-1])
-    if flat.shape[1] > 1:
-        centred = flat - flat.mean(axis=0)
-        _, _, vt = np.linalg.svd(centred[:: max(1, len(centred) // PCA_SAMPLES)], full_matrices=False)
-        flat = centred @ vt[0]
-    else:
-        flat = flat[:, 0]
+    flat = pca_project(flat, 1)[2][:, 0] if flat.shape[1] > 1 else flat[:, 0]
     values = flat.reshape(ex.shape[:3])
     box = values[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1].ravel()
     distinct = np.unique(box)
@@ -345,7 +341,7 @@ def value_classes(exemplar: np.ndarray, lo, hi, phases: int = MAX_PHASES) -> tup
 
 
 def class_balance(coords: np.ndarray, classes: np.ndarray, share: np.ndarray, weight: float) -> np.ndarray:
-    """The value-histogram cost of every exemplar voxel, ``(D, H, W)`` float64: ``weight *
+    """The phase-histogram cost of every exemplar voxel, ``(D, H, W)`` float64: ``weight *
     max(0, v_c / share_c - 1)`` for its class ``c``, ``v_c`` the share of the volume's voxels
     whose coordinates lie in class ``c``.
 
@@ -446,7 +442,7 @@ def volume_synthesize(exemplar, *, size=DEFAULTS.size, levels: int = DEFAULTS.le
     balance : float
         Strength of the phase histogram (:func:`class_balance`): a candidate whose phase (a
         segmented exemplar's value, or a side of a grey one's Otsu threshold,
-        :func:`value_classes`) the volume already holds more often than the exemplar pays
+        :func:`phase_classes`) the volume already holds more often than the exemplar pays
         ``balance * s * max(0, share / exemplar share - 1)``. 0 leaves the phase fractions free
         (a minority phase such as the pores of a rock then shrinks level by level).
     start : {"tiled", "random"}
@@ -516,7 +512,7 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
         if vector_field is None:
             check.fail("vector_field 'array' needs the frames array (vector_field=...)")
     lo, hi = _valid_box(exemplar.shape[:3], config.window)
-    classes = value_classes(exemplar, lo, hi) if config.balance else None
+    classes = phase_classes(exemplar, lo, hi) if config.balance else None
     key = _key(config, exemplar, vector_field) + (f"|parzen={list(parzen)}" if parzen else "")
     sigma = float(exemplar.astype(np.float64).std()) or 1.0
     timings = {"setup": time.perf_counter() - t_start}

@@ -17,7 +17,7 @@ from npmrf3d.resources import ResourceError
 from npmrf3d.volume_synthesis import (NEIGHBOURHOODS, appearance_space, cell_usage, class_balance, initial_coordinates,
                                       make_volume_config, set_positions, volume_synthesize)
 from npmrf3d.materials import otsu_threshold
-from npmrf3d.volume_synthesis import value_classes
+from npmrf3d.volume_synthesis import phase_classes
 from tests import naive
 
 RNG_SEED = 15
@@ -82,23 +82,23 @@ def test_correct_matches_naive(rng, neighbourhood, twisted, h, weight, biased):
         np.testing.assert_allclose(cost, want_cost, atol=1e-9)
 
 
-def test_value_classes_are_the_phases_of_a_segmented_exemplar_and_the_otsu_sides_otherwise(rng):
+def test_phase_classes_are_the_phases_of_a_segmented_exemplar_and_the_otsu_sides_otherwise(rng):
     lo, hi = np.array([1, 1, 1]), np.array([6, 6, 6])
     seg = (rng.random((8, 8, 8, 1)) < 0.3).astype(np.float32)
-    classes, share = value_classes(seg, lo, hi)
+    classes, share = phase_classes(seg, lo, hi)
     np.testing.assert_array_equal(classes, seg[..., 0].astype(np.int64))
     assert share[1] == pytest.approx(seg[1:7, 1:7, 1:7].mean())
     labels = rng.integers(0, 3, size=(8, 8, 8, 1)).astype(np.float32) * 0.5
-    np.testing.assert_array_equal(value_classes(labels, lo, hi)[0], (labels[..., 0] * 2).astype(np.int64))
+    np.testing.assert_array_equal(phase_classes(labels, lo, hi)[0], (labels[..., 0] * 2).astype(np.int64))
     # grey: two phases, the sides of Otsu's threshold of the valid box
     grey = np.where(rng.random((8, 8, 8, 1)) < 0.4, 0.2, 0.8) + rng.normal(0, 0.05, size=(8, 8, 8, 1))
-    classes, share = value_classes(grey, lo, hi)
+    classes, share = phase_classes(grey, lo, hi)
     t = otsu_threshold(grey[1:7, 1:7, 1:7])
     assert 0.3 < t < 0.7
     np.testing.assert_array_equal(classes, (grey[..., 0] > t).astype(np.int64))
     assert share.sum() == pytest.approx(1.0)
     # colour: the first principal component orders the phases (equal channels: their mean)
-    c3, _ = value_classes(np.repeat(grey, 3, axis=3), lo, hi)
+    c3, _ = phase_classes(np.repeat(grey, 3, axis=3), lo, hi)
     c3 = c3 if c3[0, 0, 0] == classes[0, 0, 0] else 1 - c3
     assert np.mean(c3 != classes) < 0.02  # Otsu's 256 bins fall a little apart on the scaled axis
 

@@ -121,8 +121,9 @@ def two_point(volume: np.ndarray, axis: int, max_lag: int, phases: np.ndarray | 
         fraction); with ``normalised`` the normalised autocovariance of each phase's indicator
         ``I`` instead, the mean over the pairs of ``(I(s) - phi)(I(s + r) - phi) / (phi -
         phi^2)`` (``phi`` the volume's fraction; 1 at lag 0; ``(S2(r) - phi^2) / (phi - phi^2)``
-        but for the pairs cut at the faces), which does not depend on the fraction. Grey volumes: one row, the normalised autocovariance (1 at lag 0, 0
-        for a constant volume), with or without ``normalised``.
+        but for the pairs cut at the faces), which does not depend on the fraction. Grey
+        volumes: one row, the normalised autocovariance (1 at lag 0, 0 for a constant volume),
+        with or without ``normalised``.
 
     Examples
     --------
@@ -200,8 +201,11 @@ def compare(volume: np.ndarray, real: np.ndarray, exemplar: np.ndarray, *,
         out["two_point"][f"axis{axis}"] = mine.tolist()
         out["two_point_real"][f"axis{axis}"] = theirs.tolist()
         out["two_point_l2"][f"axis{axis}"] = float(np.sqrt(np.nansum((mine - theirs) ** 2)))
-        shape = two_point(volume, axis, max_lag, phases, normalised=True)
-        shape_real = two_point(real, axis, max_lag, phases, normalised=True)
+        if phases is None:  # grey curves are normalised already
+            shape, shape_real = mine, theirs
+        else:
+            shape = two_point(volume, axis, max_lag, phases, normalised=True)
+            shape_real = two_point(real, axis, max_lag, phases, normalised=True)
         out["two_point_shape_l2"][f"axis{axis}"] = float(np.sqrt(np.nansum((shape - shape_real) ** 2)))
     out["two_point_l2_mean"] = float(np.mean(list(out["two_point_l2"].values())))
     out["two_point_shape_l2_mean"] = float(np.mean(list(out["two_point_shape_l2"].values())))
