@@ -253,7 +253,8 @@ def jittered(coords: np.ndarray, h: int, amount: float, uniforms: np.ndarray, lo
 def correction_pass(coords: np.ndarray, frames: np.ndarray, feat: np.ndarray, kset: np.ndarray,
                     h: int, lo, hi, offsets: np.ndarray = _k.DIAGONALS,
                     usage: float = 0.0, balance: float = 0.0,
-                    classes: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, float]:
+                    phases: tuple[np.ndarray, np.ndarray] | None = None,
+                    prices: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """One correction pass: the 8 parity sub-passes in a fixed order; returns the coordinates and
     the mean matching score.
 
@@ -261,8 +262,9 @@ def correction_pass(coords: np.ndarray, frames: np.ndarray, feat: np.ndarray, ks
     back into ``coords`` (an eighth of the voxels), so every sub-pass reads its input unchanged.
     ``usage`` is the strength of the position histogram (:func:`cell_usage`), recounted before
     every sub-pass; 0 is seed 002's rule. ``balance`` is the strength of the phase histogram
-    (:func:`class_balance`, of ``classes = phase_classes(...)``), also recounted before every
-    sub-pass."""
+    (:func:`class_balance`, of ``phases = (phase_footprint(...), share)``), also recounted before
+    every sub-pass; ``prices`` (float64 per phase, zeros at the start of a run) is its integral
+    term, **updated in place** every sub-pass and carried from pass to pass and level to level."""
     coords = np.array(coords, dtype=np.int64, order="C")  # a copy: the caller's array stays
     out = np.empty_like(coords)
     feat = np.ascontiguousarray(feat)
@@ -272,13 +274,16 @@ def correction_pass(coords: np.ndarray, frames: np.ndarray, feat: np.ndarray, ks
     weight = float(usage) * scale
     counts, even = np.zeros((1, 1, 1)), 1.0  # read only when weight > 0
     bias = np.zeros((1, 1, 1))  # none
-    if balance and classes is None:
-        check.fail("balance > 0 needs the exemplar's phases (classes=phase_classes(...))")
+    if balance and (phases is None or prices is None):
+        check.fail("balance > 0 needs the exemplar's phases and their prices "
+                   "(phases=(phase_footprint(...), share), prices=np.zeros(len(share)))")
     for parity in np.ndindex(2, 2, 2):
         if weight:
             counts, even = cell_usage(coords, feat.shape[:3], h, lo, hi)
         if balance:
-            bias = class_balance(coords, *classes, float(balance) * scale)
+            error = phase_error(coords, *phases)
+            prices[:] = next_prices(prices, error)
+            bias = class_balance(phases[0], error, prices, float(balance) * scale)
         _k.correct(coords, out, frames, feat, positions, h, lo, hi, offsets,
                    np.array(parity, dtype=np.int64), cost, counts, even, weight, bias)
         cls = tuple(slice(p, None, 2) for p in parity)
@@ -340,18 +345,59 @@ def phase_classes(exemplar: np.ndarray, lo, hi, phases: int = MAX_PHASES) -> tup
     return classes, np.maximum(share, 1.0 / box.size)
 
 
-def class_balance(coords: np.ndarray, classes: np.ndarray, share: np.ndarray, weight: float) -> np.ndarray:
+def phase_footprint(classes: np.ndarray, phases: int, h: int) -> np.ndarray:
+    """The phase mix a level-``h`` coordinate stands for, ``(phases, D, H, W)`` float64: the share
+    of each phase among the exemplar voxels its descendants at the finest level copy.
+
+    Up-sampling puts the children of ``u`` at ``u + floor(h' (delta - 1/2) + 1/2)`` (``h'`` the
+    children's spacing), so without jitter or deformation the finest-level descendants of a
+    level-``h`` coordinate cover ``u + [1 - h/2, h/2]`` on every axis: a box of ``h`` voxels
+    (faces clamped, as the coordinates are). At the finest level (``h = 1``) it is the voxel's own
+    phase, one-hot. float32 (an exemplar-sized array per phase)."""
+    one_hot = (classes[None] == np.arange(phases)[:, None, None, None]).astype(np.float32)
+    if h == 1:
+        return one_hot
+    for axis in (1, 2, 3):  # the box [u + 1 - h/2, u + h/2]: scipy's window of an even size, origin -1
+        one_hot = ndimage.uniform_filter1d(one_hot, size=h, axis=axis, mode="nearest", origin=-1)
+    return one_hot
+
+
+#: The phase histogram's integral time, in sub-passes: every sub-pass a phase's price moves by
+#: its relative error over this many (``next_prices``).
+PRICE_STEPS = 4
+
+
+def phase_error(coords: np.ndarray, footprint: np.ndarray, share: np.ndarray) -> np.ndarray:
+    """Each phase's relative excess in the volume, ``v_c / share_c - 1`` (float64 per phase),
+    ``v_c = mean f_c(S[p])`` over the volume's voxels (``footprint``: :func:`phase_footprint`)."""
+    picked = footprint[:, coords[..., 0], coords[..., 1], coords[..., 2]]
+    return picked.reshape(len(share), -1).mean(axis=1) / share - 1.0
+
+
+def next_prices(prices: np.ndarray, error: np.ndarray) -> np.ndarray:
+    """The phase histogram's integral term after one more sub-pass: ``prices + error /
+    PRICE_STEPS``, shifted so that the cheapest phase costs 0 (only the differences between
+    phases change a decision)."""
+    moved = np.asarray(prices, dtype=np.float64) + np.asarray(error, dtype=np.float64) / PRICE_STEPS
+    return moved - moved.min()
+
+
+def class_balance(footprint: np.ndarray, error: np.ndarray, prices: np.ndarray, weight: float) -> np.ndarray:
     """The phase-histogram cost of every exemplar voxel, ``(D, H, W)`` float64: ``weight *
-    max(0, v_c / share_c - 1)`` for its class ``c``, ``v_c`` the share of the volume's voxels
-    whose coordinates lie in class ``c``.
+    sum_c f_c(u) (max(0, e_c) + lambda_c)``, ``f_c(u)`` the share of phase ``c`` that voxel ``u``
+    stands for at this level (:func:`phase_footprint`; one-hot at the finest level), ``e_c`` the
+    volume's relative excess of the phase (:func:`phase_error`) and ``lambda_c`` its price, the
+    running sum of the errors (:func:`next_prices`).
 
     This project's addition, after the histogram matching of Kopf et al. 2007 (seed 002 has
     none): with it the phase fractions of a segmented scan stay those of the exemplar, where the
     correction alone lets a thin minority phase (a rock's pores) erode level by level
-    (``docs/volume.md``)."""
-    used = classes[coords[..., 0], coords[..., 1], coords[..., 2]].ravel()
-    held = np.bincount(used, minlength=len(share)) / used.size
-    return np.ascontiguousarray((weight * np.maximum(0.0, held / share - 1.0))[classes])
+    (``docs/volume.md``). The excess alone (a proportional rule, stop 25) left a steady deficit
+    of the minority phase; the price, an integral of the error carried across passes and levels,
+    removes it. Counting a coarse coordinate by the phases of its descendants, not by its own
+    voxel, keeps the share through the up-sampling."""
+    per_phase = np.maximum(0.0, error) + prices
+    return np.ascontiguousarray(weight * np.tensordot(per_phase, footprint, axes=1))
 
 
 def set_positions(kset: np.ndarray, shape) -> np.ndarray:
@@ -443,8 +489,11 @@ def volume_synthesize(exemplar, *, size=DEFAULTS.size, levels: int = DEFAULTS.le
         Strength of the phase histogram (:func:`class_balance`): a candidate whose phase (a
         segmented exemplar's value, or a side of a grey one's Otsu threshold,
         :func:`phase_classes`) the volume already holds more often than the exemplar pays
-        ``balance * s * max(0, share / exemplar share - 1)``. 0 leaves the phase fractions free
-        (a minority phase such as the pores of a rock then shrinks level by level).
+        ``balance * s * (max(0, share / exemplar share - 1) + price)``, the price summing that
+        relative error over the sub-passes (:func:`next_prices`); at the coarser levels a
+        coordinate counts as the phase mix its descendants will copy (:func:`phase_footprint`).
+        0 leaves the phase fractions free (a minority phase such as the pores of a rock then
+        shrinks level by level).
     start : {"tiled", "random"}
         The coarsest level: the exemplar tiled at its spacing with a random offset and jitter
         (the paper's pyramid), or uniformly random coordinates.
@@ -513,6 +562,7 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
             check.fail("vector_field 'array' needs the frames array (vector_field=...)")
     lo, hi = _valid_box(exemplar.shape[:3], config.window)
     classes = phase_classes(exemplar, lo, hi) if config.balance else None
+    prices = None if classes is None else np.zeros(len(classes[1]))
     key = _key(config, exemplar, vector_field) + (f"|parzen={list(parzen)}" if parzen else "")
     sigma = float(exemplar.astype(np.float64).std()) or 1.0
     timings = {"setup": time.perf_counter() - t_start}
@@ -522,8 +572,10 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
     first = config.levels - 1
     resumed = _resume(checkpoint, key)
     if resumed is not None:
-        coords, done, state, history, timings, stats = resumed
+        coords, done, state, history, timings, stats, saved_prices = resumed
         rng.bit_generator.state = state
+        if prices is not None and saved_prices is not None:
+            prices = saved_prices
         first = done - 1
     for level in range(first, -1, -1):
         t0 = time.perf_counter()
@@ -532,6 +584,7 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
         frames = level_frames(config.vector_field, vector_field, config.size, level, config.angle)
         feat = appearance_space(exemplar, level, config.window, config.pca_dims, rng)
         kset = similarity_sets(feat, lo, hi, config.k, config.exclude)
+        phases = None if classes is None else (phase_footprint(classes[0], len(classes[1]), h), classes[1])
         t_model = time.perf_counter() - t0
         if coords is None:
             coords = initial_coordinates(shape, h, lo, hi, config.start, config.jitter, rng)
@@ -548,7 +601,7 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
                 coords, mean_cost = correction_pass(coords, frames, feat, kset, h, lo, hi,
                                                     NEIGHBOURHOODS[config.neighbourhood],
                                                     usage=config.usage, balance=config.balance,
-                                                    classes=classes)
+                                                    phases=phases, prices=prices)
             else:
                 coords, mean_cost = parzen_pass(coords, frames, feat, values, kset, h, lo, hi,
                                                 NEIGHBOURHOODS[config.neighbourhood], config.window,
@@ -564,7 +617,8 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
         if checkpoint is not None:
             save_checkpoint(checkpoint, config=key, coords=coords, level=level,
                             rng_state=json.dumps(rng.bit_generator.state), history=json.dumps(history),
-                            timings=json.dumps(timings), stats=json.dumps(stats))
+                            timings=json.dumps(timings), stats=json.dumps(stats),
+                            prices=np.zeros(0) if prices is None else prices)
     out = np.ascontiguousarray(exemplar[coords[..., 0], coords[..., 1], coords[..., 2]], dtype=np.float32)
     timings["total"] = time.perf_counter() - t_start
     labels = np.unique(exemplar.reshape(-1, exemplar.shape[3]), axis=0) if exemplar.size <= 1 << 22 else np.empty((0, exemplar.shape[3]))
@@ -599,7 +653,8 @@ def _resume(path, key):
                    f"delete it or choose another checkpoint path")
     return (np.asarray(data["coords"], dtype=np.int64), int(data["level"]),
             json.loads(str(data["rng_state"])), json.loads(str(data["history"])),
-            json.loads(str(data["timings"])), json.loads(str(data["stats"])))
+            json.loads(str(data["timings"])), json.loads(str(data["stats"])),
+            np.asarray(data["prices"], dtype=np.float64) if "prices" in data else None)
 
 
 def volume_estimate(config: VolumeConfig, exemplars) -> Estimate:
@@ -607,7 +662,8 @@ def volume_estimate(config: VolumeConfig, exemplars) -> Estimate:
     sub-pass runs, three while up-sampling), the frames (9 float32, when a field is used) and
     the jitter (3 float32); per exemplar voxel the appearance space (float64 x dims, twice while
     it is built), the similarity sets (int64 x k, and as positions int64 x 3k) and the smoothed
-    exemplar (float64 x C)."""
+    exemplar (float64 x C), and with the phase histogram the phases (int64), the cost (float64)
+    and the phase mix (float32 x phases, counted as ``MAX_PHASES``, twice while it is built)."""
     n = int(np.prod(config.size))
     shape = next(iter(dict(exemplars).values()))
     shape = tuple(np.shape(shape)) if not isinstance(shape, tuple) else shape
@@ -615,7 +671,8 @@ def volume_estimate(config: VolumeConfig, exemplars) -> Estimate:
     c = shape[3] if len(shape) > 3 else 1
     field = 0 if config.vector_field == "none" else 36 * n
     return Estimate({"coordinates": 3 * 24 * n + 12 * n + 4 * c * n, "vector field": field,
-                     "exemplar model": m * (16 * config.pca_dims + 32 * config.k + 16 * c)},
+                     "exemplar model": m * (16 * config.pca_dims + 32 * config.k + 16 * c),
+                     "phase histogram": m * (16 + 8 * MAX_PHASES) if config.balance else 0},
                     seconds=n / 2.0e5)
 
 

@@ -707,16 +707,30 @@ def naive_cell_usage(coords, shape, h, lo, hi):
     return counts, coords[..., 0].size / len(cells)
 
 
-def naive_class_balance(coords, classes, share, weight):
-    """Twin of ``class_balance``: count the classes the volume's coordinates hold, voxel by voxel."""
-    held = [0] * len(share)
-    for u in coords.reshape(-1, 3):
-        held[int(classes[tuple(u)])] += 1
-    cost = np.zeros(classes.shape)
+def naive_phase_footprint(classes, phases, h):
+    """Twin of ``phase_footprint``: for every exemplar voxel, count the phases of the voxels of its
+    box ``u + [1 - h/2, h/2]`` (indices clamped to the faces), one voxel at a time."""
+    out = np.zeros((phases,) + classes.shape)
+    span = range(1 - h // 2, h // 2 + 1) if h > 1 else range(0, 1)
     for idx in itertools.product(*[range(n) for n in classes.shape]):
-        c = int(classes[idx])
-        cost[idx] = weight * max(0.0, held[c] / coords[..., 0].size / share[c] - 1.0)
-    return cost
+        for off in itertools.product(span, span, span):
+            v = tuple(min(max(idx[a] + off[a], 0), classes.shape[a] - 1) for a in range(3))
+            out[(int(classes[v]),) + idx] += 1.0 / len(span) ** 3
+    return out
+
+
+def naive_class_balance(coords, footprint, share, prices, weight):
+    """Twin of ``phase_error`` and ``class_balance``: the volume's phase mix summed voxel by voxel,
+    then every exemplar voxel's cost from its own phase mix."""
+    held = [0.0] * len(share)
+    for u in coords.reshape(-1, 3):
+        for c in range(len(share)):
+            held[c] += footprint[(c,) + tuple(u)]
+    error = [held[c] / coords[..., 0].size / share[c] - 1.0 for c in range(len(share))]
+    cost = np.zeros(footprint.shape[1:])
+    for idx in itertools.product(*[range(n) for n in cost.shape]):
+        cost[idx] = weight * sum(footprint[(c,) + idx] * (max(0.0, error[c]) + prices[c]) for c in range(len(share)))
+    return np.array(error), cost
 
 
 def naive_correct(coords, frames, feat, kset, h, lo, hi, offsets, parity, weight=0.0, bias=None):

@@ -15,9 +15,9 @@ from npmrf3d.errors import ParameterError
 from npmrf3d.methods import get_method
 from npmrf3d.resources import ResourceError
 from npmrf3d.volume_synthesis import (NEIGHBOURHOODS, appearance_space, cell_usage, class_balance, initial_coordinates,
-                                      make_volume_config, set_positions, volume_synthesize)
+                                      make_volume_config, set_positions, upsample, volume_synthesize)
 from npmrf3d.materials import otsu_threshold
-from npmrf3d.volume_synthesis import phase_classes
+from npmrf3d.volume_synthesis import PRICE_STEPS, next_prices, phase_classes, phase_error, phase_footprint
 from tests import naive
 
 RNG_SEED = 15
@@ -107,14 +107,49 @@ def test_class_balance_matches_naive_and_charges_only_the_overused_class(rng):
     classes = rng.integers(0, 3, size=(6, 5, 7))
     share = np.array([0.2, 0.5, 0.3])
     coords = np.stack([rng.integers(0, n, size=(4, 4, 3)) for n in classes.shape], axis=-1)
-    got = class_balance(coords, classes, share, 2.5)
-    np.testing.assert_allclose(got, naive.naive_class_balance(coords, classes, share, 2.5), atol=1e-12)
-    # every coordinate in class 0: class 0 pays 2.5 * (1 / 0.2 - 1), the others nothing
+    prices = np.array([0.0, 0.3, 0.1])
+    for h in (1, 2, 4):
+        footprint = phase_footprint(classes, 3, h)
+        np.testing.assert_allclose(footprint, naive.naive_phase_footprint(classes, 3, h), atol=1e-6)
+        np.testing.assert_allclose(footprint.sum(axis=0), 1.0, atol=1e-6)
+        error = phase_error(coords, footprint, share)
+        want_error, want = naive.naive_class_balance(coords, footprint, share, prices, 2.5)
+        np.testing.assert_allclose(error, want_error, atol=1e-12)
+        np.testing.assert_allclose(class_balance(footprint, error, prices, 2.5), want, atol=1e-12)
+    # at the finest level, every coordinate in class 0, no prices: class 0 pays 2.5 * (1 / 0.2 - 1)
+    one_hot = phase_footprint(classes, 3, 1)
     zero = np.argwhere(classes == 0)[0]
     flat = np.broadcast_to(zero, (4, 4, 3, 3))
-    cost = class_balance(flat, classes, share, 2.5)
+    cost = class_balance(one_hot, phase_error(flat, one_hot, share), np.zeros(3), 2.5)
     np.testing.assert_allclose(cost[classes == 0], 10.0)
     assert np.all(cost[classes != 0] == 0)
+
+
+def test_a_coarse_coordinates_footprint_is_the_phase_mix_of_its_descendants(rng):
+    # up-sample one coordinate per level-h voxel down to the finest level (no field, no jitter):
+    # the phases its descendants copy are the footprint's
+    classes = rng.integers(0, 2, size=(12, 12, 12))
+    lo, hi = np.zeros(3, dtype=np.int64), np.full(3, 11, dtype=np.int64)
+    eye = np.eye(3)
+    for h in (2, 4):
+        u = np.array([[[[5, 6, 4]]]])
+        coords, level_h = u, h
+        while level_h > 1:
+            level_h //= 2
+            coords = upsample(coords, eye, level_h, lo, hi)
+        got = np.bincount(classes[coords[..., 0], coords[..., 1], coords[..., 2]].ravel(), minlength=2) / coords[..., 0].size
+        np.testing.assert_allclose(got, phase_footprint(classes, 2, h)[:, 5, 6, 4], atol=1e-12)
+
+
+def test_the_prices_integrate_the_error_and_the_cheapest_phase_costs_nothing():
+    prices = np.zeros(2)
+    for _ in range(3):
+        prices = next_prices(prices, np.array([0.1, -0.05]))
+    # each step adds (0.1 + 0.05) / PRICE_STEPS to phase 0's price relative to phase 1's
+    np.testing.assert_allclose(prices, [3 * 0.15 / PRICE_STEPS, 0.0])
+    # an opposite error brings the price back down, never below 0
+    prices = next_prices(prices, np.array([-2.0, 0.0]))
+    assert prices.min() == 0.0 and prices[1] > 0.0
 
 
 def test_the_phase_histogram_keeps_a_thin_minority_phase(rng):

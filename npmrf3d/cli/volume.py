@@ -52,7 +52,9 @@ FIELD_HELP = {
     "balance": "strength of the phase histogram: a candidate whose phase (a segmented scan's "
                "value, or a side of a grey scan's Otsu threshold) the volume already holds more "
                "often than the exemplar pays balance x (half the distance of two random "
-               "neighbourhoods) per excess share (0: the phase fractions drift; a thin minority "
+               "neighbourhoods) x (its excess share + a price that sums the excess over the "
+               "sub-passes); at the coarse levels a coordinate counts as the phase mix of the "
+               "voxels its descendants copy (0: the phase fractions drift; a thin minority "
                "phase such as a rock's pores erodes)",
     "angle": "degrees of rotation of the named fields twist and bend",
     "adaptive": "Parzen bandwidth: 2h^2 = adaptive * the smallest neighbourhood distance, > 0",
