@@ -346,14 +346,14 @@ def phase_classes(exemplar: np.ndarray, lo, hi, phases: int = MAX_PHASES) -> tup
 
 
 def phase_footprint(classes: np.ndarray, phases: int, h: int) -> np.ndarray:
-    """The phase mix a level-``h`` coordinate stands for, ``(phases, D, H, W)`` float64: the share
+    """The phase mix a level-``h`` coordinate stands for, ``(phases, D, H, W)`` float32: the share
     of each phase among the exemplar voxels its descendants at the finest level copy.
 
     Up-sampling puts the children of ``u`` at ``u + floor(h' (delta - 1/2) + 1/2)`` (``h'`` the
     children's spacing), so without jitter or deformation the finest-level descendants of a
     level-``h`` coordinate cover ``u + [1 - h/2, h/2]`` on every axis: a box of ``h`` voxels
     (faces clamped, as the coordinates are). At the finest level (``h = 1``) it is the voxel's own
-    phase, one-hot. float32 (an exemplar-sized array per phase)."""
+    phase, one-hot."""
     one_hot = (classes[None] == np.arange(phases)[:, None, None, None]).astype(np.float32)
     if h == 1:
         return one_hot

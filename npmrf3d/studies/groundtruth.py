@@ -131,18 +131,27 @@ def two_point(volume: np.ndarray, axis: int, max_lag: int, phases: np.ndarray | 
     >>> two_point(v, 0, 2, np.array([0.0, 1.0]))[0].tolist()
     [0.5, 0.0, 0.5]
     """
+    return _curves(_fields(volume, phases, normalised), axis, max_lag)
+
+
+def _fields(volume: np.ndarray, phases: np.ndarray | None, normalised: bool) -> list[np.ndarray]:
+    """The fields :func:`two_point` correlates: the standardised grey volume, or each phase's
+    indicator but the first (standardised with ``normalised``)."""
     grey = _grey(volume)
     if grey.ndim != 3:
         raise ParameterError(f"expected a 3-D volume; got shape {np.shape(volume)}")
     if phases is None:
-        fields = [_standardised(grey)]
-    else:
-        labels = _nearest_phase(grey, phases)
-        fields = [(labels == p).astype(np.float64) for p in range(1, len(phases))] or \
-                 [(labels == 0).astype(np.float64)]
-        if normalised:
-            fields = [_standardised(f) for f in fields]
-    n = grey.shape[axis]
+        return [_standardised(grey)]
+    labels = _nearest_phase(grey, phases)
+    fields = [(labels == p).astype(np.float64) for p in range(1, len(phases))] or \
+             [(labels == 0).astype(np.float64)]
+    return [_standardised(f) for f in fields] if normalised else fields
+
+
+def _curves(fields: list[np.ndarray], axis: int, max_lag: int) -> np.ndarray:
+    """Mean of ``f(s) f(s + r e_axis)`` over the pairs inside the volume, ``r = 0..max_lag``
+    (NaN where ``r`` is not shorter than the axis), one row per field."""
+    n = fields[0].shape[axis]
     out = np.zeros((len(fields), max_lag + 1))
     for row, f in enumerate(fields):
         for r in range(max_lag + 1):
@@ -195,17 +204,15 @@ def compare(volume: np.ndarray, real: np.ndarray, exemplar: np.ndarray, *,
     value_range = (float(grey_real.min()), float(grey_real.max()))
     out: dict = {"phases": None if phases is None else phases.tolist(), "max_lag": int(max_lag),
                  "two_point": {}, "two_point_real": {}, "two_point_l2": {}, "two_point_shape_l2": {}}
+    # each volume's fields once; grey fields are normalised already, so their shape curves are the curves
+    raw = _fields(volume, phases, False), _fields(real, phases, False)
+    normalised = raw if phases is None else (_fields(volume, phases, True), _fields(real, phases, True))
     for axis in range(3):
-        mine = two_point(volume, axis, max_lag, phases)
-        theirs = two_point(real, axis, max_lag, phases)
+        mine, theirs = (_curves(f, axis, max_lag) for f in raw)
         out["two_point"][f"axis{axis}"] = mine.tolist()
         out["two_point_real"][f"axis{axis}"] = theirs.tolist()
         out["two_point_l2"][f"axis{axis}"] = float(np.sqrt(np.nansum((mine - theirs) ** 2)))
-        if phases is None:  # grey curves are normalised already
-            shape, shape_real = mine, theirs
-        else:
-            shape = two_point(volume, axis, max_lag, phases, normalised=True)
-            shape_real = two_point(real, axis, max_lag, phases, normalised=True)
+        shape, shape_real = (mine, theirs) if phases is None else (_curves(f, axis, max_lag) for f in normalised)
         out["two_point_shape_l2"][f"axis{axis}"] = float(np.sqrt(np.nansum((shape - shape_real) ** 2)))
     out["two_point_l2_mean"] = float(np.mean(list(out["two_point_l2"].values())))
     out["two_point_shape_l2_mean"] = float(np.mean(list(out["two_point_shape_l2"].values())))
