@@ -222,6 +222,59 @@ def test_keyboard_interrupt_exits_130(tmp_path, exemplar, capsys, monkeypatch):
     assert not out_dir.exists()
 
 
+def _swallowed_interrupt():
+    """What a callback from C (llvmlite's ctypes callbacks while numba compiles) does to a
+    Ctrl-C: the handler's KeyboardInterrupt is printed and dropped, and the caller goes on."""
+    import signal
+    try:
+        signal.getsignal(signal.SIGINT)(signal.SIGINT, None)
+    except KeyboardInterrupt:
+        pass
+
+
+@pytest.mark.parametrize("where", ["between levels", "after the last level", "in the compiler"])
+def test_swallowed_interrupt_still_exits_130_and_writes_nothing(tmp_path, exemplar, capsys, monkeypatch,
+                                                                 where):
+    import npmrf3d.synthesis
+    real_run = npmrf3d.synthesis.run
+
+    def run(*args, progress=None, **kwargs):
+        if where == "between levels":
+            def ticking(*a):
+                if a[1] == 0 and a[0] == 0:  # the start of the finest level
+                    _swallowed_interrupt()
+                return progress(*a)
+            return real_run(*args, progress=ticking, **kwargs)
+        if where == "in the compiler":  # numba, interrupted mid-compile, fails on the next call
+            _swallowed_interrupt()
+            raise RuntimeError("no compiled object yet for <Library 'project'>")
+        result = real_run(*args, progress=progress, **kwargs)
+        _swallowed_interrupt()
+        return result
+
+    monkeypatch.setattr(npmrf3d.synthesis, "run", run)
+    out_dir = tmp_path / "run"
+    code, out, err = run_cli(capsys, "synth", str(exemplar), *TINY, "--variant", "sharp", "--quiet",
+                             "--out", str(out_dir))
+    assert code == 130 and err.startswith("npmrf3d: interrupted; nothing was written"), err
+    assert len(err.strip().splitlines()) == 1 and not out_dir.exists()
+    # the latch is cleared with the run: the next one in the same process is not interrupted
+    monkeypatch.setattr(npmrf3d.synthesis, "run", real_run)
+    assert run_cli(capsys, "synth", str(exemplar), *TINY, "--variant", "sharp", "--quiet",
+                   "--out", str(out_dir))[0] == 0
+
+
+def test_an_unexpected_error_without_an_interrupt_is_not_called_one(tmp_path, exemplar, capsys, monkeypatch):
+    import npmrf3d.synthesis
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("a real bug")
+
+    monkeypatch.setattr(npmrf3d.synthesis, "run", broken)
+    with pytest.raises(RuntimeError, match="a real bug"):
+        cli.main(["synth", str(exemplar), *TINY, "--variant", "sharp", "--quiet", "--out", str(tmp_path / "r")])
+
+
 def test_parameter_error_from_writing_is_one_line(tmp_path, exemplar, capsys, monkeypatch):
     def refuse(*args, **kwargs):
         raise ParameterError("disk says no\nsecond line")

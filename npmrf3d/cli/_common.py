@@ -18,6 +18,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ..errors import ParameterError
+from . import _interrupt
 from ..exemplar import exemplar_source, resolve_exemplars
 from ..neighborhood import VIEWS
 from ..methods import check_resources, estimate
@@ -267,10 +268,12 @@ def run_method(args: argparse.Namespace, method, config, per_view: dict, *, chec
     """``method.run`` seeded by ``config.seed`` with a bar per level (none with ``--quiet``)."""
     progress = LevelProgress(config.size, enabled=not args.quiet, unit=unit, symbol=symbol)
     try:
-        return method.run(per_view, config, np.random.default_rng(config.seed), progress=progress,
-                          checkpoint=checkpoint, t_start=t_start, **inputs)
+        result = method.run(per_view, config, np.random.default_rng(config.seed), progress=progress,
+                            checkpoint=checkpoint, t_start=t_start, **inputs)
     finally:
         progress.close()
+    _interrupt.check()  # an interrupt swallowed after the last progress tick: write nothing
+    return result
 
 
 def write_result(out: pathlib.Path, args: argparse.Namespace, argv: list[str], command: str,
@@ -305,6 +308,7 @@ class LevelProgress:
         self.bar = None
 
     def __call__(self, level: int, sweep: int, max_sweeps: int, temperature: float) -> None:
+        _interrupt.check()  # a Ctrl-C that a callback from C swallowed ends the run here
         if not self.enabled:
             return
         if sweep == 0 or self.bar is None:
@@ -337,6 +341,7 @@ class RunsProgress:
         self.name, self.enabled, self.bar = name, enabled, None
 
     def __call__(self, row: dict | None, done: int, total: int) -> None:
+        _interrupt.check()
         if not self.enabled:
             return
         if self.bar is None:
@@ -361,6 +366,7 @@ class CountProgress:
         self.name, self.unit, self.symbol, self.enabled, self.bar = name, unit, symbol, enabled, None
 
     def __call__(self, done: int, total: int, value: float | None = None) -> None:
+        _interrupt.check()
         if not self.enabled:
             return
         if self.bar is None:

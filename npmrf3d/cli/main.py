@@ -16,12 +16,10 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
 import sys
-import threading
 
 from .. import __version__
-from . import baseline, coherent, info, metrics, neural, study, synth, volume
+from . import _interrupt, baseline, coherent, info, metrics, neural, study, synth, volume
 from ._common import PROG, HelpFormatter, Parser, guarded, say
 
 __all__ = ["COMMANDS", "build_parser", "main"]
@@ -47,17 +45,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _raise_interrupt(signum, frame):
-    raise KeyboardInterrupt
-
-
-def _terminate_as_interrupt():
-    """SIGTERM ends a run like Ctrl-C (one line, exit 130); returns the previous handler."""
-    if threading.current_thread() is not threading.main_thread():
-        return None
-    return signal.signal(signal.SIGTERM, _raise_interrupt)
-
-
 def interrupted_message(args) -> str:
     """One line after Ctrl-C or SIGTERM: where the checkpoint is and how to resume."""
     checkpoint = getattr(args, "checkpoint", None)
@@ -80,7 +67,8 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help, --version and usage errors (argparse printed them)
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
-    previous = _terminate_as_interrupt()
+    # Ctrl-C and SIGTERM end a run alike (one line, exit 130), latched so that none is lost
+    previous = _interrupt.install()
     try:
         return guarded(args.handler, args, argv, OPTION_NAMES)
     except KeyboardInterrupt:
@@ -90,6 +78,12 @@ def main(argv: list[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 1
+    except Exception:
+        # a Ctrl-C that landed inside numba's compiler leaves it half-done, and the next call
+        # fails ("no compiled object yet"): that failure is the interrupt's, not a bug
+        if _interrupt.pending():
+            say(f"{PROG}: {interrupted_message(args)}", error=True)
+            return 130
+        raise
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        _interrupt.restore(previous)
