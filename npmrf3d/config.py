@@ -76,6 +76,9 @@ VARIANT_ALIASES: dict[str, str] = {"default": "sharp"}
 
 #: The variant used when none is asked for, per relaxation (annealing needs a full-Parzen rule).
 DEFAULT_VARIANT: dict[str, str] = {"icm": "coherent", "anneal": "sharp"}
+#: ``segmented``: whether the coherent variant uses its preset for segmented exemplars
+#: (:data:`npmrf3d.coherent.SEGMENTED`): "auto" when the exemplars hold few grey values.
+SEGMENTED_MODES = ("auto", "yes", "no")
 
 
 @dataclass(frozen=True)
@@ -107,6 +110,7 @@ class SynthesisConfig:
     proposals: int = AnnealOptions.proposals
     proposal: str = AnnealOptions.proposal
     variant: str = "coherent"
+    segmented: str = "auto"
     rule: DecisionRule = field(default_factory=DecisionRule)
     grey_levels: int | None = None
     palette: int | None = None

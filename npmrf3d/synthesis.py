@@ -13,7 +13,7 @@ import numpy as np
 from . import _validation as check
 from . import coherent
 from ._kernels import _jit
-from .config import DEFAULT_SIZE, DEFAULT_VARIANT, VARIANT_ALIASES, VARIANTS, SynthesisConfig, SynthesisMethod, SynthesisResult
+from .config import DEFAULT_SIZE, DEFAULT_VARIANT, SEGMENTED_MODES, VARIANT_ALIASES, VARIANTS, SynthesisConfig, SynthesisMethod, SynthesisResult
 from .exemplar import make_labels, resolve_exemplars
 from .heuristics import DECISIONS, get_heuristic
 from .neighborhood import VIEWS, colour_classes
@@ -41,7 +41,7 @@ def make_config(
     relaxation=_C.relaxation, views=_C.views, upsample=None, inherit=_C.inherit, xi=_C.xi,
     stop=_C.stop, max_sweeps=_C.max_sweeps, sampler=_C.sampler, schedule=_C.schedule, t0=_C.t0,
     t_end=_C.t_end, proposals=_C.proposals, proposal=_C.proposal, variant=None,
-    bandwidth=None, centre_bandwidth=None, adaptive=None, decision=None, tau=None,
+    segmented=_C.segmented, bandwidth=None, centre_bandwidth=None, adaptive=None, decision=None, tau=None,
     histogram_weight=None, outlier=None, grey_levels=None, palette=None, toroidal_exemplar=False,
     seed=None,
 ) -> SynthesisConfig:
@@ -74,6 +74,7 @@ def make_config(
     proposal = check.choice("proposal", proposal, PROPOSALS)
     variant = DEFAULT_VARIANT[relaxation] if variant is None else VARIANT_ALIASES.get(variant, variant)
     variant = check.choice("variant", variant, VARIANTS)
+    segmented = check.choice("segmented", segmented, SEGMENTED_MODES)
     if variant == "coherent":
         if heuristic not in coherent.HEURISTIC_CODES:
             check.fail(f"variant 'coherent' ranks candidates by an objective: use heuristic ML_H2b or "
@@ -108,8 +109,8 @@ def make_config(
         size=dims, window=window, levels=levels, heuristic=heuristic, relaxation=relaxation,
         views=views, upsample=upsample, inherit=inherit, xi=xi, stop=stop, max_sweeps=max_sweeps,
         sampler=sampler, schedule=schedule, t0=t0, t_end=t_end, proposals=proposals,
-        proposal=proposal, variant=variant, rule=rule, grey_levels=grey_levels, palette=palette,
-        toroidal_exemplar=bool(toroidal_exemplar), seed=seed,
+        proposal=proposal, variant=variant, segmented=segmented, rule=rule, grey_levels=grey_levels,
+        palette=palette, toroidal_exemplar=bool(toroidal_exemplar), seed=seed,
     )
 
 
@@ -119,7 +120,7 @@ def synthesize(
     exemplars: dict | None = None, upsample=None, inherit=_C.inherit, xi=_C.xi, stop=_C.stop,
     max_sweeps=_C.max_sweeps, sampler=_C.sampler, schedule=_C.schedule, t0=_C.t0,
     t_end=_C.t_end, proposals=_C.proposals, proposal=_C.proposal, variant=None,
-    bandwidth=None, centre_bandwidth=None,
+    segmented=_C.segmented, bandwidth=None, centre_bandwidth=None,
     adaptive=None, decision=None, tau=None, histogram_weight=None, outlier=None, grey_levels=None,
     palette=None, toroidal_exemplar=False, rng=None, progress: ProgressCallback | None = None,
     checkpoint: str | Path | None = None,
@@ -180,6 +181,14 @@ def synthesize(
         ``exp(score / T)``, ``T`` from ``t0`` to ``t_end`` by ``schedule`` over each level's
         iterations (``sampler``, ``proposals``, ``proposal`` are not used). ``sharp`` (formerly ``default``, still accepted): the full-Parzen rule chosen
         by an earlier measurement (docs/quality.md). ``literal``: the paper word for word.
+    segmented : {"auto", "yes", "no"}
+        The ``coherent`` variant's preset for segmented exemplars
+        (:data:`npmrf3d.coherent.SEGMENTED`: window 5 at every level in place of ``window``, and
+        the histogram vote weighting 8, which keeps the phase fractions). "auto": when the
+        exemplars hold at most :data:`npmrf3d.coherent.SEGMENTED_MAX_VALUES` distinct grey
+        values together (a thresholded scan slice, a label map); "no": ``window`` as given.
+        ``stats["segmented"]`` of the result says which ran. Measured in docs/volume.md ("The 2D
+        default on segmented slices"); photographs are never segmented.
     bandwidth, centre_bandwidth, adaptive, decision, tau, histogram_weight, outlier : optional
         Override single fields of the preset (:class:`npmrf3d.config.DecisionRule`).
     grey_levels : int, optional
@@ -217,7 +226,8 @@ def synthesize(
         size=size, window=window, levels=levels, heuristic=heuristic, relaxation=relaxation,
         views=views, upsample=upsample, inherit=inherit, xi=xi, stop=stop, max_sweeps=max_sweeps,
         sampler=sampler, schedule=schedule, t0=t0, t_end=t_end, proposals=proposals,
-        proposal=proposal, variant=variant, bandwidth=bandwidth, centre_bandwidth=centre_bandwidth, adaptive=adaptive,
+        proposal=proposal, variant=variant, segmented=segmented, bandwidth=bandwidth,
+        centre_bandwidth=centre_bandwidth, adaptive=adaptive,
         decision=decision, tau=tau, histogram_weight=histogram_weight, outlier=outlier,
         grey_levels=grey_levels,
         palette=palette, toroidal_exemplar=toroidal_exemplar, seed=seed,
@@ -341,41 +351,56 @@ def npmrf_method(per_view: dict[str, np.ndarray], config: SynthesisConfig, rng: 
     return run(config, per_view, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
 
 
-def _coherent_options(config: SynthesisConfig) -> coherent.CoherentConfig:
+def segmented(config: SynthesisConfig, per_view) -> bool:
+    """Whether a ``coherent``-variant run uses :data:`npmrf3d.coherent.SEGMENTED`: ``segmented``
+    "yes", or "auto" and the exemplars (``per_view``: view -> array, before any palette or grey
+    levels) are segmented (:func:`npmrf3d.coherent.is_segmented`)."""
+    if config.segmented == "auto":
+        return coherent.is_segmented({id(a): a for a in per_view.values()}.values())
+    return config.segmented == "yes"
+
+
+def _coherent_options(config: SynthesisConfig, per_view) -> coherent.CoherentConfig:
     """The coherent sampler's options for a ``coherent``-variant configuration: its window at
-    every level, its levels, views, heuristic, centre bandwidth and outlier share; with relaxation
-    ``anneal`` its temperatures ``t0`` to ``t_end`` by ``schedule`` over each level's iterations
-    (a heat-bath draw among the candidates; ``sampler``, ``proposals`` and ``proposal`` belong to
-    the full-Parzen annealer and are not used)."""
+    every level (:data:`npmrf3d.coherent.SEGMENTED`'s window and histogram vote weighting for a
+    segmented exemplar, :func:`segmented`), its levels, views, heuristic, centre bandwidth and
+    outlier share; with relaxation ``anneal`` its temperatures ``t0`` to ``t_end`` by
+    ``schedule`` over each level's iterations (a heat-bath draw among the candidates;
+    ``sampler``, ``proposals`` and ``proposal`` belong to the full-Parzen annealer and are not
+    used)."""
     anneal = config.relaxation == "anneal"
+    phases = segmented(config, per_view)
+    window = coherent.SEGMENTED.window if phases else config.window
+    value_weight = coherent.SEGMENTED.value_weight if phases else coherent.DEFAULTS.value_weight
     return coherent.make_coherent_config(
-        size=config.size, window=(config.window,) * config.levels, levels=config.levels,
+        size=config.size, window=(window,) * config.levels, levels=config.levels,
         views=config.views, heuristic=config.heuristic, centre_bandwidth=config.rule.centre_bandwidth,
-        outlier=config.rule.outlier, t0=config.t0 if anneal else 0.0, t_end=config.t_end,
-        schedule=config.schedule, seed=config.seed)
+        outlier=config.rule.outlier, value_weight=value_weight, t0=config.t0 if anneal else 0.0,
+        t_end=config.t_end, schedule=config.schedule, seed=config.seed)
 
 
 def npmrf_resources(config: SynthesisConfig, per_view):
     """The memory estimate of a run: the coherent sampler's for the ``coherent`` variant, the
     full-Parzen sampler's otherwise."""
     if config.variant == "coherent":
-        return coherent_estimate(_coherent_options(config), per_view)
+        return coherent_estimate(_coherent_options(config, per_view), per_view)
     return npmrf_estimate(config, per_view)
 
 
 def _run_coherent(per_view, config: SynthesisConfig, rng, *, progress, checkpoint, t_start) -> SynthesisResult:
-    """The ``coherent`` variant: :mod:`npmrf3d.coherent` with this configuration's window (at every
-    level), levels, views, heuristic, centre bandwidth and outlier share; the exemplars reduced to
-    ``grey_levels`` or a ``palette`` first when asked."""
+    """The ``coherent`` variant: :mod:`npmrf3d.coherent` with the options of :func:`_coherent_options`
+    (decided on the exemplars as given); the exemplars reduced to ``grey_levels`` or a
+    ``palette`` first when asked. ``stats["segmented"]`` says whether the segmented preset ran."""
+    options, phases = _coherent_options(config, per_view), segmented(config, per_view)
     if config.grey_levels is not None or config.palette is not None:
         distinct = {id(a): a for a in per_view.values()}
         labels, images = make_labels(list(distinct.values()), grey_levels=config.grey_levels,
                                      palette=config.palette, rng=rng)
         reduced = {key: labels[image] for key, image in zip(distinct, images)}
         per_view = {v: reduced[id(a)] for v, a in per_view.items()}
-    result = coherent.coherent_method(per_view, _coherent_options(config), rng, progress=progress, checkpoint=checkpoint,
+    result = coherent.coherent_method(per_view, options, rng, progress=progress, checkpoint=checkpoint,
                                       t_start=t_start)
-    return dataclasses.replace(result, config=config)
+    return dataclasses.replace(result, config=config, stats={**result.stats, "segmented": phases})
 
 
 #: The registry entry of the NP-MRF sampler.

@@ -409,3 +409,17 @@ def test_python_m_synth_end_to_end(tmp_path, exemplar):
     assert "level 1 (8^3)" in proc.stderr and "level 0 (16^3)" in proc.stderr
     assert "Traceback" not in proc.stderr
     assert "result" in proc.stdout
+
+
+@pytest.mark.parametrize("mode, expected", [("auto", True), ("no", False)])
+def test_segmented_preset_is_recorded_in_run_json(tmp_path, capsys, mode, expected):
+    from PIL import Image
+    r, c = np.mgrid[:24, :24]
+    pores = ((r - 8) ** 2 + (c - 8) ** 2 <= 16) | ((r - 17) ** 2 + (c - 16) ** 2 <= 9)
+    Image.fromarray(np.where(pores, 0, 255).astype(np.uint8)).save(tmp_path / "phase.png")
+    code, out, err = run_cli(capsys, "synth", str(tmp_path / "phase.png"), "--size", "16", "--levels", "2",
+                             "--segmented", mode, "--quiet", "--out", str(tmp_path / "run"))
+    assert code == 0, err
+    record = json.loads((tmp_path / "run" / "run.json").read_text())
+    assert record["config"]["segmented"] == mode and record["stats"]["segmented"] is expected
+    assert record["stats"]["levels"]["level_0"]["window"] == (5 if expected else 7)

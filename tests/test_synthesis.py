@@ -149,3 +149,57 @@ def test_default_on_bundled_exemplar_beats_structureless_control_and_is_not_flat
     assert metrics.largest_value_share(res.volume) < 0.1
     literal = npmrf3d.synthesize(ex, size=16, window=5, levels=2, variant="literal", rng=0)
     assert metrics.largest_value_share(literal.volume) > metrics.largest_value_share(res.volume)
+
+
+# --------------------------------------------------------------------------- segmented exemplars
+
+def _phase_slice(side: int = 24) -> np.ndarray:
+    """A two-phase image with round pores of several sizes (a thresholded micro-CT slice)."""
+    r, c = np.mgrid[:side, :side]
+    pores = np.zeros((side, side), dtype=bool)
+    for (y, x, rad) in ((4, 5, 3), (15, 6, 2), (9, 16, 4), (20, 19, 2), (19, 11, 1.5)):
+        pores |= (r - y) ** 2 + (c - x) ** 2 <= rad ** 2
+    return np.where(pores, 0, 255).astype(np.uint8)
+
+
+def test_segmented_preset_is_the_coherent_sampler_with_its_window_and_vote_weighting():
+    from npmrf3d.coherent import SEGMENTED, coherent_synthesize
+    image = _phase_slice()
+    res = npmrf3d.synthesize(image, size=16, levels=2, rng=3)
+    assert res.stats["segmented"] is True
+    assert [lv["window"] for lv in res.stats["levels"].values()] == [SEGMENTED.window] * 2
+    twin = coherent_synthesize(image, size=16, levels=2, window=(SEGMENTED.window,) * 2,
+                               value_weight=SEGMENTED.value_weight, rng=3)
+    assert np.array_equal(res.volume, twin.volume)
+    assert np.array_equal(npmrf3d.synthesize(image, size=16, levels=2, rng=3, segmented="yes").volume,
+                          res.volume)
+
+
+def test_segmented_no_and_photographs_keep_the_window():
+    image = _phase_slice()
+    off = npmrf3d.synthesize(image, size=16, levels=2, rng=3, segmented="no")
+    assert off.stats["segmented"] is False
+    assert [lv["window"] for lv in off.stats["levels"].values()] == [7, 7]
+    assert not np.array_equal(off.volume, npmrf3d.synthesize(image, size=16, levels=2, rng=3).volume)
+    photo = np.random.default_rng(0).integers(0, 256, (24, 24)).astype(np.uint8)  # ~200 grey values
+    res = npmrf3d.synthesize(photo, size=16, levels=2, rng=3)
+    assert res.stats["segmented"] is False
+    assert np.array_equal(res.volume, npmrf3d.synthesize(photo, size=16, levels=2, rng=3, segmented="no").volume)
+
+
+def test_is_segmented_counts_grey_values_over_all_exemplars():
+    from npmrf3d.coherent import SEGMENTED_MAX_VALUES, is_segmented
+    n = SEGMENTED_MAX_VALUES
+    values = np.arange(n, dtype=np.float32).reshape(-1, 1)
+    assert is_segmented([np.tile(values, (1, 3))])
+    assert not is_segmented([np.arange(n + 1, dtype=np.float32).reshape(-1, 1)])
+    # together: two exemplars of n values each, n + n distinct in all
+    assert not is_segmented([values, values + n])
+    # colour: the grey value is the mean over channels (two colours of equal mean are one value)
+    colours = np.array([[[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]])
+    assert is_segmented([colours]) and is_segmented([np.tile(colours, (n, n, 1))])
+
+
+def test_segmented_mode_is_validated():
+    with pytest.raises(npmrf3d.ParameterError, match="segmented"):
+        npmrf3d.synthesize(_phase_slice(), size=16, levels=2, segmented="maybe")

@@ -14,7 +14,8 @@ import time
 import numpy as np
 
 from .. import data
-from ..config import DEFAULT_SIZE, VARIANT_ALIASES, VARIANTS, SynthesisConfig
+from ..coherent import SEGMENTED, SEGMENTED_MAX_VALUES
+from ..config import DEFAULT_SIZE, SEGMENTED_MODES, VARIANT_ALIASES, VARIANTS, SynthesisConfig
 from ..exemplar import BUNDLED_PREFIX
 from ..heuristics import DECISIONS, HEURISTICS
 from ..neighborhood import VIEWS
@@ -70,7 +71,8 @@ def register(commands, formatter_class) -> None:
     )
     shape.add_argument(
         "--window", type=int, default=_d("window"), metavar="W",
-        help="side of each view's square neighbourhood, an odd integer from 3 to 15",
+        help="side of each view's square neighbourhood, an odd integer from 3 to 15 (variant "
+             "coherent on a segmented exemplar: 5, see --segmented)",
     )
     shape.add_argument(
         "--levels", type=int, default=_d("levels"), metavar="L",
@@ -154,6 +156,15 @@ def register(commands, formatter_class) -> None:
              "sharp = the full-Parzen rule of an earlier round (old name: default), literal = the "
              "paper word for word (collapses to a flat volume) "
              "(default: none = coherent for icm, sharp for anneal)",
+    )
+    method.add_argument(
+        "--segmented", default=_d("segmented"), metavar=choices(SEGMENTED_MODES),
+        help="variant coherent: the preset for a segmented exemplar (a thresholded scan slice, a "
+             "label map): window 5 at every level in place of --window, and histogram vote "
+             "weighting, which keep the phase fractions and the pore sizes (measured on micro-CT "
+             "slices, docs/volume.md); auto = when the exemplars hold at most "
+             f"{SEGMENTED_MAX_VALUES} distinct grey values, no = --window as given; run.json's "
+             "stats say which ran",
     )
     method.add_argument(
         "--bandwidth", type=float, default=None, metavar="B",
@@ -268,7 +279,8 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
         heuristic=args.heuristic, relaxation=args.relaxation, views=args.views,
         upsample=args.upsample, inherit=args.inherit, xi=args.xi, stop=args.stop,
         max_sweeps=args.max_sweeps, sampler=args.sampler, schedule=args.schedule, t0=args.t0,
-        t_end=args.t_end, proposals=args.proposals, proposal=args.proposal, variant=args.variant, bandwidth=args.bandwidth,
+        t_end=args.t_end, proposals=args.proposals, proposal=args.proposal, variant=args.variant,
+        segmented=args.segmented, bandwidth=args.bandwidth,
         centre_bandwidth=args.centre_bandwidth, adaptive=args.adaptive, decision=args.decision,
         tau=args.tau, histogram_weight=args.histogram_weight, outlier=args.outlier,
         grey_levels=args.grey_levels,
@@ -281,7 +293,8 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
         _note_many_values(per_view)
     with claim_output(out, args.overwrite):
         result = run_method(args, METHOD, config, per_view, checkpoint=checkpoint, t_start=t_start)
-        title = (f"npmrf3d {config.heuristic}, variant {config.variant}, window {config.window}, "
+        window = SEGMENTED.window if result.stats.get("segmented") else config.window
+        title = (f"npmrf3d {config.heuristic}, variant {config.variant}, window {window}, "
                  f"{config.levels} levels, seed {config.seed}")
         write_result(out, args, argv, "synth", result, per_view, sources, title,
                      method=METHOD.name, labels=int(len(result.labels)))

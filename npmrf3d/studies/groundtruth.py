@@ -33,6 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from npmrf3d import metrics
+from npmrf3d.coherent import SEGMENTED_MAX_VALUES
 from npmrf3d.errors import ParameterError
 from npmrf3d.exemplar import exemplar_slice
 from npmrf3d._files import read_volume
@@ -50,8 +51,9 @@ __all__ = [
     "two_point",
 ]
 
-#: An exemplar with at most this many distinct grey values is a phase image.
-MAX_PHASES = 16
+#: An exemplar with at most this many distinct grey values is a phase image (the rule by which
+#: ``synth``'s default takes its segmented preset).
+MAX_PHASES = SEGMENTED_MAX_VALUES
 #: Bins of the grey-level fractions of non-phase volumes.
 GREY_BINS = 16
 #: Largest lag of the two-point correlations (capped at half the smallest side).
