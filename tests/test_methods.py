@@ -16,7 +16,10 @@ from npmrf3d.methods import METHODS
 
 #: id -> (method name, keyword arguments of its public function): tiny runs of two levels.
 CASES = {
-    "npmrf-icm": ("npmrf", dict(size=16, window=5, levels=2)),
+    # the checkerboard is segmented: "npmrf-icm" runs the coherent default with --window as
+    # given, "npmrf-segmented" with the segmented preset (which sets the window itself)
+    "npmrf-icm": ("npmrf", dict(size=16, window=5, levels=2, segmented="no")),
+    "npmrf-segmented": ("npmrf", dict(size=16, levels=2)),
     "npmrf-anneal": ("npmrf", dict(size=16, window=5, levels=2, relaxation="anneal", proposals=2)),
     "kopf": ("kopf", dict(size=16, window=4, levels=2, iterations=2)),
     "chen-wang": ("chen-wang", dict(size=16, window=(4, 4), levels=2, iterations=(2, 2))),
@@ -24,6 +27,8 @@ CASES = {
     "volume-lh": ("volume-lh", dict(size=16, levels=2)),
     "npmrf-3d": ("npmrf-3d", dict(size=16, levels=2, passes=1)),
 }
+#: What the resume test changes to make a different configuration (default: the window).
+DIFFERENT = {"npmrf-segmented": {"segmented": "no"}}
 #: Methods that take a 3D exemplar (run on ``tiny_volume`` instead of ``tiny_grey``).
 VOLUME_METHODS = ("volume-lh", "npmrf-3d")
 
@@ -85,4 +90,4 @@ def test_resume_from_checkpoint_gives_the_uninterrupted_result(case, tmp_path, r
     resumed = synthesize(tiny_grey, rng=5, checkpoint=path, **kwargs)
     np.testing.assert_array_equal(full, resumed.volume)
     with pytest.raises(ParameterError, match="different configuration"):
-        synthesize(tiny_grey, rng=5, checkpoint=path, **{**kwargs, "window": 3})
+        synthesize(tiny_grey, rng=5, checkpoint=path, **{**kwargs, **DIFFERENT.get(case, {"window": 3})})
