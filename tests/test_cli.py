@@ -223,13 +223,16 @@ def test_keyboard_interrupt_exits_130(tmp_path, exemplar, capsys, monkeypatch):
 
 
 def _swallowed_interrupt():
-    """What a callback from C (llvmlite's ctypes callbacks while numba compiles) does to a
-    Ctrl-C: the handler's KeyboardInterrupt is printed and dropped, and the caller goes on."""
+    """What a callback from C (llvmlite's ctypes callbacks while numba compiles, importlib's
+    module-lock callback) does to a Ctrl-C: the handler's KeyboardInterrupt is reported through
+    ``sys.unraisablehook`` and dropped, and the caller goes on (here: an object's ``__del__``)."""
     import signal
-    try:
-        signal.getsignal(signal.SIGINT)(signal.SIGINT, None)
-    except KeyboardInterrupt:
-        pass
+
+    class Dropping:
+        def __del__(self):
+            signal.getsignal(signal.SIGINT)(signal.SIGINT, None)
+
+    Dropping()
 
 
 @pytest.mark.parametrize("where", ["between levels", "after the last level", "in the compiler"])
@@ -423,3 +426,21 @@ def test_segmented_preset_is_recorded_in_run_json(tmp_path, capsys, mode, expect
     record = json.loads((tmp_path / "run" / "run.json").read_text())
     assert record["config"]["segmented"] == mode and record["stats"]["segmented"] is expected
     assert record["stats"]["levels"]["level_0"]["window"] == (5 if expected else 7)
+
+
+def test_only_dropped_interrupts_are_kept_quiet():
+    from types import SimpleNamespace
+    from npmrf3d.cli import _interrupt
+    seen = []
+    previous = _interrupt.install()
+    try:
+        try:
+            _interrupt.interrupt()
+        except KeyboardInterrupt:
+            pass
+        for exc_type in (KeyboardInterrupt, ValueError):
+            _interrupt._quiet_dropped_interrupts(SimpleNamespace(exc_type=exc_type), fallback=seen.append)
+    finally:
+        _interrupt.restore(previous)
+    assert [u.exc_type for u in seen] == [ValueError]
+    assert not _interrupt.pending()

@@ -7,12 +7,16 @@ callback function" and dropped: the run went on and, seen once in CI, exited 0 a
 SIGINT (or 1 with a cold cache). Here the handler also *latches* the signal: every progress
 tick (:class:`npmrf3d.cli._common.LevelProgress`) and the end of every run call :func:`check`,
 which raises ``KeyboardInterrupt`` again while the latch is set, so a swallowed interrupt still
-ends the run at its next step with exit 130 and nothing written.
+ends the run at its next step with exit 130 and nothing written. Python reports such a dropped
+exception through :func:`sys.unraisablehook` ("Exception ignored in ..." and a traceback on
+stderr); while the latch is set, :func:`install`'s hook keeps those quiet, since the interrupt
+is not lost (the one line of the interruption follows).
 """
 
 from __future__ import annotations
 
 import signal
+import sys
 import threading
 
 __all__ = ["check", "install", "interrupt", "pending", "restore"]
@@ -40,17 +44,33 @@ def check() -> None:
         raise KeyboardInterrupt
 
 
+def _quiet_dropped_interrupts(unraisable, *, fallback=None):
+    """``sys.unraisablehook``: say nothing of a dropped ``KeyboardInterrupt`` while the latch is
+    set (it will be raised again); pass everything else to ``fallback``."""
+    if _latched.is_set() and issubclass(unraisable.exc_type, KeyboardInterrupt):
+        return
+    (fallback or sys.__unraisablehook__)(unraisable)
+
+
 def install() -> dict | None:
-    """Clear the latch and handle :data:`SIGNALS` with :func:`interrupt`; return the previous
-    handlers for :func:`restore` (None off the main thread, where signals cannot be handled)."""
+    """Clear the latch, handle :data:`SIGNALS` with :func:`interrupt` and keep dropped
+    interrupts quiet; return what was replaced, for :func:`restore` (None off the main thread,
+    where signals cannot be handled)."""
     _latched.clear()
     if threading.current_thread() is not threading.main_thread():
         return None
-    return {s: signal.signal(s, interrupt) for s in SIGNALS}
+    previous = {s: signal.signal(s, interrupt) for s in SIGNALS}
+    hook = sys.unraisablehook
+    previous["unraisablehook"] = hook
+    sys.unraisablehook = lambda unraisable: _quiet_dropped_interrupts(unraisable, fallback=hook)
+    return previous
 
 
 def restore(previous: dict | None) -> None:
-    """Put back the handlers :func:`install` replaced and clear the latch."""
+    """Put back what :func:`install` replaced and clear the latch."""
     _latched.clear()
-    for s, handler in (previous or {}).items():
+    previous = dict(previous or {})
+    if "unraisablehook" in previous:
+        sys.unraisablehook = previous.pop("unraisablehook")
+    for s, handler in previous.items():
         signal.signal(s, handler)
