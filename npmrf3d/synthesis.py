@@ -360,16 +360,15 @@ def segmented(config: SynthesisConfig, per_view) -> bool:
     return config.segmented == "yes"
 
 
-def _coherent_options(config: SynthesisConfig, per_view) -> coherent.CoherentConfig:
+def _coherent_options(config: SynthesisConfig, phases: bool) -> coherent.CoherentConfig:
     """The coherent sampler's options for a ``coherent``-variant configuration: its window at
     every level (:data:`npmrf3d.coherent.SEGMENTED`'s window and histogram vote weighting for a
-    segmented exemplar, :func:`segmented`), its levels, views, heuristic, centre bandwidth and
+    segmented exemplar, ``phases`` = :func:`segmented`), its levels, views, heuristic, centre bandwidth and
     outlier share; with relaxation ``anneal`` its temperatures ``t0`` to ``t_end`` by
     ``schedule`` over each level's iterations (a heat-bath draw among the candidates;
     ``sampler``, ``proposals`` and ``proposal`` belong to the full-Parzen annealer and are not
     used)."""
     anneal = config.relaxation == "anneal"
-    phases = segmented(config, per_view)
     window = coherent.SEGMENTED.window if phases else config.window
     value_weight = coherent.SEGMENTED.value_weight if phases else coherent.DEFAULTS.value_weight
     return coherent.make_coherent_config(
@@ -383,7 +382,7 @@ def npmrf_resources(config: SynthesisConfig, per_view):
     """The memory estimate of a run: the coherent sampler's for the ``coherent`` variant, the
     full-Parzen sampler's otherwise."""
     if config.variant == "coherent":
-        return coherent_estimate(_coherent_options(config, per_view), per_view)
+        return coherent_estimate(_coherent_options(config, segmented(config, per_view)), per_view)
     return npmrf_estimate(config, per_view)
 
 
@@ -391,7 +390,8 @@ def _run_coherent(per_view, config: SynthesisConfig, rng, *, progress, checkpoin
     """The ``coherent`` variant: :mod:`npmrf3d.coherent` with the options of :func:`_coherent_options`
     (decided on the exemplars as given); the exemplars reduced to ``grey_levels`` or a
     ``palette`` first when asked. ``stats["segmented"]`` says whether the segmented preset ran."""
-    options, phases = _coherent_options(config, per_view), segmented(config, per_view)
+    phases = segmented(config, per_view)  # counted once, on the exemplars as given
+    options = _coherent_options(config, phases)
     if config.grey_levels is not None or config.palette is not None:
         distinct = {id(a): a for a in per_view.values()}
         labels, images = make_labels(list(distinct.values()), grey_levels=config.grey_levels,
