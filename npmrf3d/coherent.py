@@ -63,11 +63,17 @@ class SegmentedPreset:
 
     ``window``: at every level (the photographs' 7 covers half of the coarsest level's 16 x 16
     exemplar of a 64 x 64 slice); ``value_weight``: the histogram vote weighting
-    (:class:`CoherentConfig`), which keeps the phase fractions.
+    (:class:`CoherentConfig`), which keeps the phase fractions; ``fewer_levels``: a second run
+    with this many fewer pyramid levels (when one level at least is left; 0 = none), and the
+    volume kept is the one whose two-point correlation shape is nearer the exemplars'
+    (:func:`npmrf3d.metrics.two_point_shape_error`): the coarsest level builds the large pores
+    of one slice and smears the small throats of another, and only the exemplar can tell which
+    (docs/volume.md, "Two pyramids, the better kept").
     """
 
     window: int = 5
     value_weight: float = 8.0
+    fewer_levels: int = 1
 
 
 SEGMENTED = SegmentedPreset()

@@ -421,11 +421,22 @@ def test_segmented_preset_is_recorded_in_run_json(tmp_path, capsys, mode, expect
     pores = ((r - 8) ** 2 + (c - 8) ** 2 <= 16) | ((r - 17) ** 2 + (c - 16) ** 2 <= 9)
     Image.fromarray(np.where(pores, 0, 255).astype(np.uint8)).save(tmp_path / "phase.png")
     code, out, err = run_cli(capsys, "synth", str(tmp_path / "phase.png"), "--size", "16", "--levels", "2",
-                             "--segmented", mode, "--quiet", "--out", str(tmp_path / "run"))
+                             "--segmented", mode, "--quiet", "--out", str(tmp_path / "run"),
+                             "--checkpoint", str(tmp_path / "ck.npz"))
     assert code == 0, err
     record = json.loads((tmp_path / "run" / "run.json").read_text())
-    assert record["config"]["segmented"] == mode and record["stats"]["segmented"] is expected
-    assert record["stats"]["levels"]["level_0"]["window"] == (5 if expected else 7)
+    stats = record["stats"]
+    assert record["config"]["segmented"] == mode and stats["segmented"] is expected
+    assert stats["levels"]["level_0"]["window"] == (5 if expected else 7)
+    # the preset's second run (one level fewer) has its own checkpoint beside the first
+    assert (tmp_path / "ck.npz").is_file() and (tmp_path / "ck.levels1.npz").is_file() is expected
+    if expected:
+        errors = [t["two_point_shape_error"] for t in stats["level_trials"]]
+        assert [t["levels"] for t in stats["level_trials"]] == [2, 1]
+        assert stats["levels_kept"] == (2, 1)[int(np.argmin(errors))]
+        assert len(stats["levels"]) == stats["levels_kept"]
+    else:
+        assert "level_trials" not in stats and stats["levels_kept"] == 2
 
 
 def test_only_dropped_interrupts_are_kept_quiet():

@@ -321,6 +321,66 @@ def test_two_point_correlation_checks_the_distance():
         metrics.two_point_correlation(np.zeros((5, 8)), max_distance=5)
 
 
+def brute_shape_error(exemplars: dict, volume: np.ndarray, r_max: int, isotropic: bool = False) -> float:
+    """:func:`metrics.two_point_shape_error` by brute-force pair counts, written out: phases =
+    the exemplars' distinct values, labels by the nearest phase, one normalised curve per phase
+    but the first, front = volume axes (0, 1), right = (1, 2), top = (0, 2); ``isotropic``:
+    every axis against the mean of all the exemplars' row and column curves."""
+    planes = {"front": (0, 1), "right": (1, 2), "top": (0, 2)}
+    phases = np.unique(np.concatenate([e.ravel() for e in exemplars.values()]))
+
+    def curves(array):
+        label = np.abs(array[..., None] - phases).argmin(axis=-1)
+        rows = []
+        for p in range(1, len(phases)):
+            ind = label == p
+            phi = ind.mean()
+            s2 = brute_two_point(ind, r_max, False)
+            rows.append((s2 - phi ** 2) / (phi - phi ** 2) if 0 < phi < 1 else np.zeros_like(s2))
+        return np.stack(rows, axis=1)  # (axes, phases - 1, r)
+
+    mine = curves(volume)
+    refs = {a: [] for a in range(3)}
+    for view, image in exemplars.items():
+        c = curves(image)
+        for image_axis, volume_axis in enumerate(planes[view]):
+            for a in (0, 1, 2) if isotropic else (volume_axis,):
+                refs[a].append(c[image_axis])
+    return float(np.mean([np.sqrt(((mine[a] - np.mean(refs[a], axis=0)) ** 2).sum())
+                          for a in range(3) if refs[a]]))
+
+
+def test_two_point_shape_error_matches_brute_force_counts():
+    rng = np.random.default_rng(11)
+    values = np.array([0.0, 0.5, 1.0])
+    front = values[rng.integers(0, 3, (9, 10))]
+    right = values[rng.integers(0, 2, (8, 9))]      # the right view holds two of the phases
+    volume = values[rng.integers(0, 3, (8, 9, 10))] + rng.normal(0, 0.1, (8, 9, 10))  # nearest phase
+    got = metrics.two_point_shape_error({"front": front, "right": right}, volume, max_distance=3)
+    assert got == pytest.approx(brute_shape_error({"front": front, "right": right}, volume, 3), rel=1e-12)
+    # one view: only its plane's two axes are judged
+    got = metrics.two_point_shape_error({"top": front[:8]}, volume, max_distance=3)
+    assert got == pytest.approx(brute_shape_error({"top": front[:8]}, volume, 3), rel=1e-12)
+    for given in ({"front": front, "right": right}, {"top": front[:8]}):
+        got = metrics.two_point_shape_error(given, volume, max_distance=3, reference="isotropic")
+        assert got == pytest.approx(brute_shape_error(given, volume, 3, isotropic=True), rel=1e-12)
+        assert got != pytest.approx(metrics.two_point_shape_error(given, volume, max_distance=3))
+
+
+def test_two_point_shape_error_ranks_structure_over_shuffled_voxels():
+    layers = np.tile(np.repeat([0.0, 1.0], 3), (12, 2))          # columns: 3 on, 3 off
+    stacked = np.broadcast_to(layers[None], (12, 12, 12)).copy()  # every right slice is the image
+    shuffled = np.random.default_rng(0).permutation(stacked.ravel()).reshape(stacked.shape)
+    assert metrics.two_point_shape_error({"right": layers}, stacked) == 0.0
+    assert metrics.two_point_shape_error({"right": layers}, shuffled) > 1.0
+    with pytest.raises(ParameterError, match="max_distance"):
+        metrics.two_point_shape_error({"right": layers}, stacked, max_distance=7)
+    with pytest.raises(ParameterError, match="reference"):
+        metrics.two_point_shape_error({"right": layers}, stacked, reference="axes")
+    # the layers run along the columns only: an isotropic reference mixes in the flat rows
+    assert metrics.two_point_shape_error({"right": layers}, stacked, reference="isotropic") > 0.5
+
+
 # --------------------------------------------------------------------------- evaluate: sanity
 
 

@@ -162,17 +162,51 @@ def _phase_slice(side: int = 24) -> np.ndarray:
     return np.where(pores, 0, 255).astype(np.uint8)
 
 
-def test_segmented_preset_is_the_coherent_sampler_with_its_window_and_vote_weighting():
+def _preset_twins(image, size, levels, seed):
+    """The segmented preset's two runs, made by hand: the coherent sampler with the preset's
+    window and vote weighting, ``levels`` then ``levels - 1`` levels, on one generator in turn."""
     from npmrf3d.coherent import SEGMENTED, coherent_synthesize
+    generator = np.random.default_rng(seed)
+    return [coherent_synthesize(image, size=size, levels=n, window=(SEGMENTED.window,) * n,
+                                value_weight=SEGMENTED.value_weight, rng=generator)
+            for n in (levels, levels - SEGMENTED.fewer_levels)]
+
+
+def test_segmented_preset_keeps_the_trial_nearer_the_exemplars_two_point_shape():
+    from npmrf3d.coherent import SEGMENTED
     image = _phase_slice()
     res = npmrf3d.synthesize(image, size=16, levels=2, rng=3)
     assert res.stats["segmented"] is True
-    assert [lv["window"] for lv in res.stats["levels"].values()] == [SEGMENTED.window] * 2
-    twin = coherent_synthesize(image, size=16, levels=2, window=(SEGMENTED.window,) * 2,
-                               value_weight=SEGMENTED.value_weight, rng=3)
-    assert np.array_equal(res.volume, twin.volume)
+    twins = _preset_twins(image, 16, 2, 3)
+    errors = [metrics.two_point_shape_error(image, t.volume, reference="isotropic") for t in twins]
+    trials = res.stats["level_trials"]
+    assert [t["levels"] for t in trials] == [2, 1]
+    assert [t["two_point_shape_error"] for t in trials] == pytest.approx(errors, rel=1e-12)
+    kept = int(np.argmin(errors))
+    assert res.stats["levels_kept"] == (2, 1)[kept]
+    assert np.array_equal(res.volume, twins[kept].volume)
+    assert [lv["window"] for lv in res.stats["levels"].values()] == [SEGMENTED.window] * (2 - kept)
+    assert res.timings["total"] >= sum(t["seconds"] for t in trials) * 0.999
     assert np.array_equal(npmrf3d.synthesize(image, size=16, levels=2, rng=3, segmented="yes").volume,
                           res.volume)
+
+
+@pytest.mark.parametrize("kept", [0, 1])
+def test_segmented_preset_returns_whichever_trial_scores_lower(monkeypatch, kept):
+    from npmrf3d import synthesis
+    image = _phase_slice()
+    scores = iter([0.5, 0.9] if kept == 0 else [0.9, 0.5])
+    monkeypatch.setattr(synthesis, "two_point_shape_error", lambda exemplars, volume, reference: next(scores))
+    res = npmrf3d.synthesize(image, size=16, levels=2, rng=4)
+    assert res.stats["levels_kept"] == (2, 1)[kept]
+    assert np.array_equal(res.volume, _preset_twins(image, 16, 2, 4)[kept].volume)
+    assert len(res.history) == 2 - kept
+
+
+def test_segmented_preset_with_one_level_runs_once():
+    res = npmrf3d.synthesize(_phase_slice(), size=16, levels=1, rng=3)
+    assert res.stats["segmented"] is True and res.stats["levels_kept"] == 1
+    assert "level_trials" not in res.stats
 
 
 def test_segmented_no_and_photographs_keep_the_window():

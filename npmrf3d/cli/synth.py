@@ -76,7 +76,9 @@ def register(commands, formatter_class) -> None:
     )
     shape.add_argument(
         "--levels", type=int, default=_d("levels"), metavar="L",
-        help="number of pyramid levels (the paper's scales), an integer from 1 to 8",
+        help="number of pyramid levels (the paper's scales), an integer from 1 to 8 (variant "
+             "coherent on a segmented exemplar: this many and one fewer are both run, see "
+             "--segmented)",
     )
     shape.add_argument(
         "--upsample", default=None, metavar=choices(UPSAMPLING),
@@ -161,10 +163,13 @@ def register(commands, formatter_class) -> None:
         "--segmented", default=_d("segmented"), metavar=choices(SEGMENTED_MODES),
         help="variant coherent: the preset for a segmented exemplar (a thresholded scan slice, a "
              "label map): window 5 at every level in place of --window, and histogram vote "
-             "weighting, which keep the phase fractions and the pore sizes (measured on micro-CT "
-             "slices, docs/volume.md); auto = when the exemplars hold at most "
-             f"{SEGMENTED_MAX_VALUES} distinct grey values, no = --window as given; run.json's "
-             "stats say which ran",
+             "weighting, which keep the phase fractions and the pore sizes; then a second run "
+             "with one level fewer, and the volume kept is the one whose two-point correlation "
+             "is nearer the exemplar's (about twice the time; with --checkpoint FILE.npz the "
+             "second run resumes from FILE.levelsL.npz) (measured on micro-CT slices, "
+             "docs/volume.md); auto = when the exemplars hold at most "
+             f"{SEGMENTED_MAX_VALUES} distinct grey values, no = --window and --levels as given; "
+             "run.json's stats say which ran (segmented, level_trials, levels_kept)",
     )
     method.add_argument(
         "--bandwidth", type=float, default=None, metavar="B",
@@ -295,7 +300,7 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
         result = run_method(args, METHOD, config, per_view, checkpoint=checkpoint, t_start=t_start)
         window = SEGMENTED.window if result.stats.get("segmented") else config.window
         title = (f"npmrf3d {config.heuristic}, variant {config.variant}, window {window}, "
-                 f"{config.levels} levels, seed {config.seed}")
+                 f"{result.stats.get('levels_kept', config.levels)} levels, seed {config.seed}")
         write_result(out, args, argv, "synth", result, per_view, sources, title,
                      method=METHOD.name, labels=int(len(result.labels)))
     return 0
