@@ -37,12 +37,14 @@ from . import _validation as check
 from .baselines import chen_wang
 from .config import SynthesisMethod, SynthesisResult
 from .exemplar import resolve_exemplars
+from .metrics import two_point_shape_error
 from .neighborhood import VIEWS
 from .relax.anneal import SCHEDULES
 from .resources import check_memory, coherent_estimate
 
 __all__ = ["METHOD", "SEGMENTED", "SEGMENTED_MAX_VALUES", "CoherentConfig", "HEURISTIC_CODES", "SegmentedPreset",
-           "coherent_synthesize", "is_segmented", "make_coherent_config", "run", "temperatures"]
+           "best_of_pyramids", "coherent_synthesize", "is_segmented", "make_coherent_config", "run",
+           "temperatures", "trial_checkpoint"]
 
 #: Heuristics that have an objective to rank candidates by (kernel codes of the solver).
 HEURISTIC_CODES = {"ML_H2b": 1, "ML_H2a": 2}
@@ -74,6 +76,16 @@ class SegmentedPreset:
     window: int = 5
     value_weight: float = 8.0
     fewer_levels: int = 1
+
+    def pyramids(self, levels: int) -> tuple[int, ...]:
+        """The level counts the preset runs, in order: ``levels``, and ``levels - fewer_levels``
+        when at least one level is left.
+
+        >>> SEGMENTED.pyramids(3), SEGMENTED.pyramids(1)
+        ((3, 2), (1,))
+        """
+        fewer = levels - self.fewer_levels
+        return (levels, fewer) if self.fewer_levels and fewer >= 1 else (levels,)
 
 
 SEGMENTED = SegmentedPreset()
@@ -230,6 +242,63 @@ def coherent_method(per_view, config: CoherentConfig, rng: np.random.Generator, 
     """The registered form of :func:`run` (exemplars first, as every method of the registry)."""
     chen_wang._check_exemplar_levels(_chen_wang_config(config), per_view)
     return run(config, per_view, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
+
+
+def trial_checkpoint(checkpoint: str | Path | None, index: int, levels: int) -> Path | None:
+    """The checkpoint file of pyramid ``index`` (0 first) of :func:`best_of_pyramids`, which has
+    ``levels`` levels: ``checkpoint`` itself for the first, ``NAME.levelsL.SUFFIX`` beside it
+    for the others (each pyramid resumes from its own).
+
+    >>> str(trial_checkpoint("out/run.npz", 1, 2))
+    'out/run.levels2.npz'
+    """
+    if checkpoint is None or index == 0:
+        return None if checkpoint is None else Path(checkpoint)
+    path = Path(checkpoint)
+    return path.with_name(f"{path.stem}.levels{levels}{path.suffix}")
+
+
+def best_of_pyramids(per_view, configs, rng: np.random.Generator, *, progress=None, checkpoint=None,
+                     t_start=None) -> SynthesisResult:
+    """Run :func:`coherent_method` with each configuration in turn (pyramids of different depth:
+    the segmented preset's ``levels`` and ``levels - SEGMENTED.fewer_levels``) and keep the
+    volume whose :func:`npmrf3d.metrics.two_point_shape_error` against the exemplars is lowest
+    (the first on ties; the isotropic reference, since a scanned material is judged by its 3D
+    statistics, the same along every axis). One configuration: that run alone.
+
+    The pyramids draw on ``rng`` in turn, so the result depends on its seed only; each has its
+    own checkpoint (:func:`trial_checkpoint`). ``stats["levels_kept"]`` holds the kept volume's
+    levels and, with several pyramids, ``stats["level_trials"]`` each one's levels, error and
+    seconds; ``timings["total"]`` covers them all. A ``progress`` callback with a ``note(text)``
+    method is told when each pyramid starts and which was kept.
+    """
+    configs = list(configs)
+    several = len(configs) > 1
+    note = getattr(progress, "note", None) if several else None  # the callback's optional hook
+    results, errors = [], []
+    for index, config in enumerate(configs):
+        if note is not None:
+            note(f"segmented exemplar: pyramid {index + 1} of {len(configs)}, "
+                 f"{config.levels} level{'s' * (config.levels != 1)}")
+        results.append(coherent_method(per_view, config, rng, progress=progress, t_start=t_start,
+                                       checkpoint=trial_checkpoint(checkpoint, index, config.levels)))
+        if several:
+            errors.append(two_point_shape_error({v: per_view[v] for v in config.views},
+                                                results[-1].volume, reference="isotropic"))
+    best = int(np.argmin(errors)) if several else 0
+    kept = configs[best].levels
+    stats = {**results[best].stats, "levels_kept": kept}
+    if several:
+        others = " against ".join(f"{e:.3g}" for i, e in enumerate(errors) if i != best)
+        if note is not None:
+            note(f"kept the {kept}-level volume (two-point shape error against the exemplar "
+                 f"{errors[best]:.3g} against {others})")
+        ends = [r.timings["total"] for r in results]
+        stats["level_trials"] = [{"levels": c.levels, "two_point_shape_error": e,
+                                  "seconds": end - (ends[i - 1] if i else 0.0)}
+                                 for i, (c, e, end) in enumerate(zip(configs, errors, ends))]
+    timings = {**results[best].timings, "total": results[-1].timings["total"]}
+    return dataclasses.replace(results[best], stats=stats, timings=timings)
 
 
 METHOD = SynthesisMethod(

@@ -26,7 +26,7 @@ from .errors import ParameterError
 from .parzen import KERNEL_TABLE_BYTES
 
 __all__ = ["Estimate", "ResourceError", "available_memory", "check_memory", "format_bytes",
-           "generic_estimate", "kopf_estimate", "npmrf_estimate", "patch_count"]
+           "generic_estimate", "kopf_estimate", "npmrf_estimate", "one_after_another", "patch_count"]
 
 #: Bytes per voxel of the finest level that the NP-MRF sampler keeps or builds (SPEC.md 4-5):
 #: the level state (volume 4C, labels 4, temperatures 4, inherited 1), the parent level (1/8 of
@@ -72,6 +72,19 @@ class Estimate:
         if self.seconds is not None:
             text += f" and roughly {format_seconds(self.seconds)} on 2 cores"
         return text
+
+
+def one_after_another(estimates) -> Estimate:
+    """The estimate of runs made one after the other: the largest one's memory, the sum of the
+    times (None if one is unknown).
+
+    >>> one_after_another([Estimate({"a": 2}, 1.0), Estimate({"a": 3}, 2.0)])
+    Estimate(parts={'a': 3}, seconds=3.0)
+    """
+    estimates = list(estimates)
+    peak = max(estimates, key=lambda e: e.bytes)
+    seconds = None if any(e.seconds is None for e in estimates) else sum(e.seconds for e in estimates)
+    return Estimate(dict(peak.parts), seconds)
 
 
 def format_bytes(n: float) -> str:

@@ -16,14 +16,13 @@ from ._kernels import _jit
 from .config import DEFAULT_SIZE, DEFAULT_VARIANT, SEGMENTED_MODES, VARIANT_ALIASES, VARIANTS, SynthesisConfig, SynthesisMethod, SynthesisResult
 from .exemplar import make_labels, resolve_exemplars
 from .heuristics import DECISIONS, get_heuristic
-from .metrics import two_point_shape_error
 from .neighborhood import VIEWS, colour_classes
 from .parzen import PRUNE, adaptive_floor, build_view_models
 from .pyramid import INHERIT, UPSAMPLING, Levels, LevelState, random_state, run_pyramid, upsample
 from .relax import RELAXATIONS
 from .relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
 from .relax.icm import expected_sweeps
-from .resources import check_memory, coherent_estimate, npmrf_estimate
+from .resources import check_memory, coherent_estimate, npmrf_estimate, one_after_another
 
 __all__ = ["METHOD", "make_config", "npmrf_method", "run", "synthesize"]
 
@@ -361,10 +360,10 @@ def segmented(config: SynthesisConfig, per_view) -> bool:
     return config.segmented == "yes"
 
 
-def _coherent_options(config: SynthesisConfig, phases: bool, levels: int | None = None) -> coherent.CoherentConfig:
+def _coherent_options(config: SynthesisConfig, phases: bool, levels: int) -> coherent.CoherentConfig:
     """The coherent sampler's options for a ``coherent``-variant configuration: its window at
     every level (:data:`npmrf3d.coherent.SEGMENTED`'s window and histogram vote weighting for a
-    segmented exemplar, ``phases`` = :func:`segmented`), its levels (or ``levels``), views,
+    segmented exemplar, ``phases`` = :func:`segmented`), ``levels`` levels, its views,
     heuristic, centre bandwidth and outlier share; with relaxation ``anneal`` its temperatures
     ``t0`` to ``t_end`` by ``schedule`` over each level's iterations (a heat-bath draw among
     the candidates; ``sampler``, ``proposals`` and ``proposal`` belong to the full-Parzen
@@ -372,7 +371,6 @@ def _coherent_options(config: SynthesisConfig, phases: bool, levels: int | None 
     anneal = config.relaxation == "anneal"
     window = coherent.SEGMENTED.window if phases else config.window
     value_weight = coherent.SEGMENTED.value_weight if phases else coherent.DEFAULTS.value_weight
-    levels = config.levels if levels is None else levels
     return coherent.make_coherent_config(
         size=config.size, window=(window,) * levels, levels=levels,
         views=config.views, heuristic=config.heuristic, centre_bandwidth=config.rule.centre_bandwidth,
@@ -380,50 +378,26 @@ def _coherent_options(config: SynthesisConfig, phases: bool, levels: int | None 
         t_end=config.t_end, schedule=config.schedule, seed=config.seed)
 
 
-def _level_trials(config: SynthesisConfig, phases: bool) -> tuple[int, ...]:
-    """The level counts a ``coherent``-variant run tries, in order: ``levels``, and for the
-    segmented preset also ``levels - SEGMENTED.fewer_levels`` when at least one level is left."""
-    fewer = config.levels - coherent.SEGMENTED.fewer_levels
-    return (config.levels, fewer) if phases and coherent.SEGMENTED.fewer_levels and fewer >= 1 else (config.levels,)
-
-
-def trial_checkpoint(checkpoint: str | Path | None, levels: int, trials: tuple[int, ...]) -> Path | None:
-    """The checkpoint file of the run with ``levels`` levels: ``checkpoint`` itself for the first
-    trial, ``NAME.levelsL.SUFFIX`` beside it for the others (each run resumes from its own).
-
-    >>> str(trial_checkpoint("out/run.npz", 2, (3, 2)))
-    'out/run.levels2.npz'
-    """
-    if checkpoint is None or levels == trials[0]:
-        return None if checkpoint is None else Path(checkpoint)
-    path = Path(checkpoint)
-    return path.with_name(f"{path.stem}.levels{levels}{path.suffix}")
+def _coherent_runs(config: SynthesisConfig, phases: bool) -> list[coherent.CoherentConfig]:
+    """The coherent sampler's runs: one, or the segmented preset's pyramids, deepest first."""
+    levels = coherent.SEGMENTED.pyramids(config.levels) if phases else (config.levels,)
+    return [_coherent_options(config, phases, n) for n in levels]
 
 
 def npmrf_resources(config: SynthesisConfig, per_view):
-    """The memory estimate of a run: the coherent sampler's for the ``coherent`` variant (the
-    largest of its trials' memory, the sum of their times), the full-Parzen sampler's otherwise."""
+    """The memory estimate of a run: the coherent sampler's (its pyramids') for the ``coherent``
+    variant, the full-Parzen sampler's otherwise."""
     if config.variant == "coherent":
-        phases = segmented(config, per_view)
-        estimates = [coherent_estimate(_coherent_options(config, phases, levels), per_view)
-                     for levels in _level_trials(config, phases)]
-        peak = max(estimates, key=lambda e: e.bytes)
-        seconds = None if any(e.seconds is None for e in estimates) else sum(e.seconds for e in estimates)
-        return dataclasses.replace(peak, seconds=seconds)  # the trials run one after the other
+        runs = _coherent_runs(config, segmented(config, per_view))
+        return one_after_another(coherent_estimate(options, per_view) for options in runs)
     return npmrf_estimate(config, per_view)
 
 
 def _run_coherent(per_view, config: SynthesisConfig, rng, *, progress, checkpoint, t_start) -> SynthesisResult:
     """The ``coherent`` variant: :mod:`npmrf3d.coherent` with the options of :func:`_coherent_options`
     (decided on the exemplars as given); the exemplars reduced to ``grey_levels`` or a
-    ``palette`` first when asked. ``stats["segmented"]`` says whether the segmented preset ran.
-
-    The segmented preset runs twice (:func:`_level_trials`: ``levels`` levels, then fewer, on
-    the same generator in turn, each with its own checkpoint, :func:`trial_checkpoint`) and
-    keeps the volume whose :func:`npmrf3d.metrics.two_point_shape_error` against the exemplars
-    (isotropic reference: a scanned material is judged against its 3D statistics, the same
-    along every axis) is lower (the first on ties); ``stats["level_trials"]`` records each run's levels and
-    error, ``stats["levels_kept"]`` the levels of the volume returned."""
+    ``palette`` first when asked. ``stats["segmented"]`` says whether the segmented preset ran;
+    the preset runs two pyramids and keeps the better (:func:`npmrf3d.coherent.best_of_pyramids`)."""
     phases = segmented(config, per_view)  # counted once, on the exemplars as given
     if config.grey_levels is not None or config.palette is not None:
         distinct = {id(a): a for a in per_view.values()}
@@ -431,24 +405,9 @@ def _run_coherent(per_view, config: SynthesisConfig, rng, *, progress, checkpoin
                                      palette=config.palette, rng=rng)
         reduced = {key: labels[image] for key, image in zip(distinct, images)}
         per_view = {v: reduced[id(a)] for v, a in per_view.items()}
-    trials = _level_trials(config, phases)
-    results, errors = [], []
-    for levels in trials:
-        result = coherent.coherent_method(per_view, _coherent_options(config, phases, levels), rng,
-                                          progress=progress, t_start=t_start,
-                                          checkpoint=trial_checkpoint(checkpoint, levels, trials))
-        results.append(result)
-        if len(trials) > 1:
-            errors.append(two_point_shape_error({v: per_view[v] for v in config.views}, result.volume,
-                                                reference="isotropic"))
-    best = int(np.argmin(errors)) if errors else 0
-    stats = {**results[best].stats, "segmented": phases, "levels_kept": trials[best]}
-    if len(trials) > 1:
-        stats["level_trials"] = [{"levels": levels, "two_point_shape_error": error,
-                                  "seconds": r.timings["total"] - (results[i - 1].timings["total"] if i else 0.0)}
-                                 for i, (levels, error, r) in enumerate(zip(trials, errors, results))]
-    timings = {**results[best].timings, "total": results[-1].timings["total"]}
-    return dataclasses.replace(results[best], config=config, stats=stats, timings=timings)
+    result = coherent.best_of_pyramids(per_view, _coherent_runs(config, phases), rng, progress=progress,
+                                       checkpoint=checkpoint, t_start=t_start)
+    return dataclasses.replace(result, config=config, stats={**result.stats, "segmented": phases})
 
 
 #: The registry entry of the NP-MRF sampler.

@@ -439,6 +439,21 @@ def test_segmented_preset_is_recorded_in_run_json(tmp_path, capsys, mode, expect
         assert "level_trials" not in stats and stats["levels_kept"] == 2
 
 
+def test_segmented_preset_says_which_pyramid_runs_and_which_it_kept(tmp_path, capsys):
+    from PIL import Image
+    r, c = np.mgrid[:24, :24]
+    pores = ((r - 8) ** 2 + (c - 8) ** 2 <= 16) | ((r - 17) ** 2 + (c - 16) ** 2 <= 9)
+    Image.fromarray(np.where(pores, 0, 255).astype(np.uint8)).save(tmp_path / "phase.png")
+    code, out, err = run_cli(capsys, "synth", str(tmp_path / "phase.png"), "--size", "16", "--levels", "2",
+                             "--out", str(tmp_path / "run"))
+    assert code == 0, err
+    kept = json.loads((tmp_path / "run" / "run.json").read_text())["stats"]["levels_kept"]
+    lines = err.splitlines()
+    first = lines.index("segmented exemplar: pyramid 1 of 2, 2 levels")
+    second = lines.index("segmented exemplar: pyramid 2 of 2, 1 level")
+    assert first < second and any(f"kept the {kept}-level volume" in line for line in lines[second:])
+
+
 def test_only_dropped_interrupts_are_kept_quiet():
     from types import SimpleNamespace
     from npmrf3d.cli import _interrupt

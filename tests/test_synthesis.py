@@ -193,10 +193,10 @@ def test_segmented_preset_keeps_the_trial_nearer_the_exemplars_two_point_shape()
 
 @pytest.mark.parametrize("kept", [0, 1])
 def test_segmented_preset_returns_whichever_trial_scores_lower(monkeypatch, kept):
-    from npmrf3d import synthesis
+    from npmrf3d import coherent
     image = _phase_slice()
     scores = iter([0.5, 0.9] if kept == 0 else [0.9, 0.5])
-    monkeypatch.setattr(synthesis, "two_point_shape_error", lambda exemplars, volume, reference: next(scores))
+    monkeypatch.setattr(coherent, "two_point_shape_error", lambda exemplars, volume, reference: next(scores))
     res = npmrf3d.synthesize(image, size=16, levels=2, rng=4)
     assert res.stats["levels_kept"] == (2, 1)[kept]
     assert np.array_equal(res.volume, _preset_twins(image, 16, 2, 4)[kept].volume)

@@ -325,6 +325,14 @@ class LevelProgress:
         else:
             self.bar.refresh()
 
+    def note(self, text: str) -> None:
+        """One line on stderr between levels (a method's optional hook: the segmented preset
+        says when its second pyramid starts and which volume it kept)."""
+        _interrupt.check()
+        self.close()
+        if self.enabled:
+            print(text, file=sys.stderr, flush=True)
+
     def close(self) -> None:
         if self.bar is not None:
             self.bar.total = self.bar.n
