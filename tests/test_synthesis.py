@@ -203,6 +203,32 @@ def test_segmented_preset_returns_whichever_trial_scores_lower(monkeypatch, kept
     assert len(res.history) == 2 - kept
 
 
+def test_segmented_preset_resumes_inside_its_second_pyramid(tmp_path):
+    image = _phase_slice(32)  # 32^3 in 3 levels, then 2: the second pyramid checkpoints its first level
+    full = npmrf3d.synthesize(image, size=32, levels=3, rng=6)
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def interrupt(level, step, steps, value):
+        seen.append((level, step))
+        if seen.count((0, 1)) == 2:  # the second pyramid's finest level, after one iteration
+            raise Stop
+
+    path = tmp_path / "run.npz"
+    with pytest.raises(Stop):
+        npmrf3d.synthesize(image, size=32, levels=3, rng=6, progress=interrupt, checkpoint=path)
+    assert path.is_file() and (tmp_path / "run.levels2.npz").is_file()
+    again = []
+    resumed = npmrf3d.synthesize(image, size=32, levels=3, rng=6, checkpoint=path,
+                                 progress=lambda level, *rest: again.append(level))
+    assert np.array_equal(resumed.volume, full.volume)
+    assert set(again) == {0}  # the first pyramid came whole from its file, the second from level 0
+    assert resumed.stats["level_trials"] == [
+        {**t, "seconds": r["seconds"]} for t, r in zip(full.stats["level_trials"], resumed.stats["level_trials"])]
+
+
 def test_segmented_preset_with_one_level_runs_once():
     res = npmrf3d.synthesize(_phase_slice(), size=16, levels=1, rng=3)
     assert res.stats["segmented"] is True and res.stats["levels_kept"] == 1
