@@ -331,7 +331,7 @@ class LevelProgress:
         _interrupt.check()
         self.close()
         if self.enabled:
-            print(text, file=sys.stderr, flush=True)
+            say(text, error=True)
 
     def close(self) -> None:
         if self.bar is not None:
