@@ -771,17 +771,19 @@ def two_point_shape_error(exemplars: Any, volume: Any, *, views: Any = None,
     0.0
     """
     reference = check.choice("reference", reference, SHAPE_REFERENCES)
-    per_view = {v: _exemplar(a, f"{v} exemplar") for v, a in _exemplar_map(exemplars, views).items()}
+    given = _exemplar_map(exemplars, views)
+    distinct = {id(a): _grey(_exemplar(a, f"{v} exemplar")) for v, a in given.items()}  # one array, several views: once
+    greys = {v: distinct[id(a)] for v, a in given.items()}
     grey = _grey(_volume(volume))
-    greys = {v: _grey(e) for v, e in per_view.items()}
     phases = np.unique(np.concatenate([g.ravel() for g in greys.values()]))
     longest = min(min(min(g.shape) for g in greys.values()), min(grey.shape)) // 2
     r_max = min(32, longest) if max_distance is None else check.integer(
         "max_distance", max_distance, low=1, high=max(1, longest))
     mine = _phase_shape_curves(grey, phases, r_max)
     refs: dict[int, list[np.ndarray]] = {}
-    for view, g in greys.items():
-        curves = _phase_shape_curves(g, phases, r_max)
+    curves_of = {key: _phase_shape_curves(g, phases, r_max) for key, g in distinct.items()}
+    for view, a in given.items():
+        curves = curves_of[id(a)]
         for image_axis, volume_axis in enumerate(VIEW_AXES[view]):
             for axis in range(3) if reference == "isotropic" else (volume_axis,):
                 refs.setdefault(axis, []).append(curves[image_axis])

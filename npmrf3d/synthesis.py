@@ -182,13 +182,12 @@ def synthesize(
         iterations (``sampler``, ``proposals``, ``proposal`` are not used). ``sharp`` (formerly ``default``, still accepted): the full-Parzen rule chosen
         by an earlier measurement (docs/quality.md). ``literal``: the paper word for word.
     segmented : {"auto", "yes", "no"}
-        The ``coherent`` variant's preset for segmented exemplars
-        (:data:`npmrf3d.coherent.SEGMENTED`: window 5 at every level in place of ``window``, and
-        the histogram vote weighting 8, which keeps the phase fractions). "auto": when the
-        exemplars hold at most :data:`npmrf3d.coherent.SEGMENTED_MAX_VALUES` distinct grey
-        values together (a thresholded scan slice, a label map); "no": ``window`` as given.
-        ``stats["segmented"]`` of the result says which ran. Measured in docs/volume.md ("The 2D
-        default on segmented slices"); photographs are never segmented.
+        The ``coherent`` variant's preset for segmented exemplars (:data:`npmrf3d.coherent.SEGMENTED`:
+        window 5 at every level, histogram vote weighting 8, and two pyramids, ``levels`` and
+        one fewer, of which :func:`npmrf3d.coherent.best_of_pyramids` keeps the one nearer the
+        exemplars' two-point correlation; about twice the time). "auto": when the exemplars hold
+        at most :data:`npmrf3d.coherent.SEGMENTED_MAX_VALUES` grey values together; "no":
+        ``window`` and ``levels`` as given. The result's ``stats`` say what ran (docs/volume.md).
     bandwidth, centre_bandwidth, adaptive, decision, tau, histogram_weight, outlier : optional
         Override single fields of the preset (:class:`npmrf3d.config.DecisionRule`).
     grey_levels : int, optional
