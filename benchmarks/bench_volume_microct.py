@@ -10,10 +10,11 @@ segmented micro-CT images, as ``berea.tif`` and ``ketton.tif`` in
 The scan is split along axis 0: the exemplar is the 64^3 crop at ``--corner`` of the first half
 (``--downsample`` 2 averages 2^3 voxels first, for coarse-grained rock in a 64^3 crop), and the
 real spread is every 64^3 crop of the second half (stride ``--stride``), which no run has seen.
-Each volume and crop is judged at the scan's threshold (0.5 of the scaled values, so
-``phase`` is the bright phase: grain): volume fraction, specific surface area (marching cubes)
-and radial two-point correlation S2(r), r = 0..16, each "inside" when it lies within the crops'
-min-max.
+Each volume and crop is judged at the scan's threshold (``--threshold``: 0.5 of the scaled
+values by default, so the phase is the bright one, a rock's grain; several values judge each
+interface of a multi-phase scan; ``otsu`` takes Otsu's threshold of the exemplar crop, for a grey
+scan): volume fraction, specific surface area (marching cubes) and radial two-point correlation
+S2(r), r = 0..16, each "inside" when it lies within the crops' min-max.
 
 Usage::
 
@@ -36,6 +37,7 @@ import matplotlib
 matplotlib.use("Agg")
 import numpy as np  # noqa: E402
 
+from npmrf3d import materials  # noqa: E402
 from npmrf3d.errors import ParameterError  # noqa: E402
 from npmrf3d.volume import load_volume_exemplar  # noqa: E402
 from npmrf3d.volume_synthesis import VolumeConfig, volume_synthesize  # noqa: E402
@@ -44,7 +46,26 @@ sys.path.insert(0, str(pathlib.Path(__file__).parent))
 from bench_volume_scan import (block_mean, crops_of, inside, print_spread, report, spread_of,  # noqa: E402
                                statistics)
 
-THRESHOLDS = {"grain|pore": 0.5}
+DEFAULT_THRESHOLD = "0.5"
+
+
+def thresholds_of(spec: list[str], exemplar: np.ndarray) -> dict[str, float]:
+    """Name -> threshold: ``0.5`` is "grain|pore" (the published runs' name), another number
+    "above X", ``otsu`` "otsu (X)" at the exemplar's Otsu threshold."""
+    out = {}
+    for item in spec:
+        if item == "otsu":
+            t = materials.otsu_threshold(exemplar)
+            out[f"otsu ({t:.3f})"] = t
+        else:
+            try:
+                t = float(item)
+            except ValueError:
+                raise ParameterError(f"--threshold takes numbers in (0, 1) or 'otsu'; got {item!r}") from None
+            if not 0.0 < t < 1.0:
+                raise ParameterError(f"--threshold takes numbers in (0, 1) or 'otsu'; got {item!r}")
+            out["grain|pore" if item == DEFAULT_THRESHOLD else f"above {t:g}"] = t
+    return out
 
 
 def main(argv=None) -> int:
@@ -58,6 +79,8 @@ def main(argv=None) -> int:
     p.add_argument("--seeds", type=int, nargs="+", default=[0])
     p.add_argument("--balance", type=float, nargs="+", default=[VolumeConfig.balance],
                    help="phase-histogram strengths to run (0: the phase fractions are left free)")
+    p.add_argument("--threshold", nargs="+", default=[DEFAULT_THRESHOLD],
+                   help="thresholds of the scaled values to judge at (numbers in (0, 1)), or 'otsu'")
     p.add_argument("--size", type=int, default=128)
     p.add_argument("--name", default="microct", help="name of the JSON and PNG written")
     p.add_argument("--out", default="figures/volume3d")
@@ -79,18 +102,23 @@ def main(argv=None) -> int:
               f"({half} x {scan.shape[1]} x {scan.shape[2]})", file=sys.stderr)
         return 2
     exemplar = scan[a:a + 64, b:b + 64, c:c + 64]
+    try:
+        thresholds = thresholds_of(args.threshold, exemplar)
+    except ParameterError as exc:
+        print(f"bench_volume_microct: error: {exc}", file=sys.stderr)
+        return 2
     if args.write_block:
         np.save(args.write_block, exemplar.astype(np.float32))
         print(f"wrote the exemplar crop to {args.write_block}")
-    crops = [statistics(crop, THRESHOLDS) for crop in crops_of(scan[half:], args.stride)]
+    crops = [statistics(crop, thresholds) for crop in crops_of(scan[half:], args.stride)]
     if len(crops) < 2:
         print("bench_volume_microct: error: the second half holds fewer than two 64^3 crops", file=sys.stderr)
         return 2
     spread = spread_of(crops)
-    ex_stats = statistics(exemplar, THRESHOLDS)
-    print(f"exemplar: {args.scan} crop at {(a, b, c)} (downsample {f}), fraction "
-          f"{ex_stats['grain|pore']['fraction']:.3f}, surface {ex_stats['grain|pore']['surface_area']:.4f}; "
-          f"{len(crops)} held-out crops")
+    ex_stats = statistics(exemplar, thresholds)
+    print(f"exemplar: {args.scan} crop at {(a, b, c)} (downsample {f}), " + "; ".join(
+          f"{n}: fraction {ex_stats[n]['fraction']:.3f}, surface {ex_stats[n]['surface_area']:.4f}" for n in thresholds)
+          + f"; {len(crops)} held-out crops")
     print_spread(spread)
     runs = []
     for balance, seed in [(b, s_) for b in args.balance for s_ in args.seeds]:
@@ -98,17 +126,18 @@ def main(argv=None) -> int:
         res = volume_synthesize(exemplar[..., None], size=args.size, rng=seed, balance=balance)
         seconds = time.perf_counter() - t0
         vol = res.volume[..., 0]
-        st = statistics(vol, THRESHOLDS)
+        st = statistics(vol, thresholds)
         verdict = {name: {key: inside(st[name][key], *spread[name][key])
-                          for key in ("fraction", "surface_area", "s2")} for name in THRESHOLDS}
+                          for key in ("fraction", "surface_area", "s2")} for name in thresholds}
         runs.append({"balance": balance, "seed": seed, "seconds": round(seconds, 1), "statistics": st, "inside": verdict,
                      "slice": vol[:, :, args.size // 2]})
         parts = [f"fraction {st[n]['fraction']:.3f}{'' if verdict[n]['fraction'] else ' (out)'}, "
                  f"surface {st[n]['surface_area']:.4f}{'' if verdict[n]['surface_area'] else ' (out)'}, "
-                 f"S2 {'inside' if verdict[n]['s2'] else 'out'}" for n in THRESHOLDS]
+                 f"S2 {'inside' if verdict[n]['s2'] else 'out'}" for n in thresholds]
         print(f"balance {balance:g} seed {seed}: {seconds:.1f} s; " + "; ".join(parts), flush=True)
     out = pathlib.Path(args.out)
     record = {"scan": str(args.scan), "downsample": f, "corner": [a, b, c], "size": args.size,
+              "thresholds": thresholds,
               "crops": len(crops), "stride": args.stride, "exemplar_statistics": ex_stats, "spread": spread}
     report(out, args.name, record, runs, exemplar[:, :, 32], f"exemplar: {pathlib.Path(args.scan).stem} 64³",
            lambda r: f"volume-lh {args.size}³, balance {r['balance']:g}, seed {r['seed']}",
