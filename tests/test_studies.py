@@ -3,6 +3,7 @@ the HTML report and the 2D -> 3D ground-truth measures."""
 
 from __future__ import annotations
 
+import dataclasses
 import html.parser
 import json
 import sys
@@ -497,3 +498,50 @@ def test_ground_truth_compare_ranks_structure(blobs):
     assert groundtruth.fit_size(real.shape, 64, 2) == 32
     with pytest.raises(ParameterError, match="slice index"):
         groundtruth.exemplar_slice(real, 1, 40)
+
+
+def test_ground_truth_three_slices_give_each_view_its_own_plane(blobs):
+    real = groundtruth.load_reference(blobs)
+    one = groundtruth.exemplar_slices(real, 1, 2, 5)
+    assert {id(a) for a in one.values()} == {id(one["front"])}  # one array for every view
+    np.testing.assert_array_equal(one["top"], real[:, :, 5])
+    three = groundtruth.exemplar_slices(real, 3)
+    np.testing.assert_array_equal(three["front"], real[:, :, 16])  # front: axes 0-1
+    np.testing.assert_array_equal(three["right"], real[16])         # right: axes 1-2
+    np.testing.assert_array_equal(three["top"], real[:, 16])        # top: axes 0-2
+    pooled = groundtruth.pooled_exemplar(three)
+    assert pooled.shape == (3 * 32 * 32, 1, 1)
+    assert groundtruth.pooled_exemplar(one) is one["front"]
+    with pytest.raises(ParameterError, match="1 or 3"):
+        groundtruth.exemplar_slices(real, 2)
+    with pytest.raises(ParameterError, match="middle slice"):
+        groundtruth.exemplar_slices(real, 3, 0, 4)
+    with pytest.raises(ParameterError, match="--slice-index"):
+        STUDIES["groundtruth"].runs("quick", reference=str(blobs), slices=3, slice_index=4)
+
+
+def test_ground_truth_study_with_three_slices_hands_each_method_the_three(tmp_path, blobs, monkeypatch):
+    specs = STUDIES["groundtruth"].runs("quick", reference=str(blobs), slices=3)
+    assert {s.exemplar for s in specs} == {"blobs.three_slices"} and {s.slices for s in specs} == {3}
+    seen = {}
+    kopf = runner.METHODS["kopf"]
+
+    def spy(exemplar=None, **kwargs):
+        seen.update(kwargs.get("exemplars") or {})
+        return kopf.synthesize(exemplar, **kwargs)
+
+    monkeypatch.setitem(runner.METHODS, "kopf", dataclasses.replace(kopf, synthesize=spy))
+    spec = next(s for s in specs if s.algorithm == "kopf")
+    row = runner.execute_run(spec, str(tmp_path))
+    assert row["status"] == "done", row
+    real = groundtruth.load_reference(blobs)
+    for view, plane in groundtruth.reference_slices(real).items():
+        np.testing.assert_array_equal(seen[view], plane)
+    control = next(s for s in specs if s.algorithm == "control")
+    volume, per_view, _ = runner._synthesise(control, groundtruth.pooled_exemplar(seen), real, seen)
+    assert per_view["right"] is seen["right"] and volume.shape == (16, 16, 16, 1)
+    outcome = run_study(STUDIES["groundtruth"], mode="quick", out=tmp_path / "three", scheduler="serial",
+                        volume=blobs, slices=3, progress=False, echo=None)
+    assert {r["status"] for r in outcome.rows} == {"done"}
+    record = json.loads((tmp_path / "three" / "groundtruth" / "study.json").read_text())
+    assert record["options"]["slices"] == 3

@@ -63,6 +63,11 @@ def _add_study_options(parser: argparse.ArgumentParser) -> None:
                         help="groundtruth: the exemplar is a slice across this axis of --volume")
     parser.add_argument("--slice-index", type=non_negative_int, default=None, metavar="I",
                         help="groundtruth: index of that slice (default: None = the middle)")
+    parser.add_argument("--slices", type=int, default=1, choices=(1, 3), metavar="K",
+                        help="groundtruth: 1 = that one slice is every view's exemplar; 3 = each "
+                             "view takes the volume's middle slice in its own plane (front: "
+                             "axes 0-1, right: 1-2, top: 0-2), for an anisotropic material "
+                             "(default: 1)")
     parser.add_argument("--quiet", action="store_true",
                         help="no progress bar and no messages, only errors")
 
@@ -79,7 +84,7 @@ def _run(args: argparse.Namespace, name: str | None = None) -> int:
             scheduler=None if args.scheduler == "local" else args.scheduler, workers=args.workers,
             threads=args.threads, seeds=args.seeds, exemplars=args.exemplars, sizes=args.size,
             levels=args.levels, volume=args.volume, slice_axis=args.slice_axis,
-            slice_index=args.slice_index, progress=progress, echo=echo)
+            slice_index=args.slice_index, slices=args.slices, progress=progress, echo=echo)
     finally:
         progress.close()
     if echo is not None:
@@ -117,7 +122,8 @@ def register(commands, formatter_class) -> None:
             "  npmrf3d study heuristics --quick                 # tiny, a minute\n"
             "  npmrf3d study npk --workers 2                    # full, local cluster\n"
             "  npmrf3d study cooling --scheduler tcp://10.0.0.5:8786\n"
-            "  npmrf3d study groundtruth --volume scan.tif --slice-axis 2"
+            "  npmrf3d study groundtruth --volume scan.tif --slice-axis 2\n"
+            "  npmrf3d study groundtruth --volume fibres.tif --slices 3    # anisotropic"
         ),
         formatter_class=formatter_class,
     )

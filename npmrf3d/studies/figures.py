@@ -22,11 +22,12 @@ from collections import defaultdict
 import numpy as np
 from matplotlib.figure import Figure
 
-from npmrf3d.exemplar import exemplar_slice, named_exemplar
+from npmrf3d.exemplar import named_exemplar
 from npmrf3d.io import read_volume
 from npmrf3d.metrics import view_slices
 from npmrf3d.plotting import save_figure, to_display
 
+from .groundtruth import exemplar_slices
 from .table import metric_columns, summarise, unique, write_csv
 
 __all__ = ["make_figures"]
@@ -125,7 +126,7 @@ def _exemplar_image(spec):
     try:
         if spec.reference is not None:
             real = read_volume(spec.reference)
-            return exemplar_slice(real, spec.slice_axis, spec.slice_index)
+            return exemplar_slices(real, spec.slices, spec.slice_axis, spec.slice_index)["front"]
         return named_exemplar(spec.exemplar, spec.crop)
     except Exception:  # the exemplar may be gone (e.g. a report on another machine)
         return None

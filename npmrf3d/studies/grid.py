@@ -138,7 +138,8 @@ class RunSpec:
     """Everything one run needs; picklable, so it travels to Dask workers as is.
 
     ``reference`` is the path of a real volume (ground-truth study) or None; ``slice_axis`` and
-    ``slice_index`` then say which of its slices is the exemplar.
+    ``slice_index`` then say which of its slices is the exemplar of every view, or ``slices = 3``
+    gives each view its own middle slice (:func:`npmrf3d.studies.groundtruth.exemplar_slices`).
     """
 
     study: str
@@ -154,6 +155,7 @@ class RunSpec:
     reference: str | None = None
     slice_axis: int = 0
     slice_index: int | None = None
+    slices: int = 1
 
     def kwargs(self) -> dict[str, Any]:
         """Keyword arguments for the algorithm (without the exemplar and progress)."""
@@ -242,12 +244,18 @@ class Study:
 
     def runs(self, mode: str = "full", *, seeds=None, exemplars=None, sizes=None,
              levels: int | None = None, reference: str | None = None, slice_axis: int = 0,
-             slice_index: int | None = None) -> tuple[RunSpec, ...]:
+             slice_index: int | None = None, slices: int = 1) -> tuple[RunSpec, ...]:
         """The grid of one variant, as run specifications in a fixed order.
 
         ``seeds``, ``exemplars``, ``sizes`` and ``levels`` replace the variant's values when given.
-        ``reference`` (a real volume) is required when :attr:`needs_volume`.
+        ``reference`` (a real volume) is required when :attr:`needs_volume`; ``slices`` (1 or 3)
+        says how many of its slices the methods see.
         """
+        if slices not in (1, 3):
+            raise ParameterError(f"--slices must be 1 or 3; got {slices!r}")
+        if slices == 3 and slice_index is not None:
+            raise ParameterError("--slice-index picks one slice; with --slices 3 each view takes "
+                                 "its own middle slice")
         scale = self.scale(mode)
         seeds = tuple(int(s) for s in (scale.seeds if seeds is None else seeds))
         sizes = tuple(int(s) for s in (scale.sizes if sizes is None else sizes))
@@ -259,7 +267,7 @@ class Study:
                                      f"give one with --volume FILE (.npy or .tif)")
             stem = re.sub(r"\W+", "_", str(reference).replace("\\", "/").rsplit("/", 1)[-1]
                           .rsplit(".", 1)[0])
-            exemplars = (f"{stem}.axis{slice_axis}",)
+            exemplars = (f"{stem}.axis{slice_axis}" if slices == 1 else f"{stem}.three_slices",)
         if not seeds or not sizes or not exemplars:
             raise ParameterError(f"study {self.name}: seeds, sizes and exemplars must not be empty")
         methods = self.methods if scale.methods is None else scale.methods
@@ -280,7 +288,7 @@ class Study:
                             seed=seed, size=size, levels=levels, params=_params(params),
                             crop=scale.crop,
                             reference=None if reference is None else str(reference),
-                            slice_axis=slice_axis, slice_index=slice_index,
+                            slice_axis=slice_axis, slice_index=slice_index, slices=slices,
                         ))
         ids = [s.run_id for s in specs]
         if len(set(ids)) != len(ids):

@@ -41,12 +41,15 @@ from npmrf3d._files import read_volume
 __all__ = [
     "GREY_BINS",
     "MAX_PHASES",
+    "SLICE_COUNTS",
     "compare",
     "exemplar_slice",
+    "exemplar_slices",
     "fit_size",
     "fractions",
     "load_reference",
     "phases_of",
+    "pooled_exemplar",
     "reference_slices",
     "two_point",
 ]
@@ -70,6 +73,41 @@ def reference_slices(volume: np.ndarray) -> dict[str, np.ndarray]:
     """The real volume's middle slice in each view (front, right, top), as exemplar images."""
     return {"front": exemplar_slice(volume, 2), "right": exemplar_slice(volume, 0),
             "top": exemplar_slice(volume, 1)}
+
+
+#: How many slices of the real volume the ground-truth study's methods see: one for every
+#: view, or each view's own middle slice (an anisotropic material needs the three).
+SLICE_COUNTS = (1, 3)
+
+
+def exemplar_slices(volume: np.ndarray, slices: int = 1, axis: int = 0,
+                    index: int | None = None) -> dict[str, np.ndarray]:
+    """View -> exemplar image: with ``slices=1`` the slice across ``axis`` at ``index`` for
+    every view; with ``slices=3`` each view's middle slice (:func:`reference_slices`, the
+    plane of the view's axes), so no view is asked to look like a plane it was not cut from.
+
+    >>> v = np.arange(64, dtype=np.float32).reshape(4, 4, 4, 1)
+    >>> sorted(exemplar_slices(v, 3)), exemplar_slices(v, 1)["top"][0, 0, 0]
+    (['front', 'right', 'top'], 32.0)
+    """
+    if slices not in SLICE_COUNTS:
+        raise ParameterError(f"slices must be 1 or 3; got {slices!r}")
+    if slices == 3:
+        if index is not None:
+            raise ParameterError("a slice index picks one slice; the three slices are each "
+                                 "view's middle slice (give --slices 1 with --slice-index)")
+        return reference_slices(volume)
+    one = exemplar_slice(volume, axis, index)
+    return {"front": one, "right": one, "top": one}
+
+
+def pooled_exemplar(per_view: dict[str, np.ndarray]) -> np.ndarray:
+    """One ``(N, 1, C)`` image of every distinct exemplar's pixels (one array given for several
+    views counts once): what decides the phases and feeds the structureless control."""
+    distinct = list({id(a): a for a in per_view.values()}.values())
+    if len(distinct) == 1:
+        return distinct[0]
+    return np.concatenate([a.reshape(-1, 1, a.shape[-1]) for a in distinct])
 
 
 def fit_size(shape, size: int, levels: int) -> int:

@@ -47,7 +47,7 @@ import numpy as np
 from npmrf3d._cluster import local_cluster
 from npmrf3d._kernels import _jit
 from npmrf3d.errors import ParameterError
-from npmrf3d.exemplar import exemplar_slice, named_exemplar
+from npmrf3d.exemplar import named_exemplar
 from npmrf3d.methods import METHODS
 from npmrf3d.runs import run_record, write_run
 from npmrf3d import io, metrics
@@ -96,12 +96,17 @@ def structureless(exemplar: np.ndarray, size: int, rng) -> np.ndarray:
 
 # --------------------------------------------------------------------------- one run
 
-def _synthesise(spec: RunSpec, exemplar: np.ndarray, real: np.ndarray | None):
-    """(volume, per-view exemplars, result or None) for one run."""
+def _synthesise(spec: RunSpec, exemplar: np.ndarray, real: np.ndarray | None,
+                given: dict[str, np.ndarray] | None = None):
+    """(volume, per-view exemplars, result or None) for one run; ``given`` holds each view's
+    own exemplar (three slices of the real volume), else ``exemplar`` serves every view."""
     views = spec.views
-    per_view = {v: exemplar for v in views}
+    per_view = {v: exemplar if given is None else given[v] for v in views}
     if spec.algorithm in METHODS:
-        result = METHODS[spec.algorithm].synthesize(exemplar, **spec.kwargs())
+        if given is None:
+            result = METHODS[spec.algorithm].synthesize(exemplar, **spec.kwargs())
+        else:
+            result = METHODS[spec.algorithm].synthesize(exemplars=per_view, **spec.kwargs())
         return result.volume, per_view, result
     if spec.algorithm == "control":
         return structureless(exemplar, spec.size, spec.seed), per_view, None
@@ -138,10 +143,12 @@ def execute_run(spec: RunSpec, study_dir: str, threads: int | None = None) -> di
         real = None
         if spec.reference is not None:
             real = groundtruth.load_reference(spec.reference)
-            exemplar = exemplar_slice(real, spec.slice_axis, spec.slice_index)
+            slices = groundtruth.exemplar_slices(real, spec.slices, spec.slice_axis, spec.slice_index)
+            given = None if spec.slices == 1 else slices
+            exemplar = groundtruth.pooled_exemplar(slices)
         else:
-            exemplar = named_exemplar(spec.exemplar, spec.crop)
-        volume, per_view, result = _synthesise(spec, exemplar, real)
+            given, exemplar = None, named_exemplar(spec.exemplar, spec.crop)
+        volume, per_view, result = _synthesise(spec, exemplar, real, given)
         if real is not None:
             truth = groundtruth.compare(volume, real, exemplar)
             scores = truth.pop("slice_metrics")
@@ -394,7 +401,7 @@ class StudyOutcome:
 def run_study(study: Study, *, mode: str = "quick", out="study-results", scheduler: str | None = None,
               workers: int | None = None, threads: int | None = None, seeds=None, exemplars=None,
               sizes=None, levels: int | None = None, volume=None, slice_axis: int = 0,
-              slice_index: int | None = None,
+              slice_index: int | None = None, slices: int = 1,
               progress: Callable[[dict | None, int, int], None] | bool | None = None,
               echo: Callable[[str], None] | None = None) -> StudyOutcome:
     """Run (or resume) a study and write its runs, ``results.csv``, figures and ``study.json``.
@@ -417,6 +424,9 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
         The real volume of the ground-truth study.
     slice_axis, slice_index : int
         Which slice of ``volume`` is the exemplar (default: the middle one across axis 0).
+    slices : {1, 3}
+        3: each view's exemplar is the volume's middle slice in that view's plane instead
+        (for an anisotropic material, which one slice cannot describe).
     progress : callable, optional
         Called as ``progress(row, done, total)`` after every finished run (its
         ``results.csv`` row) and once as ``progress(None, 0, total)`` when the runs start;
@@ -447,7 +457,8 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
         raise ParameterError(f"study {study.name} compares with a real 3-D volume: give one with "
                              f"--volume FILE (.npy or .tif)")
     specs = study.runs(mode, seeds=seeds, exemplars=exemplars, sizes=sizes, levels=levels,
-                       reference=reference, slice_axis=slice_axis, slice_index=slice_index)
+                       reference=reference, slice_axis=slice_axis, slice_index=slice_index,
+                       slices=slices)
     specs, left_out = leave_out_unavailable(specs)
     if not specs:
         raise ParameterError(f"study {study.name}: no method can run here: "
@@ -495,7 +506,8 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
         "study": study.to_dict(),
         "mode": mode,
         "options": {"seeds": seeds, "exemplars": exemplars, "sizes": sizes, "levels": levels,
-                    "volume": reference, "slice_axis": slice_axis, "slice_index": slice_index},
+                    "volume": reference, "slice_axis": slice_axis, "slice_index": slice_index,
+                    "slices": slices},
         "runs": [s.to_dict() for s in specs],
         "left_out": left_out,
         **info,
