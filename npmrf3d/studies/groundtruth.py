@@ -87,7 +87,7 @@ def exemplar_slices(volume: np.ndarray, slices: int = 1, axis: int = 0,
     plane of the view's axes), so no view is asked to look like a plane it was not cut from.
 
     >>> v = np.arange(64, dtype=np.float32).reshape(4, 4, 4, 1)
-    >>> sorted(exemplar_slices(v, 3)), exemplar_slices(v, 1)["top"][0, 0, 0]
+    >>> sorted(exemplar_slices(v, 3)), float(exemplar_slices(v, 1)["top"][0, 0, 0])
     (['front', 'right', 'top'], 32.0)
     """
     if slices not in SLICE_COUNTS:
