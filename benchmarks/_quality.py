@@ -40,6 +40,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import multiprocessing
 import os
 import subprocess
 import time
@@ -348,7 +349,9 @@ def run_all(methods, names, seeds, size, levels, palette, results, cache_dir: Pa
             volume, seconds = _run_one(method, name, size, levels, seed, p, None)
             store(key, method, name, seed, p, volume, seconds)
     else:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
+        # spawn, not fork: numba's OpenMP threading layer aborts a forked child ("fork() called
+        # from a process already using GNU OpenMP") once the parent has run a parallel kernel.
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
             futures = {pool.submit(_run_one, m, n, size, levels, s, p, threads): (k, m, n, s, p)
                        for k, m, n, s, p in todo}
             for future, args in futures.items():
