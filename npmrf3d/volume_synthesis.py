@@ -54,10 +54,9 @@ from . import _validation as check
 from ._files import load_checkpoint, save_checkpoint
 from ._kernels import _jit
 from ._kernels import volume as _k
-from .coherence import pca_project
 from .config import SynthesisMethod, SynthesisResult
 from .fields import FIELDS, field_input, level_frames
-from .materials import otsu_threshold
+from .phase_histogram import MAX_PHASES, PhaseControl, phase_classes, phase_error, phase_footprint
 from .resources import Estimate, check_memory
 from .volume import load_volume_exemplar, volume_fits
 
@@ -254,7 +253,7 @@ def correction_pass(coords: np.ndarray, frames: np.ndarray, feat: np.ndarray, ks
                     h: int, lo, hi, offsets: np.ndarray = _k.DIAGONALS,
                     usage: float = 0.0, balance: float = 0.0,
                     phases: tuple[np.ndarray, np.ndarray] | None = None,
-                    prices: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+                    control: PhaseControl | None = None) -> tuple[np.ndarray, float]:
     """One correction pass: the 8 parity sub-passes in a fixed order; returns the coordinates and
     the mean matching score.
 
@@ -262,9 +261,11 @@ def correction_pass(coords: np.ndarray, frames: np.ndarray, feat: np.ndarray, ks
     back into ``coords`` (an eighth of the voxels), so every sub-pass reads its input unchanged.
     ``usage`` is the strength of the position histogram (:func:`cell_usage`), recounted before
     every sub-pass; 0 is seed 002's rule. ``balance`` is the strength of the phase histogram
-    (:func:`class_balance`, of ``phases = (phase_footprint(...), share)``), also recounted before
-    every sub-pass; ``prices`` (float64 per phase, zeros at the start of a run) is its integral
-    term, **updated in place** every sub-pass and carried from pass to pass and level to level."""
+    (:func:`npmrf3d.phase_histogram.class_balance`, of ``phases = (phase_footprint(...),
+    share)``), also recounted before every sub-pass; ``control``
+    (:class:`npmrf3d.phase_histogram.PhaseControl`, ``PhaseControl.start(phases)`` at the start
+    of a run) holds its prices and gain, is **updated in place** every sub-pass and is carried
+    from pass to pass and level to level."""
     coords = np.array(coords, dtype=np.int64, order="C")  # a copy: the caller's array stays
     out = np.empty_like(coords)
     feat = np.ascontiguousarray(feat)
@@ -274,16 +275,16 @@ def correction_pass(coords: np.ndarray, frames: np.ndarray, feat: np.ndarray, ks
     weight = float(usage) * scale
     counts, even = np.zeros((1, 1, 1)), 1.0  # read only when weight > 0
     bias = np.zeros((1, 1, 1))  # none
-    if balance and (phases is None or prices is None):
-        check.fail("balance > 0 needs the exemplar's phases and their prices "
-                   "(phases=(phase_footprint(...), share), prices=np.zeros(len(share)))")
+    if balance and (phases is None or control is None):
+        check.fail("balance > 0 needs the exemplar's phases and their control state "
+                   "(phases=(phase_footprint(...), share), control=PhaseControl.start(len(share)))")
     for parity in np.ndindex(2, 2, 2):
         if weight:
             counts, even = cell_usage(coords, feat.shape[:3], h, lo, hi)
         if balance:
             error = phase_error(coords, *phases)
-            prices[:] = next_prices(prices, error)
-            bias = class_balance(phases[0], error, prices, float(balance) * scale)
+            control.step(error)
+            bias = control.cost(phases[0], error, float(balance) * scale)
         _k.correct(coords, out, frames, feat, positions, h, lo, hi, offsets,
                    np.array(parity, dtype=np.int64), cost, counts, even, weight, bias)
         cls = tuple(slice(p, None, 2) for p in parity)
@@ -314,90 +315,6 @@ def cell_usage(coords: np.ndarray, shape, h: int, lo, hi) -> tuple[np.ndarray, f
     counts = np.bincount(flat, minlength=int(np.prod(cells))).astype(np.float64).reshape(cells)
     valid = int(np.prod([int(hi[a]) // h - int(lo[a]) // h + 1 for a in range(3)]))
     return counts, coords[..., 0].size / valid
-
-
-#: An exemplar with at most this many distinct values is a segmented (labelled) one.
-MAX_PHASES = 8
-
-
-def phase_classes(exemplar: np.ndarray, lo, hi, phases: int = MAX_PHASES) -> tuple[np.ndarray, np.ndarray]:
-    """The phase of every exemplar voxel, ``(D, H, W)`` int64, and each phase's share of the
-    valid box ``[lo, hi]`` (float64, every share > 0).
-
-    The value is the voxel's projection on the first principal component of the channels (the
-    value itself for one channel). An exemplar with at most ``phases`` distinct values (a
-    segmented scan) has one class per value; any other has two, the sides of the Otsu threshold
-    of the valid box's values. (Eight quantile bins of a grey scan were tried and not kept: a
-    voxel then changes bin for a tiny change of value, and the histogram turned smooth tissue
-    into speckle, ``docs/volume.md``.)"""
-    ex = np.asarray(exemplar, dtype=np.float64)
-    flat = ex.reshape(-1, ex.shape[-1])
-    flat = pca_project(flat, 1)[2][:, 0] if flat.shape[1] > 1 else flat[:, 0]
-    values = flat.reshape(ex.shape[:3])
-    box = values[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1].ravel()
-    distinct = np.unique(box)
-    if len(distinct) <= phases:
-        edges = (distinct[1:] + distinct[:-1]) / 2
-    else:
-        edges = np.array([otsu_threshold(box)])
-    classes = np.searchsorted(edges, values, side="right").astype(np.int64)
-    share = np.bincount(np.searchsorted(edges, box, side="right"), minlength=len(edges) + 1) / box.size
-    return classes, np.maximum(share, 1.0 / box.size)
-
-
-def phase_footprint(classes: np.ndarray, phases: int, h: int) -> np.ndarray:
-    """The phase mix a level-``h`` coordinate stands for, ``(phases, D, H, W)`` float32: the share
-    of each phase among the exemplar voxels its descendants at the finest level copy.
-
-    Up-sampling puts the children of ``u`` at ``u + floor(h' (delta - 1/2) + 1/2)`` (``h'`` the
-    children's spacing), so without jitter or deformation the finest-level descendants of a
-    level-``h`` coordinate cover ``u + [1 - h/2, h/2]`` on every axis: a box of ``h`` voxels
-    (faces clamped, as the coordinates are). At the finest level (``h = 1``) it is the voxel's own
-    phase, one-hot."""
-    one_hot = (classes[None] == np.arange(phases)[:, None, None, None]).astype(np.float32)
-    if h == 1:
-        return one_hot
-    for axis in (1, 2, 3):  # the box [u + 1 - h/2, u + h/2]: scipy's window of an even size, origin -1
-        one_hot = ndimage.uniform_filter1d(one_hot, size=h, axis=axis, mode="nearest", origin=-1)
-    return one_hot
-
-
-#: The phase histogram's integral time, in sub-passes: every sub-pass a phase's price moves by
-#: its relative error over this many (``next_prices``).
-PRICE_STEPS = 4
-
-
-def phase_error(coords: np.ndarray, footprint: np.ndarray, share: np.ndarray) -> np.ndarray:
-    """Each phase's relative excess in the volume, ``v_c / share_c - 1`` (float64 per phase),
-    ``v_c = mean f_c(S[p])`` over the volume's voxels (``footprint``: :func:`phase_footprint`)."""
-    picked = footprint[:, coords[..., 0], coords[..., 1], coords[..., 2]]
-    return picked.reshape(len(share), -1).mean(axis=1) / share - 1.0
-
-
-def next_prices(prices: np.ndarray, error: np.ndarray) -> np.ndarray:
-    """The phase histogram's integral term after one more sub-pass: ``prices + error /
-    PRICE_STEPS``, shifted so that the cheapest phase costs 0 (only the differences between
-    phases change a decision)."""
-    moved = np.asarray(prices, dtype=np.float64) + np.asarray(error, dtype=np.float64) / PRICE_STEPS
-    return moved - moved.min()
-
-
-def class_balance(footprint: np.ndarray, error: np.ndarray, prices: np.ndarray, weight: float) -> np.ndarray:
-    """The phase-histogram cost of every exemplar voxel, ``(D, H, W)`` float64: ``weight *
-    sum_c f_c(u) (max(0, e_c) + lambda_c)``, ``f_c(u)`` the share of phase ``c`` that voxel ``u``
-    stands for at this level (:func:`phase_footprint`; one-hot at the finest level), ``e_c`` the
-    volume's relative excess of the phase (:func:`phase_error`) and ``lambda_c`` its price, the
-    running sum of the errors (:func:`next_prices`).
-
-    This project's addition, after the histogram matching of Kopf et al. 2007 (seed 002 has
-    none): with it the phase fractions of a segmented scan stay those of the exemplar, where the
-    correction alone lets a thin minority phase (a rock's pores) erode level by level
-    (``docs/volume.md``). The excess alone (a proportional rule, stop 25) left a steady deficit
-    of the minority phase; the price, an integral of the error carried across passes and levels,
-    removes it. Counting a coarse coordinate by the phases of its descendants, not by its own
-    voxel, keeps the share through the up-sampling."""
-    per_phase = np.maximum(0.0, error) + prices
-    return np.ascontiguousarray(weight * np.tensordot(per_phase, footprint, axes=1))
 
 
 def set_positions(kset: np.ndarray, shape) -> np.ndarray:
@@ -486,14 +403,15 @@ def volume_synthesize(exemplar, *, size=DEFAULTS.size, levels: int = DEFAULTS.le
         cell, ``s`` half the distance of two random exemplar neighbourhoods. 0 is seed 002's rule, which collapses onto one homogeneous region of a
         non-stationary scan (``docs/volume.md``).
     balance : float
-        Strength of the phase histogram (:func:`class_balance`): a candidate whose phase (a
-        segmented exemplar's value, or a side of a grey one's Otsu threshold,
-        :func:`phase_classes`) the volume already holds more often than the exemplar pays
-        ``balance * s * (max(0, share / exemplar share - 1) + price)``, the price summing that
-        relative error over the sub-passes (:func:`next_prices`); at the coarser levels a
-        coordinate counts as the phase mix its descendants will copy (:func:`phase_footprint`).
-        0 leaves the phase fractions free (a minority phase such as the pores of a rock then
-        shrinks level by level).
+        Strength of the phase histogram (:mod:`npmrf3d.phase_histogram`): a candidate whose
+        phase (a segmented exemplar's value, or a side of a grey one's Otsu threshold) the
+        volume already holds more often than the exemplar pays ``balance * g * s * (max(0,
+        share / exemplar share - 1) + price)``, the price summing that relative error over the
+        sub-passes, the gain ``g`` halved when the error flips sign between sub-passes (a
+        noisy exemplar's oscillation) and grown back otherwise; at the coarser levels a
+        coordinate counts as the phase mix its descendants will copy. 0 leaves the phase
+        fractions free (a minority phase such as the pores of a rock then shrinks level by
+        level).
     start : {"tiled", "random"}
         The coarsest level: the exemplar tiled at its spacing with a random offset and jitter
         (the paper's pyramid), or uniformly random coordinates.
@@ -562,7 +480,7 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
             check.fail("vector_field 'array' needs the frames array (vector_field=...)")
     lo, hi = _valid_box(exemplar.shape[:3], config.window)
     classes = phase_classes(exemplar, lo, hi) if config.balance else None
-    prices = None if classes is None else np.zeros(len(classes[1]))
+    control = None if classes is None else PhaseControl.start(len(classes[1]))
     key = _key(config, exemplar, vector_field) + (f"|parzen={list(parzen)}" if parzen else "")
     sigma = float(exemplar.astype(np.float64).std()) or 1.0
     timings = {"setup": time.perf_counter() - t_start}
@@ -572,10 +490,10 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
     first = config.levels - 1
     resumed = _resume(checkpoint, key)
     if resumed is not None:
-        coords, done, state, history, timings, stats, saved_prices = resumed
+        coords, done, state, history, timings, stats, saved_control = resumed
         rng.bit_generator.state = state
-        if prices is not None and saved_prices is not None:
-            prices = saved_prices
+        if control is not None and saved_control is not None and saved_control.size:
+            control = PhaseControl.from_array(saved_control, len(classes[1]))
         first = done - 1
     for level in range(first, -1, -1):
         t0 = time.perf_counter()
@@ -601,7 +519,7 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
                 coords, mean_cost = correction_pass(coords, frames, feat, kset, h, lo, hi,
                                                     NEIGHBOURHOODS[config.neighbourhood],
                                                     usage=config.usage, balance=config.balance,
-                                                    phases=phases, prices=prices)
+                                                    phases=phases, control=control)
             else:
                 coords, mean_cost = parzen_pass(coords, frames, feat, values, kset, h, lo, hi,
                                                 NEIGHBOURHOODS[config.neighbourhood], config.window,
@@ -618,7 +536,7 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
             save_checkpoint(checkpoint, config=key, coords=coords, level=level,
                             rng_state=json.dumps(rng.bit_generator.state), history=json.dumps(history),
                             timings=json.dumps(timings), stats=json.dumps(stats),
-                            prices=np.zeros(0) if prices is None else prices)
+                            prices=np.zeros(0) if control is None else control.to_array())
     out = np.ascontiguousarray(exemplar[coords[..., 0], coords[..., 1], coords[..., 2]], dtype=np.float32)
     timings["total"] = time.perf_counter() - t_start
     labels = np.unique(exemplar.reshape(-1, exemplar.shape[3]), axis=0) if exemplar.size <= 1 << 22 else np.empty((0, exemplar.shape[3]))

@@ -161,7 +161,7 @@ def correct(coords, out, frames, feat, kset, h, lo, hi, offsets, parity, cost, c
     (:func:`_usage_penalty`: ``counts`` holds how many voxels use each ``h``-cell of the
     exemplar, ``even`` the count of an even use; ``weight = 0`` gives ``P = 0``, seed 002's rule)
     plus ``bias[u]``, a non-negative cost of the exemplar voxel itself (the phase-histogram
-    balance, ``volume_synthesis.class_balance``); a ``(1, 1, 1)`` ``bias`` means none.
+    balance, ``phase_histogram.class_balance``); a ``(1, 1, 1)`` ``bias`` means none.
     ``frames`` is ``(N1, N2, N3, 3, 3)`` or ``(1, 1, 1, 3, 3)`` (one frame for all voxels).
 
     A candidate equal to one already scored is skipped: its distance is the same, and only a
