@@ -14,7 +14,9 @@ Each volume and crop is judged at the scan's threshold (``--threshold``: 0.5 of 
 values by default, so the phase is the bright one, a rock's grain; several values judge each
 interface of a multi-phase scan; ``otsu`` takes Otsu's threshold of the exemplar crop, for a grey
 scan): volume fraction, specific surface area (marching cubes) and radial two-point correlation
-S2(r), r = 0..16, each "inside" when it lies within the crops' min-max.
+S2(r), r = 0..16, each "inside" when it lies within the crops' min-max; and the volume's copy
+repetition (:func:`npmrf3d.repetition.copy_repetition`: the largest share of voxels whose exemplar
+coordinate recurs at one shift of 16 voxels or more), which those statistics do not see.
 
 Usage::
 
@@ -22,7 +24,7 @@ Usage::
         --write-block berea_d2_block.npy
     npmrf3d study groundtruth --volume berea_d2_block.npy --slice-axis 0   # the 2D -> 3D part
 
-Prints one row per (balance, seed) and writes ``NAME.json`` and ``NAME.png`` into ``--out``.
+Prints one row per (balance, start, seed) and writes ``NAME.json`` and ``NAME.png`` into ``--out``.
 """
 
 from __future__ import annotations
@@ -79,6 +81,8 @@ def main(argv=None) -> int:
     p.add_argument("--seeds", type=int, nargs="+", default=[0])
     p.add_argument("--balance", type=float, nargs="+", default=[VolumeConfig.balance],
                    help="phase-histogram strengths to run (0: the phase fractions are left free)")
+    p.add_argument("--start", nargs="+", default=[VolumeConfig.start], choices=("tiled", "random"),
+                   help="how the coarsest level starts (volume-lh's --start)")
     p.add_argument("--threshold", nargs="+", default=[DEFAULT_THRESHOLD],
                    help="thresholds of the scaled values to judge at (numbers in (0, 1)), or 'otsu'")
     p.add_argument("--size", type=int, default=128)
@@ -121,27 +125,30 @@ def main(argv=None) -> int:
           + f"; {len(crops)} held-out crops")
     print_spread(spread)
     runs = []
-    for balance, seed in [(b, s_) for b in args.balance for s_ in args.seeds]:
+    for balance, start, seed in [(b, t, s_) for b in args.balance for t in args.start for s_ in args.seeds]:
         t0 = time.perf_counter()
-        res = volume_synthesize(exemplar[..., None], size=args.size, rng=seed, balance=balance)
+        res = volume_synthesize(exemplar[..., None], size=args.size, rng=seed, balance=balance, start=start)
         seconds = time.perf_counter() - t0
         vol = res.volume[..., 0]
         st = statistics(vol, thresholds)
         verdict = {name: {key: inside(st[name][key], *spread[name][key])
                           for key in ("fraction", "surface_area", "s2")} for name in thresholds}
-        runs.append({"balance": balance, "seed": seed, "seconds": round(seconds, 1), "statistics": st, "inside": verdict,
+        repetition = res.stats["repetition"]
+        runs.append({"balance": balance, "start": start, "seed": seed, "repetition": repetition,
+                     "seconds": round(seconds, 1), "statistics": st, "inside": verdict,
                      "slice": vol[:, :, args.size // 2]})
         parts = [f"fraction {st[n]['fraction']:.3f}{'' if verdict[n]['fraction'] else ' (out)'}, "
                  f"surface {st[n]['surface_area']:.4f}{'' if verdict[n]['surface_area'] else ' (out)'}, "
                  f"S2 {'inside' if verdict[n]['s2'] else 'out'}" for n in thresholds]
-        print(f"balance {balance:g} seed {seed}: {seconds:.1f} s; " + "; ".join(parts), flush=True)
+        print(f"balance {balance:g} start {start} seed {seed}: {seconds:.1f} s; " + "; ".join(parts)
+              + f"; repetition {repetition['share']:.3f} at {repetition['shift']}", flush=True)
     out = pathlib.Path(args.out)
     record = {"scan": str(args.scan), "downsample": f, "corner": [a, b, c], "size": args.size,
               "thresholds": thresholds,
               "crops": len(crops), "stride": args.stride, "exemplar_statistics": ex_stats, "spread": spread}
     report(out, args.name, record, runs, exemplar[:, :, 32], f"exemplar: {pathlib.Path(args.scan).stem} 64³",
-           lambda r: f"volume-lh {args.size}³, balance {r['balance']:g}, seed {r['seed']}",
-           lambda r: f"balance {r['balance']:g}, seed {r['seed']}", f"{len(crops)} held-out crops")
+           lambda r: f"volume-lh {args.size}³, balance {r['balance']:g}, {r['start']}, seed {r['seed']}",
+           lambda r: f"balance {r['balance']:g}, {r['start']}, seed {r['seed']}", f"{len(crops)} held-out crops")
     print(f"wrote {out / (args.name + '.json')} and {out / (args.name + '.png')}")
     return 0
 

@@ -57,6 +57,7 @@ from ._kernels import volume as _k
 from .config import SynthesisMethod, SynthesisResult
 from .fields import FIELDS, field_input, level_frames
 from .phase_histogram import MAX_PHASES, PhaseControl, phase_classes, phase_error, phase_footprint
+from .repetition import copy_repetition
 from .resources import Estimate, check_memory
 from .volume import load_volume_exemplar, volume_fits
 
@@ -538,6 +539,9 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
                             timings=json.dumps(timings), stats=json.dumps(stats),
                             prices=np.zeros(0) if control is None else control.to_array())
     out = np.ascontiguousarray(exemplar[coords[..., 0], coords[..., 1], coords[..., 2]], dtype=np.float32)
+    t0 = time.perf_counter()
+    stats["repetition"] = copy_repetition(coords)
+    timings["repetition"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_start
     labels = np.unique(exemplar.reshape(-1, exemplar.shape[3]), axis=0) if exemplar.size <= 1 << 22 else np.empty((0, exemplar.shape[3]))
     return SynthesisResult(volume=out, history=history, config=config, timings=timings,
