@@ -52,7 +52,9 @@ def copy_repetition(coords: np.ndarray, *, min_shift: int = MIN_SHIFT, tolerance
     -------
     dict
         ``share``: the largest ``sum_d #{p : S(p + t + d) == S(p)} / N`` (``max |d_i| <=
-        tolerance``) over the shifts counted, and
+        tolerance``) over the shifts counted — with ``tolerance=0`` the share of voxels
+        repeated at ``t``; with a box it counts every match in it, and can exceed 1 where
+        neighbouring voxels copy one coordinate (an up-sampling left uncorrected does) — and
         ``shift``: that ``t`` (components in ``[-N_i / 2, N_i / 2)``; ``None`` when no two voxels
         far apart copy the same voxel). Two voxels of one coordinate more than
         :data:`MAX_GROUP` places apart in raster order are not paired.
