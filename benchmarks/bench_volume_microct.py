@@ -42,7 +42,7 @@ import numpy as np  # noqa: E402
 from npmrf3d import materials  # noqa: E402
 from npmrf3d.errors import ParameterError  # noqa: E402
 from npmrf3d.volume import load_volume_exemplar  # noqa: E402
-from npmrf3d.volume_synthesis import VolumeConfig, volume_synthesize  # noqa: E402
+from npmrf3d.volume_synthesis import STARTS, VolumeConfig, volume_synthesize  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
 from bench_volume_scan import (block_mean, crops_of, inside, print_spread, report, spread_of,  # noqa: E402
@@ -81,7 +81,7 @@ def main(argv=None) -> int:
     p.add_argument("--seeds", type=int, nargs="+", default=[0])
     p.add_argument("--balance", type=float, nargs="+", default=[VolumeConfig.balance],
                    help="phase-histogram strengths to run (0: the phase fractions are left free)")
-    p.add_argument("--start", nargs="+", default=[VolumeConfig.start], choices=("tiled", "random"),
+    p.add_argument("--start", nargs="+", default=[VolumeConfig.start], choices=STARTS,
                    help="how the coarsest level starts (volume-lh's --start)")
     p.add_argument("--threshold", nargs="+", default=[DEFAULT_THRESHOLD],
                    help="thresholds of the scaled values to judge at (numbers in (0, 1)), or 'otsu'")

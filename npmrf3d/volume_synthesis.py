@@ -71,8 +71,9 @@ PCA_SAMPLES = 20000
 SET_STRIDE = 2
 SET_QUERY = 48
 #: How the coarsest level starts: the exemplar tiled (the paper's coordinate pyramid, from one
-#: voxel) with a random offset and jitter, or uniformly random coordinates.
-STARTS = ("tiled", "random")
+#: voxel) with a random offset and jitter, uniformly random coordinates, or the tiling with an
+#: offset of its own for every tile.
+STARTS = ("tiled", "random", "blocks")
 #: The synthesis neighbourhoods: the paper's 8 diagonal neighbours, or those and the 6 faces.
 NEIGHBOURHOODS = {"diagonal": _k.DIAGONALS, "faces": np.concatenate([_k.DIAGONALS, _k.FACES])}
 
@@ -234,13 +235,21 @@ def initial_coordinates(shape, h: int, lo, hi, start: str, jitter: float,
     with one random offset ``o``, then jittered (:func:`jittered`, amplitude ``jitter``) — what the
     paper's pyramid from a single voxel gives, with wrap-around seams for the correction to mend.
     ``random``: every coordinate uniform in the box (the exemplar's parts mixed voxel by voxel,
-    from which the correction drifts to the parts easiest to match: ``docs/volume.md``)."""
+    from which the correction drifts to the parts easiest to match: ``docs/volume.md``).
+    ``blocks``: the tiling, but every tile (``extent // h`` coarse voxels per axis) takes its own
+    random offset, so no block of the exemplar repeats at one shift."""
     lo, hi = np.asarray(lo, dtype=np.int64), np.asarray(hi, dtype=np.int64)
     if start == "random":
         return np.stack([rng.integers(lo[a], hi[a] + 1, size=shape) for a in range(3)], axis=-1)
     extent = hi - lo + 1
-    offset = rng.integers(0, extent)
     grid = np.stack(np.meshgrid(*[np.arange(n, dtype=np.int64) for n in shape], indexing="ij"), axis=-1)
+    if start == "blocks":
+        tile = np.maximum(1, extent // h)  # coarse voxels per exemplar tile, per axis
+        blocks = tuple(int(-(-n // t)) for n, t in zip(shape, tile))
+        offsets = rng.integers(0, extent, size=blocks + (3,))
+        offset = offsets[tuple((grid // tile)[..., a] for a in range(3))]
+    else:
+        offset = rng.integers(0, extent)
     uniforms = rng.uniform(-1.0, 1.0, size=tuple(shape) + (3,)).astype(np.float32)
     return jittered(lo + (grid * h + offset) % extent, h, jitter, uniforms, lo, hi)
 

@@ -45,11 +45,13 @@ def test_copy_repetition_refuses_values():
 def test_volume_lh_records_the_repetition_of_its_tiled_start():
     """With neither jitter nor correction the tiled start is the exemplar laid side by side
     (period: the valid box, 12 voxels of a 16^3 exemplar, seen at 24 >= MIN_SHIFT); uniform
-    random coordinates are not."""
+    random coordinates are not, nor tiles that each take their own offset ('blocks')."""
     from npmrf3d.volume_synthesis import volume_synthesize
     exemplar = np.random.default_rng(3).random((16, 16, 16, 1)).astype(np.float32)
     common = dict(size=48, levels=2, passes=0, jitter=0.0, usage=0.0, balance=0.0, rng=0)
     tiled = volume_synthesize(exemplar, start="tiled", **common).stats["repetition"]
     random = volume_synthesize(exemplar, start="random", **common).stats["repetition"]
+    blocks = volume_synthesize(exemplar, start="blocks", **common).stats["repetition"]
     assert tiled["share"] > 0.3 and random["share"] < 0.1
+    assert blocks["share"] < tiled["share"] / 4  # every tile at its own offset
     assert max(abs(x) for x in tiled["shift"]) == 24

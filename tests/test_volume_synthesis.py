@@ -390,7 +390,7 @@ def test_position_histogram_keeps_the_phases_of_a_non_stationary_exemplar():
         assert errors[1] < 0.07 < errors[0], errors
 
 
-@pytest.mark.parametrize("start", ["tiled", "random"])
+@pytest.mark.parametrize("start", ["tiled", "random", "blocks"])
 def test_initial_coordinates_lie_in_the_valid_box_and_tiled_ones_are_coherent(start):
     lo, hi = np.array([2, 2, 3]), np.array([29, 25, 40])
     coords = initial_coordinates((8, 6, 10), 4, lo, hi, start, 0.0, np.random.default_rng(1))
@@ -400,6 +400,8 @@ def test_initial_coordinates_lie_in_the_valid_box_and_tiled_ones_are_coherent(st
     coherent = np.mean(step == 4)
     if start == "tiled":  # steps of h, but where the tiling wraps round the valid box
         assert coherent >= 0.85 and set(np.unique(step)) <= {4, 4 - (hi[2] - lo[2] + 1)}
+    elif start == "blocks":  # tiles of 38 // 4 = 9 coarse voxels, each at its own offset
+        assert coherent >= 0.7 and not set(np.unique(step[..., 8])) <= {4, 4 - (hi[2] - lo[2] + 1)}
     else:
         assert coherent < 0.2
 
