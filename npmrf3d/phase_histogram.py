@@ -147,9 +147,10 @@ class PhaseControl:
         self.prices = next_prices(self.prices, self.gain * error)
         self.last_error = error.copy()
 
-    def cost(self, footprint: np.ndarray, error: np.ndarray, weight: float) -> np.ndarray:
-        """The cost of every exemplar voxel now (:func:`class_balance` at ``weight`` times the gain)."""
-        return class_balance(footprint, error, self.prices, weight * self.gain)
+    def cost(self, footprint: np.ndarray, weight: float) -> np.ndarray:
+        """The cost of every exemplar voxel after the last :meth:`step` (:func:`class_balance` of
+        its error at ``weight`` times the gain)."""
+        return class_balance(footprint, self.last_error, self.prices, weight * self.gain)
 
     def to_array(self) -> np.ndarray:
         """``[prices, last error, gain]`` as one float64 vector, for the checkpoint."""

@@ -78,24 +78,28 @@ def copy_repetition(coords: np.ndarray, *, min_shift: int = MIN_SHIFT, tolerance
     key = np.ravel_multi_index(tuple(span.T), tuple(span.max(axis=0) + 1))
     order = np.argsort(key, kind="stable")
     sorted_key = key[order]
-    pos = np.stack(np.unravel_index(order, tuple(shape)), axis=-1)
+    pos = np.stack(np.unravel_index(order, tuple(shape)), axis=-1).astype(np.int32)
+    del key, order
     counts = np.zeros(n, dtype=np.int64)
     group = np.diff(np.flatnonzero(np.diff(sorted_key, prepend=-1, append=-1)))
     reach = min(int(group.max()), MAX_GROUP)
     # pairs (i, i + d) of the sorted list share a coordinate when their keys are equal: every
-    # pair of a group of m voxels comes once, at d = 1 .. m - 1, and counts at both t and -t
+    # pair of a group of m voxels comes once, at d = 1 .. m - 1, counted at its shift t here ...
     for d in range(1, reach):
         same = np.flatnonzero(sorted_key[d:] == sorted_key[:-d])
         if same.size == 0:
             break
         t = (pos[same + d] - pos[same]) % shape
-        for signed in (t, (-t) % shape):
-            counts += np.bincount(np.ravel_multi_index(tuple(signed.T), tuple(shape)), minlength=n)
-    raw = counts.reshape(tuple(shape)).astype(np.float64)
+        counts += np.bincount(np.ravel_multi_index(tuple(t.T), tuple(shape)), minlength=n)
+    # ... and at -t: the second voxel of the pair sees the first there
+    counts = counts.reshape(tuple(shape))
+    counts += np.roll(np.flip(counts), 1, axis=(0, 1, 2))
+    raw = counts.astype(np.float64)
+    del counts
     box = 2 * tolerance + 1
     summed = ndimage.uniform_filter(raw, size=box, mode="wrap") * box ** 3 if tolerance else raw.copy()
-    grid = np.meshgrid(*[np.minimum(np.arange(m), m - np.arange(m)) for m in shape], indexing="ij")
-    summed[np.maximum(np.maximum(grid[0], grid[1]), grid[2]) < min_shift] = 0
+    reach_of = np.meshgrid(*[np.minimum(np.arange(m), m - np.arange(m)) for m in shape], indexing="ij", sparse=True)
+    summed[np.maximum(np.maximum(reach_of[0], reach_of[1]), reach_of[2]) < min_shift] = 0
     summed = np.rint(summed)
     if not summed.any():
         return {"share": 0.0, "shift": None}

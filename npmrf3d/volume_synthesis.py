@@ -292,9 +292,8 @@ def correction_pass(coords: np.ndarray, frames: np.ndarray, feat: np.ndarray, ks
         if weight:
             counts, even = cell_usage(coords, feat.shape[:3], h, lo, hi)
         if balance:
-            error = phase_error(coords, *phases)
-            control.step(error)
-            bias = control.cost(phases[0], error, float(balance) * scale)
+            control.step(phase_error(coords, *phases))
+            bias = control.cost(phases[0], float(balance) * scale)
         _k.correct(coords, out, frames, feat, positions, h, lo, hi, offsets,
                    np.array(parity, dtype=np.int64), cost, counts, even, weight, bias)
         cls = tuple(slice(p, None, 2) for p in parity)
@@ -422,9 +421,10 @@ def volume_synthesize(exemplar, *, size=DEFAULTS.size, levels: int = DEFAULTS.le
         coordinate counts as the phase mix its descendants will copy. 0 leaves the phase
         fractions free (a minority phase such as the pores of a rock then shrinks level by
         level).
-    start : {"tiled", "random"}
+    start : {"tiled", "random", "blocks"}
         The coarsest level: the exemplar tiled at its spacing with a random offset and jitter
-        (the paper's pyramid), or uniformly random coordinates.
+        (the paper's pyramid), uniformly random coordinates, or the tiling with an offset of its
+        own for every tile (no block of the exemplar repeated at one shift).
     vector_field : str, path or array
         ``none``, ``twist``, ``bend``, ``radial`` (:mod:`npmrf3d.fields`), a ``.npy`` file, or an
         array: directions ``(N1, N2, N3, 3)`` or frames ``(N1, N2, N3, 3, 3)``.

@@ -179,9 +179,8 @@ def test_the_phase_gain_halves_at_each_flip_and_stays_one_on_a_steady_approach()
     assert flipping.gain == pytest.approx(0.5 ** 3)  # three flips after the first error
     # the cost scales with the gain
     footprint = np.ones((2, 1, 1, 1), dtype=np.float32)
-    err = np.array([0.1, -0.1])
-    np.testing.assert_allclose(flipping.cost(footprint, err, 2.0),
-                               class_balance(footprint, err, flipping.prices, 2.0 * 0.5 ** 3))
+    np.testing.assert_allclose(flipping.cost(footprint, 2.0),
+                               class_balance(footprint, flipping.last_error, flipping.prices, 2.0 * 0.5 ** 3))
     # flips within the tolerance are noise around the target: the gain grows back to 1
     noisy = PhaseControl(np.zeros(2), np.zeros(2), 0.5)
     for k in range(10):
