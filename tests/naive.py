@@ -848,21 +848,14 @@ def naive_relative_weights(dist, d_min, inv, lowest):
 
 def naive_copy_repetition(coords: np.ndarray, min_shift: int, tolerance: int) -> float:
     """max over shifts t (max |t_i| >= min_shift, toroidal) of
-    sum over max |d_i| <= tolerance of #{p : S(p + t + d) == S(p)}, over N."""
+    #{p : max_i |S(p + t)_i - S(p)_i| <= tolerance} / N, every voxel and shift looked at."""
     shape = coords.shape[:3]
-    n = int(np.prod(shape))
-    same = {}
-    for t in itertools.product(*[range(m) for m in shape]):
-        moved = np.roll(coords, shift=[-ti for ti in t], axis=(0, 1, 2))  # moved[p] = coords[p + t]
-        same[t] = int(np.all(moved == coords, axis=-1).sum())
-    same[(0, 0, 0)] = 0  # a voxel is not a repetition of itself
     best = 0
-    box = range(-tolerance, tolerance + 1)
     for t in itertools.product(*[range(m) for m in shape]):
         short = [ti if ti < (m + 1) // 2 else ti - m for ti, m in zip(t, shape)]
         if max(abs(x) for x in short) < min_shift:
             continue
-        total = sum(same[tuple((ti + di) % m for ti, di, m in zip(t, d, shape))]
-                    for d in itertools.product(box, box, box))
-        best = max(best, total)
-    return best / n
+        moved = np.roll(coords, shift=[-ti for ti in t], axis=(0, 1, 2))  # moved[p] = coords[p + t]
+        count = int((np.abs(moved - coords).max(axis=-1) <= tolerance).sum())
+        best = max(best, count)
+    return best / int(np.prod(shape))
