@@ -132,6 +132,7 @@ class CoherentConfig:
     value_weight: float = 0.0
     value_prior: float = 5.0
     value_bins: int = _CW.value_bins
+    phase_weight: float = 0.0
     # annealing over the candidates (issue 14, item 2): t0 = 0 decides by the highest score (ICM)
     t0: float = 0.0
     t_end: float = 0.05
@@ -146,7 +147,7 @@ class CoherentConfig:
 DEFAULTS = CoherentConfig()
 _SHARED = ("size", "window", "levels", "views", "iterations", "k", "index_weight", "position_weight",
            "position_boost", "random_candidates", "global_share", "coherence_bias", "value_weight",
-           "value_prior", "value_bins", "seed")
+           "value_prior", "value_bins", "phase_weight", "seed")
 
 
 def make_coherent_config(
@@ -157,7 +158,7 @@ def make_coherent_config(
     position_boost=DEFAULTS.position_boost, random_candidates=DEFAULTS.random_candidates,
     global_share=DEFAULTS.global_share, coherence_bias=DEFAULTS.coherence_bias,
     value_weight=DEFAULTS.value_weight, value_prior=DEFAULTS.value_prior, value_bins=DEFAULTS.value_bins,
-    t0=DEFAULTS.t0, t_end=DEFAULTS.t_end, schedule=DEFAULTS.schedule, seed=None,
+    phase_weight=DEFAULTS.phase_weight, t0=DEFAULTS.t0, t_end=DEFAULTS.t_end, schedule=DEFAULTS.schedule, seed=None,
 ) -> CoherentConfig:
     """Validate plain keyword arguments into a frozen :class:`CoherentConfig` (the shared
     coherence fields are validated as Chen–Wang's)."""
@@ -166,7 +167,7 @@ def make_coherent_config(
         index_weight=index_weight, position_weight=position_weight, position_boost=position_boost,
         random_candidates=random_candidates, global_share=global_share,
         coherence_bias=coherence_bias, value_weight=value_weight, value_prior=value_prior,
-        value_bins=value_bins, seed=seed)
+        value_bins=value_bins, phase_weight=phase_weight, seed=seed)
     heuristic = check.choice("heuristic", heuristic, tuple(HEURISTIC_CODES))
     centre_bandwidth = check.real("centre_bandwidth", centre_bandwidth, low=0.0, low_open=True)
     outlier = check.real("outlier", outlier, low=0.0, high=1.0, high_open=True)

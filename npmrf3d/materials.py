@@ -33,7 +33,7 @@ import numpy as np
 from . import _validation as check
 from .metrics import two_point_correlation
 
-__all__ = ["chord_length_distribution", "chord_lengths", "octant_fractions", "otsu_threshold", "phase",
+__all__ = ["chord_length_distribution", "chord_lengths", "octant_fractions", "otsu_split", "otsu_threshold", "phase",
            "radial_two_point", "specific_surface_area", "stationarity_warning", "structure_summary",
            "tortuosity", "two_point_correlation", "volume_fraction"]
 
@@ -63,11 +63,25 @@ def otsu_threshold(values, *, bins: int = 256) -> float:
     v = np.asarray(values, dtype=np.float64).ravel()
     counts, edges = np.histogram(v, bins=bins)
     centres = (edges[:-1] + edges[1:]) / 2
-    w0 = np.cumsum(counts)[:-1].astype(np.float64)
-    w1 = np.cumsum(counts[::-1])[::-1][1:].astype(np.float64)
-    m0 = np.cumsum(counts * centres)[:-1] / np.maximum(w0, 1)
-    m1 = (np.cumsum((counts * centres)[::-1])[::-1][1:]) / np.maximum(w1, 1)
-    return float(centres[:-1][np.argmax(w0 * w1 * (m0 - m1) ** 2)])
+    return float(centres[otsu_split(counts)])
+
+
+def otsu_split(counts) -> int:
+    """Otsu's split of a histogram of evenly spaced bins: the last bin of the lower class (the
+    bins ``<=`` it against those above), maximising the between-class variance.
+
+    >>> otsu_split([5, 4, 0, 0, 1, 6])
+    1
+    """
+    counts = np.asarray(counts, dtype=np.float64).ravel()
+    if counts.size < 2:
+        check.fail(f"Otsu's split needs at least two bins; got {counts.size}")
+    centres = np.arange(counts.size, dtype=np.float64)
+    w0 = np.cumsum(counts)[:-1]
+    w1 = np.cumsum(counts[::-1])[::-1][1:]
+    m0 = np.cumsum(counts * centres)[:-1] / np.maximum(w0, 1e-300)
+    m1 = (np.cumsum((counts * centres)[::-1])[::-1][1:]) / np.maximum(w1, 1e-300)
+    return int(np.argmax(w0 * w1 * (m0 - m1) ** 2))
 
 
 def phase(volume, *, threshold="otsu") -> np.ndarray:

@@ -7,6 +7,11 @@ The exemplar's phases (:func:`phase_classes`), the phase mix a coarse coordinate
 cost a candidate pays (:func:`class_balance`), driven by :class:`PhaseControl`: a price per
 phase (an integral of the error, :func:`next_prices`) and a gain that halves when the error
 flips sign between sub-passes (``docs/volume.md``, "The phase histogram's gain").
+
+The same control drives the 2D methods' value histogram (:func:`bin_phases`,
+:func:`bin_phase_error`, :func:`phase_prior_target`): the two sides of each channel's Otsu split
+of the exemplars' value histogram, priced through the histogram prior (``phase_weight``,
+``docs/volume.md``, "A phase control in the 2D default").
 """
 
 from __future__ import annotations
@@ -17,10 +22,10 @@ import numpy as np
 from scipy import ndimage
 
 from .coherence import pca_project
-from .materials import otsu_threshold
+from .materials import otsu_split, otsu_threshold
 
-__all__ = ["MAX_PHASES", "PRICE_STEPS", "PhaseControl", "class_balance", "next_prices", "phase_classes",
-           "phase_error", "phase_footprint"]
+__all__ = ["MAX_PHASES", "PRICE_STEPS", "PhaseControl", "bin_phase_error", "bin_phases", "class_balance",
+           "next_prices", "phase_classes", "phase_error", "phase_footprint", "phase_prior_target"]
 
 #: An exemplar with at most this many distinct values is a segmented (labelled) one.
 MAX_PHASES = 8
@@ -152,6 +157,11 @@ class PhaseControl:
         its error at ``weight`` times the gain)."""
         return class_balance(footprint, self.last_error, self.prices, weight * self.gain)
 
+    def phase_costs(self, weight: float) -> np.ndarray:
+        """Each phase's cost after the last :meth:`step`, ``weight * gain * (max(0, e_c) +
+        lambda_c)`` (what :func:`class_balance` charges a voxel of that one phase)."""
+        return weight * self.gain * (np.maximum(0.0, self.last_error) + self.prices)
+
     def to_array(self) -> np.ndarray:
         """``[prices, last error, gain]`` as one float64 vector, for the checkpoint."""
         return np.concatenate([self.prices, self.last_error, [self.gain]])
@@ -165,3 +175,40 @@ class PhaseControl:
         if saved.size != 2 * phases + 1:
             raise ValueError(f"a phase-histogram state of {saved.size} numbers does not fit {phases} phases")
         return cls(saved[:phases].copy(), saved[phases:2 * phases].copy(), float(saved[-1]))
+
+
+# --------------------------------------------------------------------------- 2D value histograms
+
+
+def bin_phases(target: np.ndarray) -> np.ndarray:
+    """The phase of every value bin, ``(C, B)`` int64 (0 below, 1 above each channel's Otsu
+    split of the exemplars' histogram ``target`` ``(C, B)``; :func:`npmrf3d.materials.otsu_split`),
+    all 0 for a channel whose values fill one bin (nothing to split)."""
+    target = np.asarray(target, dtype=np.float64)
+    phases = np.zeros(target.shape, dtype=np.int64)
+    for c, counts in enumerate(target):
+        if np.count_nonzero(counts) > 1:
+            phases[c, otsu_split(counts) + 1:] = 1
+    return phases
+
+
+def bin_phase_error(hist: np.ndarray, target: np.ndarray, phases: np.ndarray) -> np.ndarray:
+    """Each channel's relative excess per phase, ``(C, 2)`` float64: ``v_c / t_c - 1`` for the
+    volume's share ``v`` of the bins of a phase in ``hist`` and the exemplars' ``t`` in
+    ``target`` (0 for a phase the exemplars lack)."""
+    error = np.zeros((len(hist), 2))
+    for c in range(len(hist)):
+        v = np.bincount(phases[c], weights=hist[c], minlength=2) / max(float(np.sum(hist[c])), 1e-300)
+        t = np.bincount(phases[c], weights=target[c], minlength=2) / max(float(np.sum(target[c])), 1e-300)
+        error[c] = np.where(t > 0, v / np.where(t > 0, t, 1.0) - 1.0, 0.0)
+    return error
+
+
+def phase_prior_target(target: np.ndarray, phases: np.ndarray, costs: np.ndarray, prior: float) -> np.ndarray:
+    """The target histogram through which the histogram prior charges each phase its cost:
+    ``T_c(b) exp(-costs[c, phase_c(b)] / prior)``, so the prior ``prior * log(T' / H)`` of a texel
+    is the plain prior minus its phase's cost (:meth:`PhaseControl.phase_costs`, ``(C, 2)``)."""
+    if prior <= 0.0:
+        return np.asarray(target, dtype=np.float64)
+    cost = np.take_along_axis(np.asarray(costs, dtype=np.float64), phases, axis=1)
+    return np.ascontiguousarray(np.asarray(target, dtype=np.float64) * np.exp(-cost / prior))

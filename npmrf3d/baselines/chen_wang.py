@@ -77,6 +77,7 @@ from .._kernels import coherence as _k
 from ..config import SynthesisMethod, SynthesisResult
 from ..exemplar import resolve_exemplars
 from ..neighborhood import VIEW_AXES, VIEWS
+from ..phase_histogram import PhaseControl, bin_phase_error, bin_phases, phase_prior_target
 from ..pyramid import level_shape
 from ..resources import check_memory, coherent_estimate
 
@@ -115,6 +116,7 @@ class ChenWangConfig:
     value_weight: float = 32.0
     value_prior: float = 3.0
     value_bins: int = 16
+    phase_weight: float = 0.0
     batches: int = 8
     solver: str = "medoid"
     balance_views: bool = False
@@ -136,7 +138,7 @@ def make_chen_wang_config(
     coherence_exclude=DEFAULTS.coherence_exclude, random_candidates=DEFAULTS.random_candidates,
     global_share=DEFAULTS.global_share, coherence_bias=DEFAULTS.coherence_bias,
     value_weight=DEFAULTS.value_weight, value_prior=DEFAULTS.value_prior, value_bins=DEFAULTS.value_bins,
-    batches=DEFAULTS.batches, solver=DEFAULTS.solver, balance_views=DEFAULTS.balance_views,
+    phase_weight=DEFAULTS.phase_weight, batches=DEFAULTS.batches, solver=DEFAULTS.solver, balance_views=DEFAULTS.balance_views,
     seed=None,
 ) -> ChenWangConfig:
     """Validate plain keyword arguments into a frozen :class:`ChenWangConfig`.
@@ -177,6 +179,7 @@ def make_chen_wang_config(
     value_weight = check.real("value_weight", value_weight, low=0.0)
     value_prior = check.real("value_prior", value_prior, low=0.0)
     value_bins = check.integer("value_bins", value_bins, low=2, high=256)
+    phase_weight = check.real("phase_weight", phase_weight, low=0.0)
     batches = check.integer("batches", batches, low=1, high=1024)
     solver = check.choice("solver", solver, SOLVERS)
     views = check.views(views, VIEWS)
@@ -188,8 +191,8 @@ def make_chen_wang_config(
                           position_boost=position_boost, coherence_exclude=coherence_exclude,
                           random_candidates=random_candidates, global_share=global_share,
                           coherence_bias=coherence_bias, value_weight=value_weight,
-                          value_prior=value_prior, value_bins=value_bins, batches=batches, solver=solver,
-                          balance_views=bool(balance_views), seed=seed)
+                          value_prior=value_prior, value_bins=value_bins, phase_weight=phase_weight,
+                          batches=batches, solver=solver, balance_views=bool(balance_views), seed=seed)
 
 
 def _check_exemplar_levels(config: ChenWangConfig, per_view: Mapping[str, np.ndarray]) -> None:
@@ -218,7 +221,8 @@ def chen_wang_synthesize(
     random_candidates: int = DEFAULTS.random_candidates,
     global_share: float = DEFAULTS.global_share, coherence_bias: float = DEFAULTS.coherence_bias,
     value_weight: float = DEFAULTS.value_weight, value_prior: float = DEFAULTS.value_prior,
-    value_bins: int = DEFAULTS.value_bins, batches: int = DEFAULTS.batches, solver: str = DEFAULTS.solver, balance_views: bool = DEFAULTS.balance_views, rng=None,
+    value_bins: int = DEFAULTS.value_bins, phase_weight: float = DEFAULTS.phase_weight,
+    batches: int = DEFAULTS.batches, solver: str = DEFAULTS.solver, balance_views: bool = DEFAULTS.balance_views, rng=None,
     progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
 ) -> SynthesisResult:
     """Synthesize a solid texture with Chen & Wang's method (2010; issue 11).
@@ -286,6 +290,14 @@ def chen_wang_synthesize(
         ignores it).
     value_bins : int
         Bins per channel of those histograms.
+    phase_weight : float >= 0
+        A phase control through the histogram prior (this project's addition, stop 33): each
+        channel's value bins split at the Otsu threshold of the exemplars' histogram into two
+        phases, and after every iteration a :class:`npmrf3d.phase_histogram.PhaseControl` per
+        channel prices the phase the volume over-uses; a candidate's prior loses
+        ``phase_weight`` times its phase's cost (excess plus the integral of the error, times
+        the control's gain). It restores a thin minority phase that the plain prior lets erode
+        (0 = off; acts only with ``value_prior > 0``).
     batches : int
         Histogram updates per pass (search: interleaved slice groups; solver: parts of a random
         voxel order). More batches track the histograms more closely, fewer run more in parallel.
@@ -332,7 +344,8 @@ def chen_wang_synthesize(
         position_weight=position_weight, position_boost=position_boost,
         coherence_exclude=coherence_exclude, random_candidates=random_candidates,
         global_share=global_share, coherence_bias=coherence_bias, value_weight=value_weight,
-        value_prior=value_prior, value_bins=value_bins, batches=batches, solver=solver, balance_views=balance_views, seed=seed)
+        value_prior=value_prior, value_bins=value_bins, phase_weight=phase_weight, batches=batches, solver=solver,
+        balance_views=balance_views, seed=seed)
     generator = check.rng(rng)
     per_view = resolve_exemplars(exemplar, exemplars, config.views, **_fit(config))
     _check_exemplar_levels(config, per_view)
@@ -376,8 +389,17 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
     first_level = config.levels - 1
     key = _config_key(config, per_view) + (f"|decision={list(decision)}" if decision[0] else "")
     resumed = _load_checkpoint(checkpoint, key)
+    phases = control = None
+    if config.phase_weight > 0.0 and config.value_prior > 0.0:
+        scale = np.where(value_span > 0, config.value_bins / np.where(value_span > 0, value_span, 1.0), 0.0)
+        pooled_bins = np.clip(np.floor((pooled - value_lo) * scale), 0, config.value_bins - 1).astype(np.int64)
+        phases = bin_phases(np.stack([np.bincount(pooled_bins[:, c], minlength=config.value_bins)
+                                      for c in range(channels)]))
+        control = [PhaseControl.start(2) for _ in range(channels)]
     if resumed is not None:
-        volume, src, done_level, rng_state, history, timings, stats, prev_widths = resumed
+        volume, src, done_level, rng_state, history, timings, stats, prev_widths, saved = resumed
+        if control is not None and saved is not None:
+            control = [PhaseControl.from_array(a, 2) for a in saved]
         rng.bit_generator.state = rng_state
         first_level = done_level - 1
     for level in range(first_level, -1, -1):
@@ -452,6 +474,9 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
             ts = time.perf_counter()
             order = rng.permutation(n_vox).astype(np.int64)
             temperature = float(decision[3][li][it]) if len(decision) > 3 else 0.0
+            target = values.target if control is None else phase_prior_target(
+                values.target, phases, np.stack([c.phase_costs(config.phase_weight) for c in control]),
+                config.value_prior)
             salt = int(rng.integers(0, 2**31)) if temperature > 0.0 else 0
             for b in range(len(bounds) - 1):
                 # within a batch the histograms are frozen and every voxel depends only on them
@@ -463,10 +488,13 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
                                         _MEDOID_CANDIDATES if config.solver == "medoid" or decision[0] else 0,
                                         config.balance_views, _SOLVE_CHUNK, decision[0],
                                         2.0 * (decision[1] * sigma) ** 2 or 1.0, decision[2],
-                                        values.ex_bins, values.hist, values.target, config.value_weight,
+                                        values.ex_bins, values.hist, target, config.value_weight,
                                         config.value_prior, values.lo, values.scale, values.unit,
                                         temperature, salt)))
             t_solve += time.perf_counter() - ts
+            if control is not None:
+                for c, e in zip(control, bin_phase_error(values.hist, values.target, phases)):
+                    c.step(e)
             level_history.append(energy_sum / max(1, sites))
             if progress is not None:
                 progress(level, it + 1, n_iter, level_history[-1])
@@ -483,8 +511,12 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
             "global_matches": global_counts,
             "exemplar_pixels_used": {v: used[vi] for vi, v in enumerate(views)},
         }
+        if control is not None:
+            stats["levels"][f"level_{level}"]["phase_error"] = [c.last_error.tolist() for c in control]
+            stats["levels"][f"level_{level}"]["phase_gain"] = [c.gain for c in control]
         if checkpoint is not None:
-            _save_checkpoint(checkpoint, key, volume, src, level, rng, history, timings, stats, widths)
+            _save_checkpoint(checkpoint, key, volume, src, level, rng, history, timings, stats, widths,
+                             None if control is None else np.stack([c.to_array() for c in control]))
     timings["total"] = time.perf_counter() - t_start
     return SynthesisResult(volume=volume, history=history, config=config, timings=timings,
                            labels=labels, stats=stats)
@@ -539,8 +571,9 @@ def _config_key(config: ChenWangConfig, per_view) -> str:
                        "exemplars": digest}, sort_keys=True, default=str)
 
 
-def _save_checkpoint(path, key, volume, src, level, rng, history, timings, stats, widths) -> None:
-    save_checkpoint(path, config=key, volume=volume, sources=src, level=level,
+def _save_checkpoint(path, key, volume, src, level, rng, history, timings, stats, widths, control=None) -> None:
+    extra = {} if control is None else {"phase_control": control}
+    save_checkpoint(path, config=key, volume=volume, sources=src, level=level, **extra,
                     widths=np.asarray(widths, dtype=np.int64),
                     rng_state=json.dumps(rng.bit_generator.state), history=json.dumps(history),
                     timings=json.dumps(timings), stats=json.dumps(stats, default=str))
@@ -558,7 +591,8 @@ def _load_checkpoint(path, key):
             np.ascontiguousarray(data["sources"], dtype=np.int32), int(data["level"]),
             json.loads(str(data["rng_state"])), json.loads(str(data["history"])),
             json.loads(str(data["timings"])), json.loads(str(data["stats"])),
-            [int(w) for w in np.atleast_1d(data["widths"])])
+            [int(w) for w in np.atleast_1d(data["widths"])],
+            np.asarray(data["phase_control"], dtype=np.float64) if "phase_control" in data else None)
 
 
 def _fit(config) -> dict:

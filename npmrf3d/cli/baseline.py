@@ -173,6 +173,10 @@ CHEN_WANG_HELP = {
     "value_prior": "strength of the histogram prior log(exemplar share / volume share) on each "
                    "candidate's score, >= 0 (0 = off; the mean solver ignores it)",
     "value_bins": "bins per channel of the value histograms",
+    "phase_weight": "this project's addition: a phase control through the histogram prior -- each channel's "
+                    "value bins split at the exemplar's Otsu threshold, and a candidate of the phase the "
+                    "volume over-uses loses W times that phase's price (excess + integral, with a gain that "
+                    "halves when the error flips), >= 0 (0 = off; needs --value-prior > 0)",
     "batches": "histogram updates per pass (more track the histograms closer, fewer run more in parallel)",
     "solver": "how a voxel picks among its voted texels: medoid (weighted medoid of the 8 heaviest, "
               "chosen by measurement) or mean (nearest to the weighted mean, the paper's practice)",
