@@ -35,7 +35,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from npmrf3d import materials  # noqa: E402
-from npmrf3d.volume_synthesis import volume_synthesize  # noqa: E402
+from npmrf3d.volume_synthesis import STARTS, VolumeConfig, volume_synthesize  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
 from scan_volume import CORNER, TEMPLATE  # noqa: E402
@@ -130,7 +130,7 @@ def main(argv=None) -> int:
     p.add_argument("--template", default=str(TEMPLATE), help="the Colin27 NIfTI file")
     p.add_argument("--usage", type=float, nargs="+", default=[1.0],
                    help="position-histogram strengths to run (0: seed 002's rule)")
-    p.add_argument("--start", nargs="+", default=["tiled"], choices=("tiled", "random"),
+    p.add_argument("--start", nargs="+", default=[VolumeConfig.start], choices=STARTS,
                    help="coarsest-level starts to run")
     p.add_argument("--seeds", type=int, nargs="+", default=[0])
     p.add_argument("--size", type=int, default=128)

@@ -14,7 +14,9 @@ voxel of the 3D exemplar: the synthesised volume is a field of exemplar coordina
 2. **Similarity sets** (``k = 3``): the voxel itself, then the nearest voxels in appearance space
    with each new one outside the ``7 x 7 x 7`` neighbourhood (``exclude = 3``) of the earlier ones.
 3. **Coordinate pyramid**: the coarsest level starts from the exemplar tiled at its spacing
-   with a random offset and jitter (``start = "tiled"``; ``"random"``: uniform coordinates);
+   with a random offset of its own for every tile, and jitter (``start = "blocks"``, since stop
+   33; ``"tiled"``: one offset for all, what the paper's pyramid from one voxel gives, which
+   repeats the exemplar at its period; ``"random"``: uniform coordinates);
    each level's children take ``S[parent] + floor(h R^T (delta - 1/2) + 1/2)`` (``delta`` in
    {0, 1}^3, ``R`` the child's frame), then a **jitter** ``floor(h r U + 1/2)``, ``U`` uniform in
    [-1, 1]^3 (``r = jitter``, the paper's 0.7), then ``passes`` **correction** passes of 8
@@ -26,7 +28,7 @@ voxel of the 3D exemplar: the synthesised volume is a field of exemplar coordina
 
 Choices where the paper is silent (also in ``docs/volume.md``): a coarsest level of
 ``size / 2**(levels-1)`` voxels holding the exemplar tiled at its spacing (what one voxel
-up-sampled would give) with a random offset and jitter; the valid box keeps
+up-sampled would give) with a random offset per tile and jitter; the valid box keeps
 coordinates ``window // 2`` voxels from the exemplar's faces (the paper discards 2 voxels per
 border); coordinates are rounded after up-sampling and jitter; the similarity sets are searched
 (exact ``cKDTree``) for and among the valid voxels of a stride-2 lattice (1/8 of them), the
@@ -94,7 +96,9 @@ class VolumeConfig:
     fine_jitter: float = 0.0
     usage: float = 1.0
     balance: float = 4.0
-    start: str = "tiled"
+    # stop 33 (docs/volume.md): the tiled start repeats 8-22 % of a 128^3 volume at the
+    # exemplar's period; blocks keeps the statistics of 6 scans x 3 seeds but one surface area
+    start: str = "blocks"
     vector_field: str = "none"
     angle: float = 180.0
     seed: int | None = None
@@ -423,8 +427,9 @@ def volume_synthesize(exemplar, *, size=DEFAULTS.size, levels: int = DEFAULTS.le
         level).
     start : {"tiled", "random", "blocks"}
         The coarsest level: the exemplar tiled at its spacing with a random offset and jitter
-        (the paper's pyramid), uniformly random coordinates, or the tiling with an offset of its
-        own for every tile (no block of the exemplar repeated at one shift).
+        (the paper's pyramid, which repeats the exemplar at its period), uniformly random
+        coordinates, or (the default) the tiling with an offset of its own for every tile (no
+        block of the exemplar repeated at one shift).
     vector_field : str, path or array
         ``none``, ``twist``, ``bend``, ``radial`` (:mod:`npmrf3d.fields`), a ``.npy`` file, or an
         array: directions ``(N1, N2, N3, 3)`` or frames ``(N1, N2, N3, 3, 3)``.

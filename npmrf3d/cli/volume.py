@@ -42,9 +42,9 @@ FIELD_HELP = {
                      "faces (those and the 6 face neighbours)",
     "jitter": "jitter amplitude at the coarser levels, in units of the level's spacing (the paper: 0.7)",
     "fine_jitter": "jitter amplitude at the finest level",
-    "start": "the coarsest level: 'tiled' (the exemplar laid out at the level's spacing with a "
-             "random offset and jitter, as the paper's pyramid from one voxel), 'random' "
-             "(uniform coordinates) or 'blocks' (the tiling with its own offset for every tile)",
+    "start": "the coarsest level: 'blocks' (the exemplar laid out at the level's spacing, every tile "
+             "with its own random offset, and jitter), 'tiled' (one offset for all, as the paper's "
+             "pyramid from one voxel: repeats the exemplar at its period) or 'random' (uniform coordinates)",
     "usage": "strength of the position histogram: a candidate copying an over-used part of the "
              "exemplar pays usage x (half the distance of two random neighbourhoods) per excess "
              "use (0: seed 002's rule, which collapses onto one homogeneous region of a "
