@@ -8,6 +8,10 @@ segmented micro-CT images, as ``berea.tif`` and ``ketton.tif`` in
 ``data/<name>/original/raw/<name>.zip`` of github.com/LukasMosser/PorousMediaGan.
 
 The scan is split along axis 0: the exemplar is the 64^3 crop at ``--corner`` of the first half
+(``typical``: of the first half's crops at ``--stride``, the one whose grey mean and standard
+deviation lie nearest the medians of those crops', in units of their spread, chosen without
+looking at any result: a corner crop can be unlike the rest of a scan, as the polymer's and the
+weave's are)
 (``--downsample`` 2 averages 2^3 voxels first, for coarse-grained rock in a 64^3 crop), and the
 real spread is every 64^3 crop of the second half (stride ``--stride``), which no run has seen.
 Each volume and crop is judged at the scan's threshold (``--threshold``: 0.5 of the scaled
@@ -51,6 +55,22 @@ from bench_volume_scan import (block_mean, crops_of, inside, print_spread, repor
 DEFAULT_THRESHOLD = "0.5"
 
 
+def typical_corner(half: np.ndarray, stride: int, side: int = 64) -> tuple[int, int, int]:
+    """The corner of the ``side^3`` crop of ``half`` (corners on the ``stride`` lattice) whose
+    grey mean and standard deviation lie nearest the crops' medians, each in units of the crops'
+    interquartile range (of the standard deviation, when that range is 0)."""
+    corners = [(i, j, k) for i in range(0, half.shape[0] - side + 1, stride)
+               for j in range(0, half.shape[1] - side + 1, stride)
+               for k in range(0, half.shape[2] - side + 1, stride)]
+    if not corners:
+        raise ParameterError(f"the first half ({' x '.join(map(str, half.shape))}) holds no {side}^3 crop")
+    moments = np.array([[float(c.mean()), float(c.std())] for c in
+                        (half[i:i + side, j:j + side, k:k + side] for i, j, k in corners)])
+    q1, med, q3 = np.percentile(moments, [25, 50, 75], axis=0)
+    scale = np.where(q3 - q1 > 0, q3 - q1, np.maximum(moments.std(axis=0), 1e-12))
+    return corners[int(np.argmin((((moments - med) / scale) ** 2).sum(axis=1)))]
+
+
 def thresholds_of(spec: list[str], exemplar: np.ndarray) -> dict[str, float]:
     """Name -> threshold: ``0.5`` is "grain|pore" (the published runs' name), another number
     "above X", ``otsu`` "otsu (X)" at the exemplar's Otsu threshold."""
@@ -76,7 +96,9 @@ def main(argv=None) -> int:
     p.add_argument("--scan", required=True, help="the segmented scan (.npy or TIFF stack)")
     p.add_argument("--downsample", type=int, default=1, choices=(1, 2, 4),
                    help="average this many voxels per side before cutting crops")
-    p.add_argument("--corner", default="0,0,0", help="corner of the exemplar crop in the first half")
+    p.add_argument("--corner", default="0,0,0",
+                   help="corner of the exemplar crop in the first half, or 'typical' (the crop nearest the "
+                        "first half's median grey mean and standard deviation)")
     p.add_argument("--stride", type=int, default=32, help="stride of the held-out crops")
     p.add_argument("--seeds", type=int, nargs="+", default=[0])
     p.add_argument("--balance", type=float, nargs="+", default=[VolumeConfig.balance],
@@ -100,7 +122,15 @@ def main(argv=None) -> int:
     f = args.downsample
     scan = block_mean(scan, f)
     half = scan.shape[0] // 2
-    a, b, c = (int(x) for x in args.corner.split(","))
+    if args.corner == "typical":
+        a, b, c = typical_corner(scan[:half], args.stride)
+    else:
+        try:
+            a, b, c = (int(x) for x in args.corner.split(","))
+        except ValueError:
+            print(f"bench_volume_microct: error: --corner takes 'A,B,C' or 'typical'; got {args.corner!r}",
+                  file=sys.stderr)
+            return 2
     if a + 64 > half or b + 64 > scan.shape[1] or c + 64 > scan.shape[2]:
         print(f"bench_volume_microct: error: the 64^3 crop at {args.corner} does not fit in the first half "
               f"({half} x {scan.shape[1]} x {scan.shape[2]})", file=sys.stderr)
