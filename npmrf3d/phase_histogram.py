@@ -24,11 +24,60 @@ from scipy import ndimage
 from .coherence import pca_project
 from .materials import otsu_split, otsu_threshold
 
-__all__ = ["MAX_PHASES", "PRICE_STEPS", "PhaseControl", "bin_phase_error", "bin_phases", "class_balance",
-           "next_prices", "phase_classes", "phase_error", "phase_footprint", "phase_prior_target"]
+__all__ = ["MAX_PHASES", "PRICE_STEPS", "SOFT_WIDTH", "PhaseControl", "bin_phase_error", "bin_phases",
+           "class_balance", "next_prices", "phase_classes", "phase_error", "phase_footprint", "phase_membership",
+           "phase_prior_target"]
 
 #: An exemplar with at most this many distinct values is a segmented (labelled) one.
 MAX_PHASES = 8
+
+
+#: A grey exemplar's phases are soft (stop 33): a voxel's share of the bright side ramps from 0
+#: to 1 over this fraction of the distance between the two sides' mean values, centred on the
+#: Otsu threshold, so the voxels at the threshold (a soil's grey matrix) belong to both sides and
+#: are not pushed across it; 0 = hard sides.
+SOFT_WIDTH = 0.25
+
+
+def _phase_values(exemplar: np.ndarray, lo, hi, phases: int):
+    """The value of every exemplar voxel (first principal component of the channels), those of
+    the valid box, and the phase edges (between distinct values for a segmented exemplar, else
+    Otsu's threshold); the last item says whether it is segmented."""
+    ex = np.asarray(exemplar, dtype=np.float64)
+    flat = ex.reshape(-1, ex.shape[-1])
+    flat = pca_project(flat, 1)[2][:, 0] if flat.shape[1] > 1 else flat[:, 0]
+    values = flat.reshape(ex.shape[:3])
+    box = values[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1].ravel()
+    distinct = np.unique(box)
+    if len(distinct) <= phases:
+        return values, box, (distinct[1:] + distinct[:-1]) / 2, True
+    return values, box, np.array([otsu_threshold(box)]), False
+
+
+def phase_membership(exemplar: np.ndarray, lo, hi, phases: int = MAX_PHASES,
+                     width: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Each exemplar voxel's share of every phase, ``(P, D, H, W)`` float32, and each phase's share
+    of the valid box (float64, every share > 0): one-hot :func:`phase_classes` for a segmented
+    exemplar; for a grey one the bright side's share ``clip((v - t) / w + 1/2, 0, 1)``, ``t``
+    Otsu's threshold and ``w`` = ``width`` (default :data:`SOFT_WIDTH`) times the difference of
+    the two sides' mean values (the dark side's share its complement)."""
+    width = SOFT_WIDTH if width is None else float(width)
+    values, box, edges, is_segmented = _phase_values(exemplar, lo, hi, phases)
+    if is_segmented or width <= 0.0:
+        classes = np.searchsorted(edges, values, side="right")
+        n = len(edges) + 1
+        member = (classes[None] == np.arange(n)[:, None, None, None]).astype(np.float32)
+    else:
+        t = float(edges[0])
+        above, below = box[box > t], box[box <= t]
+        ramp = width * (float(above.mean()) - float(below.mean())) if above.size and below.size else 0.0
+        if ramp > 0.0:
+            bright = np.clip((values - t) / ramp + 0.5, 0.0, 1.0)
+        else:
+            bright = (values > t).astype(np.float64)
+        member = np.stack([1.0 - bright, bright]).astype(np.float32)
+    inner = member[:, lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1].reshape(len(member), -1)
+    return member, np.maximum(inner.astype(np.float64).mean(axis=1), 1.0 / box.size)
 
 
 def phase_classes(exemplar: np.ndarray, lo, hi, phases: int = MAX_PHASES) -> tuple[np.ndarray, np.ndarray]:
@@ -41,16 +90,7 @@ def phase_classes(exemplar: np.ndarray, lo, hi, phases: int = MAX_PHASES) -> tup
     of the valid box's values. (Eight quantile bins of a grey scan were tried and not kept: a
     voxel then changes bin for a tiny change of value, and the histogram turned smooth tissue
     into speckle, ``docs/volume.md``.)"""
-    ex = np.asarray(exemplar, dtype=np.float64)
-    flat = ex.reshape(-1, ex.shape[-1])
-    flat = pca_project(flat, 1)[2][:, 0] if flat.shape[1] > 1 else flat[:, 0]
-    values = flat.reshape(ex.shape[:3])
-    box = values[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1].ravel()
-    distinct = np.unique(box)
-    if len(distinct) <= phases:
-        edges = (distinct[1:] + distinct[:-1]) / 2
-    else:
-        edges = np.array([otsu_threshold(box)])
+    values, box, edges, _ = _phase_values(exemplar, lo, hi, phases)
     classes = np.searchsorted(edges, values, side="right").astype(np.int64)
     share = np.bincount(np.searchsorted(edges, box, side="right"), minlength=len(edges) + 1) / box.size
     return classes, np.maximum(share, 1.0 / box.size)
@@ -60,17 +100,22 @@ def phase_footprint(classes: np.ndarray, phases: int, h: int) -> np.ndarray:
     """The phase mix a level-``h`` coordinate stands for, ``(phases, D, H, W)`` float32: the share
     of each phase among the exemplar voxels its descendants at the finest level copy.
 
-    Up-sampling puts the children of ``u`` at ``u + floor(h' (delta - 1/2) + 1/2)`` (``h'`` the
-    children's spacing), so without jitter or deformation the finest-level descendants of a
-    level-``h`` coordinate cover ``u + [1 - h/2, h/2]`` on every axis: a box of ``h`` voxels
-    (faces clamped, as the coordinates are). At the finest level (``h = 1``) it is the voxel's own
-    phase, one-hot."""
-    one_hot = (classes[None] == np.arange(phases)[:, None, None, None]).astype(np.float32)
+    ``classes``: every exemplar voxel's phase ``(D, H, W)`` int, or its share of each phase
+    ``(phases, D, H, W)`` float (:func:`phase_membership`). Up-sampling puts the children of ``u``
+    at ``u + floor(h' (delta - 1/2) + 1/2)`` (``h'`` the children's spacing), so without jitter
+    or deformation the finest-level descendants of a level-``h`` coordinate cover ``u + [1 -
+    h/2, h/2]`` on every axis: a box of ``h`` voxels (faces clamped, as the coordinates are). At
+    the finest level (``h = 1``) it is the voxel's own phase (one-hot for ``classes``)."""
+    classes = np.asarray(classes)
+    if classes.ndim == 4:
+        mix = np.ascontiguousarray(classes, dtype=np.float32)
+    else:
+        mix = (classes[None] == np.arange(phases)[:, None, None, None]).astype(np.float32)
     if h == 1:
-        return one_hot
+        return mix
     for axis in (1, 2, 3):  # the box [u + 1 - h/2, u + h/2]: scipy's window of an even size, origin -1
-        one_hot = ndimage.uniform_filter1d(one_hot, size=h, axis=axis, mode="nearest", origin=-1)
-    return one_hot
+        mix = ndimage.uniform_filter1d(mix, size=h, axis=axis, mode="nearest", origin=-1)
+    return mix
 
 
 #: The phase histogram's integral time, in sub-passes: every sub-pass a phase's price moves by

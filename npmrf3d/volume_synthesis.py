@@ -58,7 +58,7 @@ from ._kernels import _jit
 from ._kernels import volume as _k
 from .config import SynthesisMethod, SynthesisResult
 from .fields import FIELDS, field_input, level_frames
-from .phase_histogram import MAX_PHASES, PhaseControl, phase_classes, phase_error, phase_footprint
+from .phase_histogram import MAX_PHASES, SOFT_WIDTH, PhaseControl, phase_error, phase_footprint, phase_membership
 from .repetition import copy_repetition
 from .resources import Estimate, check_memory
 from .volume import load_volume_exemplar, volume_fits
@@ -422,7 +422,8 @@ def volume_synthesize(exemplar, *, size=DEFAULTS.size, levels: int = DEFAULTS.le
         share / exemplar share - 1) + price)``, the price summing that relative error over the
         sub-passes, the gain ``g`` halved when the error flips sign between sub-passes (a
         noisy exemplar's oscillation) and grown back otherwise; at the coarser levels a
-        coordinate counts as the phase mix its descendants will copy. 0 leaves the phase
+        coordinate counts as the phase mix its descendants will copy, and a grey voxel near the
+        threshold as partly both sides (:func:`npmrf3d.phase_histogram.phase_membership`). 0 leaves the phase
         fractions free (a minority phase such as the pores of a rock then shrinks level by
         level).
     start : {"tiled", "random", "blocks"}
@@ -494,7 +495,7 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
         if vector_field is None:
             check.fail("vector_field 'array' needs the frames array (vector_field=...)")
     lo, hi = _valid_box(exemplar.shape[:3], config.window)
-    classes = phase_classes(exemplar, lo, hi) if config.balance else None
+    classes = phase_membership(exemplar, lo, hi) if config.balance else None
     control = None if classes is None else PhaseControl.start(len(classes[1]))
     key = _key(config, exemplar, vector_field) + (f"|parzen={list(parzen)}" if parzen else "")
     sigma = float(exemplar.astype(np.float64).std()) or 1.0
@@ -576,8 +577,9 @@ def _key(config: VolumeConfig, exemplar: np.ndarray, field) -> str:
     digest = [list(exemplar.shape), float(exemplar.astype(np.float64).sum()),
               float((exemplar.astype(np.float64) ** 2).sum())]
     fdigest = None if field is None else float(np.asarray(field, dtype=np.float64).sum())
+    # the soft phases of stop 33 change a grey scan's run: a checkpoint from before is refused
     return json.dumps({"method": "volume-lh", "config": config.to_dict(), "exemplar": digest,
-                       "field": fdigest}, sort_keys=True, default=str)
+                       "field": fdigest, "soft_phases": SOFT_WIDTH}, sort_keys=True, default=str)
 
 
 def _resume(path, key):

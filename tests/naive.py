@@ -719,6 +719,19 @@ def naive_phase_footprint(classes, phases, h):
     return out
 
 
+def naive_membership_footprint(member, h):
+    """Twin of ``phase_footprint`` of a soft membership ``(P, D, H, W)``: every exemplar voxel's
+    mean membership over its box ``u + [1 - h/2, h/2]`` (indices clamped), one voxel at a time."""
+    shape = member.shape[1:]
+    out = np.zeros(member.shape)
+    span = range(1 - h // 2, h // 2 + 1) if h > 1 else range(0, 1)
+    for idx in itertools.product(*[range(n) for n in shape]):
+        for off in itertools.product(span, span, span):
+            v = tuple(min(max(idx[a] + off[a], 0), shape[a] - 1) for a in range(3))
+            out[(slice(None),) + idx] += member[(slice(None),) + v] / len(span) ** 3
+    return out
+
+
 def naive_class_balance(coords, footprint, share, prices, weight):
     """Twin of ``phase_error`` and ``class_balance``: the volume's phase mix summed voxel by voxel,
     then every exemplar voxel's cost from its own phase mix."""

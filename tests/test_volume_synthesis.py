@@ -18,7 +18,7 @@ from npmrf3d.volume_synthesis import (NEIGHBOURHOODS, appearance_space, cell_usa
                                       make_volume_config, set_positions, upsample, volume_synthesize)
 from npmrf3d.materials import otsu_threshold
 from npmrf3d.phase_histogram import (PRICE_STEPS, PhaseControl, class_balance, next_prices, phase_classes, phase_error,
-                                     phase_footprint)
+                                     phase_footprint, phase_membership)
 from tests import naive
 
 RNG_SEED = 15
@@ -102,6 +102,31 @@ def test_phase_classes_are_the_phases_of_a_segmented_exemplar_and_the_otsu_sides
     c3, _ = phase_classes(np.repeat(grey, 3, axis=3), lo, hi)
     c3 = c3 if c3[0, 0, 0] == classes[0, 0, 0] else 1 - c3
     assert np.mean(c3 != classes) < 0.02  # Otsu's 256 bins fall a little apart on the scaled axis
+
+
+def test_a_grey_exemplars_phases_are_soft_at_the_threshold_and_a_segmented_ones_hard(rng):
+    """Stop 33: a grey voxel's share of the bright side ramps over a quarter of the distance
+    between the sides' means, centred on Otsu's threshold; a segmented exemplar stays one-hot."""
+    lo, hi = np.array([1, 1, 1]), np.array([6, 6, 6])
+    seg = (rng.random((8, 8, 8, 1)) < 0.3).astype(np.float32)
+    member, share = phase_membership(seg, lo, hi)
+    classes, hard_share = phase_classes(seg, lo, hi)
+    np.testing.assert_array_equal(member[1], classes)
+    np.testing.assert_allclose(share, hard_share)
+    grey = np.where(rng.random((8, 8, 8, 1)) < 0.4, 0.2, 0.8) + rng.normal(0, 0.1, size=(8, 8, 8, 1))
+    member, share = phase_membership(grey, lo, hi)
+    box = grey[1:7, 1:7, 1:7, 0].ravel()
+    t = otsu_threshold(box)
+    w = 0.25 * (box[box > t].mean() - box[box <= t].mean())
+    for v, m in zip(grey[..., 0].ravel()[:50], member[1].ravel()[:50]):
+        want = 0.0 if v <= t - w / 2 else 1.0 if v >= t + w / 2 else (v - t) / w + 0.5
+        assert m == pytest.approx(want, abs=1e-6)
+    np.testing.assert_allclose(member.sum(axis=0), 1.0, atol=1e-6)
+    assert share[1] == pytest.approx(member[1, 1:7, 1:7, 1:7].mean(), abs=1e-6)
+    for h in (1, 2):
+        np.testing.assert_allclose(phase_footprint(member, 2, h), naive.naive_membership_footprint(member, h), atol=1e-6)
+    # width 0: the hard sides
+    np.testing.assert_array_equal(phase_membership(grey, lo, hi, width=0.0)[0][1], phase_classes(grey, lo, hi)[0])
 
 
 def test_class_balance_matches_naive_and_charges_only_the_overused_class(rng):
