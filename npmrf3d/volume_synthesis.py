@@ -1,6 +1,6 @@
 """Synthesis from a 3D exemplar with a vector-field deformation (seed 002; issue 15, item 3).
 
-Why a module of ~500 lines: configuration, validation, the appearance-space model, the level
+Why a module of ~630 lines: configuration, validation, the appearance-space model, the level
 loop, the checkpoint and the registry entry of one method, most of it the documented signature.
 
 The method (registry name ``volume-lh``: it is Lefebvre & Hoppe's appearance-space, coordinate

@@ -1,6 +1,6 @@
 """Chen & Wang 2010: k-coherence search, discrete solver, position and index histograms.
 
-Why one module of ~500 lines: the configuration, its validation, the level loop and the
+Why one module of ~600 lines: the configuration, its validation, the level loop and the
 checkpoint of one method, most of it the documented public signature.
 
 "High quality solid texture synthesis using position and index histogram matching" (The Visual
