@@ -53,6 +53,8 @@ __all__ = [
     "random_sources",
     "upsample_sources",
     "valid_centres",
+    "value_counts",
+    "value_scale",
 ]
 
 
@@ -390,6 +392,20 @@ def global_matches(volume: np.ndarray, view: str, model: LevelModel, assign_v: n
 # --------------------------------------------------------------------------- histograms
 
 
+def value_scale(span, bins: int) -> np.ndarray:
+    """Bins per unit of value of each channel, ``bins / span`` (0 for a channel of one value)."""
+    span = np.asarray(span, dtype=np.float64)
+    return np.where(span > 0, bins / np.where(span > 0, span, 1.0), 0.0)
+
+
+def value_counts(values: np.ndarray, lo: np.ndarray, scale: np.ndarray, bins: int) -> tuple[np.ndarray, np.ndarray]:
+    """The bin of every value of ``values`` (n, C) (:func:`npmrf3d._kernels.coherence.value_bin`),
+    ``(n, C)`` int64, and each channel's counts, ``(C, bins)`` float64."""
+    b = np.empty(values.shape, dtype=np.int64)
+    _k.value_bins(np.ascontiguousarray(values, dtype=np.float32), np.asarray(lo, dtype=np.float64), scale, bins, b)
+    return b, np.stack([np.bincount(b[:, c], minlength=bins) for c in range(values.shape[1])]).astype(np.float64)
+
+
 class ValueHistogram(NamedTuple):
     """Per-channel value histograms of a level for the solver's histogram matching.
 
@@ -424,20 +440,13 @@ class ValueHistogram(NamedTuple):
         texels (:func:`npmrf3d.baselines.chen_wang._pack`)."""
         channels = volume.shape[3]
         lo = np.asarray(lo, dtype=np.float64)
-        span = np.asarray(span, dtype=np.float64)
-        scale = np.where(span > 0, bins / np.where(span > 0, span, 1.0), 0.0)
-
-        def counts(values):
-            b = np.empty(values.shape, dtype=np.int64)
-            _k.value_bins(np.ascontiguousarray(values, dtype=np.float32), lo, scale, bins, b)
-            return b, np.stack([np.bincount(b[:, c], minlength=bins) for c in range(channels)]).astype(np.float64)
-
-        ex_bins, _ = counts(ex_flat)
+        scale = value_scale(span, bins)
+        ex_bins, _ = value_counts(ex_flat, lo, scale, bins)
         n = volume.shape[0] * volume.shape[1] * volume.shape[2]
-        _, hist = counts(volume.reshape(n, channels))
+        _, hist = value_counts(volume.reshape(n, channels), lo, scale, bins)
         target = np.zeros((channels, bins), dtype=np.float64)
         for ex in exemplars:
-            _, h = counts(ex.reshape(-1, channels))
+            _, h = value_counts(ex.reshape(-1, channels), lo, scale, bins)
             target += h / h.sum(axis=1, keepdims=True)
         unit = n / bins
         return cls(lo, scale, ex_bins, hist / unit, target * bins / len(exemplars), float(unit))

@@ -63,21 +63,25 @@ def phase_membership(exemplar: np.ndarray, lo, hi, phases: int = MAX_PHASES,
     the two sides' mean values (the dark side's share its complement)."""
     width = SOFT_WIDTH if width is None else float(width)
     values, box, edges, is_segmented = _phase_values(exemplar, lo, hi, phases)
-    if is_segmented or width <= 0.0:
-        classes = np.searchsorted(edges, values, side="right")
-        n = len(edges) + 1
-        member = (classes[None] == np.arange(n)[:, None, None, None]).astype(np.float32)
-    else:
+    ramp = 0.0
+    if not is_segmented:
         t = float(edges[0])
         above, below = box[box > t], box[box <= t]
         ramp = width * (float(above.mean()) - float(below.mean())) if above.size and below.size else 0.0
-        if ramp > 0.0:
-            bright = np.clip((values - t) / ramp + 0.5, 0.0, 1.0)
-        else:
-            bright = (values > t).astype(np.float64)
-        member = np.stack([1.0 - bright, bright]).astype(np.float32)
-    inner = member[:, lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1].reshape(len(member), -1)
+    if ramp <= 0.0:
+        classes, share = _hard_phases(values, box, edges)
+        return phase_footprint(classes, len(share), 1), share
+    bright = np.clip((values - t) / ramp + 0.5, 0.0, 1.0)
+    member = np.stack([1.0 - bright, bright]).astype(np.float32)
+    inner = member[:, lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1].reshape(2, -1)
     return member, np.maximum(inner.astype(np.float64).mean(axis=1), 1.0 / box.size)
+
+
+def _hard_phases(values: np.ndarray, box: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The phase of every voxel between ``edges`` (int64) and each phase's share of ``box``."""
+    classes = np.searchsorted(edges, values, side="right").astype(np.int64)
+    share = np.bincount(np.searchsorted(edges, box, side="right"), minlength=len(edges) + 1) / box.size
+    return classes, np.maximum(share, 1.0 / box.size)
 
 
 def phase_classes(exemplar: np.ndarray, lo, hi, phases: int = MAX_PHASES) -> tuple[np.ndarray, np.ndarray]:
@@ -91,9 +95,7 @@ def phase_classes(exemplar: np.ndarray, lo, hi, phases: int = MAX_PHASES) -> tup
     voxel then changes bin for a tiny change of value, and the histogram turned smooth tissue
     into speckle, ``docs/volume.md``.)"""
     values, box, edges, _ = _phase_values(exemplar, lo, hi, phases)
-    classes = np.searchsorted(edges, values, side="right").astype(np.int64)
-    share = np.bincount(np.searchsorted(edges, box, side="right"), minlength=len(edges) + 1) / box.size
-    return classes, np.maximum(share, 1.0 / box.size)
+    return _hard_phases(values, box, edges)
 
 
 def phase_footprint(classes: np.ndarray, phases: int, h: int) -> np.ndarray:

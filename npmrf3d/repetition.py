@@ -30,9 +30,6 @@ __all__ = ["copy_repetition"]
 #: two).
 TOLERANCE = 2
 
-#: Voxels of one coordinate are paired with at most this many others when the shifts are searched.
-MAX_GROUP = 512
-
 #: A coordinate copied by more voxels than this is a collapse (a flat region copying one voxel),
 #: left out of the search for the shift; its voxels still count in the share of every shift.
 SEARCH_GROUP = 64
@@ -62,8 +59,8 @@ def copy_repetition(coords: np.ndarray, *, min_shift: int = MIN_SHIFT, tolerance
     candidates : int or None
         The shifts counted: in the boxes (``2 tolerance + 1`` shifts per axis) of the
         ``candidates`` largest local maxima of the box-summed histogram of the shifts between
-        voxels that copy one coordinate, the most frequent shift of each box (coordinates copied more than :data:`SEARCH_GROUP` times, and pairs
-        more than :data:`MAX_GROUP` places apart in raster order, left out of that histogram);
+        voxels that copy one coordinate, the most frequent shift of each box (coordinates copied
+        more than :data:`SEARCH_GROUP` times left out of that histogram);
         ``None``: every shift (exact, slow beyond 32^3). A repetition is a peak of that
         histogram, so the default finds it; it cannot report more than the exact maximum. The
         shortest far shift along each axis is always counted too (a flat region copying one
@@ -128,7 +125,7 @@ def _peaks(span: np.ndarray, shape: np.ndarray, far: np.ndarray, tolerance: int,
     group = np.repeat(np.diff(bounds), np.diff(bounds))  # the group size of every sorted voxel
     del key, order
     counts = np.zeros(n, dtype=np.int64)
-    reach = min(int(group.max()), MAX_GROUP, SEARCH_GROUP)
+    reach = min(int(group.max()), SEARCH_GROUP)
     # pairs (i, i + d) of the sorted list share a coordinate when their keys are equal: every
     # pair of a group of m voxels comes once, at d = 1 .. m - 1, counted at its shift t here ...
     for d in range(1, reach):

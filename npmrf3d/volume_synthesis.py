@@ -495,8 +495,8 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
         if vector_field is None:
             check.fail("vector_field 'array' needs the frames array (vector_field=...)")
     lo, hi = _valid_box(exemplar.shape[:3], config.window)
-    classes = phase_membership(exemplar, lo, hi) if config.balance else None
-    control = None if classes is None else PhaseControl.start(len(classes[1]))
+    membership = phase_membership(exemplar, lo, hi) if config.balance else None
+    control = None if membership is None else PhaseControl.start(len(membership[1]))
     key = _key(config, exemplar, vector_field) + (f"|parzen={list(parzen)}" if parzen else "")
     sigma = float(exemplar.astype(np.float64).std()) or 1.0
     timings = {"setup": time.perf_counter() - t_start}
@@ -509,7 +509,7 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
         coords, done, state, history, timings, stats, saved_control = resumed
         rng.bit_generator.state = state
         if control is not None and saved_control is not None and saved_control.size:
-            control = PhaseControl.from_array(saved_control, len(classes[1]))
+            control = PhaseControl.from_array(saved_control, len(membership[1]))
         first = done - 1
     for level in range(first, -1, -1):
         t0 = time.perf_counter()
@@ -518,7 +518,7 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
         frames = level_frames(config.vector_field, vector_field, config.size, level, config.angle)
         feat = appearance_space(exemplar, level, config.window, config.pca_dims, rng)
         kset = similarity_sets(feat, lo, hi, config.k, config.exclude)
-        phases = None if classes is None else (phase_footprint(classes[0], len(classes[1]), h), classes[1])
+        phases = None if membership is None else (phase_footprint(membership[0], len(membership[1]), h), membership[1])
         t_model = time.perf_counter() - t0
         if coords is None:
             coords = initial_coordinates(shape, h, lo, hi, config.start, config.jitter, rng)

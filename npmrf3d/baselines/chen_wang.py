@@ -391,10 +391,8 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
     resumed = _load_checkpoint(checkpoint, key)
     phases = control = None
     if config.phase_weight > 0.0 and config.value_prior > 0.0:
-        scale = np.where(value_span > 0, config.value_bins / np.where(value_span > 0, value_span, 1.0), 0.0)
-        pooled_bins = np.clip(np.floor((pooled - value_lo) * scale), 0, config.value_bins - 1).astype(np.int64)
-        phases = bin_phases(np.stack([np.bincount(pooled_bins[:, c], minlength=config.value_bins)
-                                      for c in range(channels)]))
+        phases = bin_phases(coh.value_counts(pooled, value_lo, coh.value_scale(value_span, config.value_bins),
+                                             config.value_bins)[1])
         control = [PhaseControl.start(2) for _ in range(channels)]
     if resumed is not None:
         volume, src, done_level, rng_state, history, timings, stats, prev_widths, saved = resumed
