@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import importlib.util
 
-TORCH_MODULES = ["npmrf3d/neural/descriptor.py", "npmrf3d/neural/engine.py",
-                 "npmrf3d/neural/generator.py", "npmrf3d/neural/noise.py",
-                 "npmrf3d/neural/zarr_volume.py"]
+TORCH_MODULES = ["npmrf3d/methods/neural/descriptor.py", "npmrf3d/methods/neural/engine.py",
+                 "npmrf3d/methods/neural/generator.py", "npmrf3d/methods/neural/noise.py",
+                 "npmrf3d/methods/neural/zarr_volume.py"]
 
 collect_ignore = [] if importlib.util.find_spec("torch") is not None else TORCH_MODULES

@@ -13,12 +13,12 @@ The floor pools the three 64 x 64 quadrants of the 128 x 128 photograph that do 
 crop A (one crop B can be unrepresentative: ``hubble``'s diagonal quadrant holds one large
 galaxy).
 
-* ``ac``: L2 error of the grey autocorrelation, lags -8..8 (:func:`npmrf3d.metrics.autocorrelation_error`);
+* ``ac``: L2 error of the grey autocorrelation, lags -8..8 (:func:`npmrf3d.analysis.metrics.autocorrelation_error`);
 * ``hist_kl``: ``KL(exemplar || volume)``: grey histogram (32 bins) for grey exemplars, joint
-  colour histogram (8 bins per channel) for colour ones, as :func:`npmrf3d.metrics.evaluate`;
+  colour histogram (8 bins per channel) for colour ones, as :func:`npmrf3d.analysis.metrics.evaluate`;
 * ``orient_kl``: KL of the structure-tensor orientation histograms;
 * ``sw``: sliced Wasserstein distance of 7 x 7 patches at scales 1, 2 and 4
-  (:func:`npmrf3d.metrics.multiscale_sliced_wasserstein`), exemplar units;
+  (:func:`npmrf3d.analysis.metrics.multiscale_sliced_wasserstein`), exemplar units;
 * ``top``: share of the voxels holding the most common value (flat volumes);
 * ``bright``: share of voxels brighter (grey) than the exemplar's 99th percentile (sparse
   bright features such as ``hubble``'s galaxies; the exemplar and the control hold 0.01);
@@ -52,7 +52,7 @@ import numpy as np
 from scipy import ndimage
 
 import npmrf3d
-from npmrf3d import metrics
+from npmrf3d.analysis import metrics
 from npmrf3d.studies.catalog import ETR_DIR, load_exemplar
 
 VIEWS = ("front", "right", "top")
@@ -88,7 +88,7 @@ def _npmrf_anneal(ex, size, levels, seed, *, palette=None, **_):
 
 
 def _npk(ex, size, levels, seed, **_):
-    from npmrf3d.baselines import kopf_synthesize
+    from npmrf3d.methods.kopf import kopf_synthesize
     return kopf_synthesize(ex, size=size, levels=levels, rng=seed).volume
 
 

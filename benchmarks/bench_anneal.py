@@ -30,13 +30,12 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import hardware, matmul_gflops
+from _quality import measure, ratios, structureless
 
 import npmrf3d
 from npmrf3d import data
 from npmrf3d.plotting import preview_figure, save_figure
-
-from _common import hardware, matmul_gflops
-from _quality import measure, ratios, structureless
 
 PAPER_SECONDS = 48 * 3600
 

@@ -21,14 +21,13 @@ import argparse
 import time
 
 import numpy as np
+from _common import hardware, matmul_gflops
 
 import npmrf3d
-from npmrf3d import coherence, data
+from npmrf3d import data
 from npmrf3d._kernels import _jit
-from npmrf3d.baselines import chen_wang_synthesize
-from npmrf3d.baselines.chen_wang import DEFAULTS
-
-from _common import hardware, matmul_gflops
+from npmrf3d.methods.chen_wang import DEFAULTS, chen_wang_synthesize
+from npmrf3d.model import kcoherence
 
 
 def _ints(text):
@@ -80,12 +79,12 @@ def main(argv=None) -> int:
           f"{'met' if wall < 60 else 'MISSED'}; paper 5-10 min: {300 / wall:.1f}x-{600 / wall:.1f}x faster")
     print(f"exemplar pixels in use at level 0 per view: {state['exemplar_pixels_used']}")
     print(f"float32 matmul on this machine: {matmul_gflops():.1f} GFLOP/s")
-    from npmrf3d.metrics import histogram_kl
+    from npmrf3d.analysis.metrics import histogram_kl
 
     print(f"histogram KL(exemplar || volume): {histogram_kl(ex, res.volume):.4f}")
-    model = coherence.build_level_model(ex, res.config.window[-1])
+    model = kcoherence.build_level_model(ex, res.config.window[-1])
     src = np.random.default_rng(0).integers(0, ex.shape[0] * ex.shape[1], size=(8, 8, 8)).astype(np.int32)
-    distinct = np.mean([len(coherence.candidate_set(src, "front", s, model)) for s in np.ndindex(8, 8, 8)])
+    distinct = np.mean([len(kcoherence.candidate_set(src, "front", s, model)) for s in np.ndindex(8, 8, 8)])
     print(f"distinct candidates per site with random sources: {distinct:.1f} of {9 * (1 + 5)}")
     if args.save:
         np.save(args.save, res.volume)
@@ -96,8 +95,8 @@ def figure(path: str, names, size: int, seed: int) -> int:
     """Chen–Wang and NP_K side by side on 64 x 64 crops of bundled exemplars (64^3, one seed)."""
     from matplotlib.figure import Figure
 
-    from npmrf3d import metrics
-    from npmrf3d.baselines import kopf_synthesize
+    from npmrf3d.analysis import metrics
+    from npmrf3d.methods.kopf import kopf_synthesize
     from npmrf3d.plotting import plot_slices, save_figure, to_display
 
     print(f"hardware: {hardware()}")

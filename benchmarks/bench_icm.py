@@ -15,12 +15,11 @@ import argparse
 import time
 
 import numpy as np
+from _common import hardware, matmul_gflops
 
 import npmrf3d
 from npmrf3d import data
 from npmrf3d.config import VARIANT_ALIASES
-
-from _common import hardware, matmul_gflops
 
 
 def main(argv=None) -> int:

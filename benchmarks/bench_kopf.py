@@ -22,12 +22,11 @@ import argparse
 import time
 
 import numpy as np
+from _common import hardware, matmul_gflops
 
 import npmrf3d
 from npmrf3d import data
-from npmrf3d.baselines import kopf_synthesize
-
-from _common import hardware, matmul_gflops
+from npmrf3d.methods.kopf import kopf_synthesize
 
 
 def main(argv=None) -> int:
@@ -71,7 +70,7 @@ def main(argv=None) -> int:
     print(f"float32 matmul on this machine: {matmul_gflops():.1f} GFLOP/s")
     print(f"versus the paper's 10-90 min: {600 / wall:.1f}x to {5400 / wall:.1f}x; bar 5 min: "
           f"{'met' if wall < 300 else 'MISSED'}")
-    from npmrf3d.metrics import histogram_kl
+    from npmrf3d.analysis.metrics import histogram_kl
 
     print(f"histogram KL(exemplar || volume): {histogram_kl(ex, res.volume):.4f}")
     if args.save:
@@ -83,7 +82,7 @@ def figure(path: str, exemplar: str, size: int, seed: int) -> int:
     """NP_K and NP-MRF (both with their defaults) side by side on one bundled exemplar."""
     from matplotlib.figure import Figure
 
-    from npmrf3d import metrics
+    from npmrf3d.analysis import metrics
     from npmrf3d.plotting import plot_cube, plot_slices, save_figure, to_display
 
     ex = npmrf3d.load_exemplar(data.path(exemplar))

@@ -22,11 +22,10 @@ import time
 
 import numpy as np
 import torch
-
-from npmrf3d import neural
-from npmrf3d.exemplar import named_exemplar
-
 from _common import hardware
+
+from npmrf3d.methods import neural
+from npmrf3d.model.exemplar import named_exemplar
 
 
 def main(argv=None) -> int:

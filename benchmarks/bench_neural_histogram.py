@@ -3,7 +3,7 @@
 For each exemplar (top-left ``--crop`` pixels) and each ``--weights`` value of
 ``histogram_weight``, trains the paper's generator for ``--steps`` steps (seed 0, same slice
 positions for every weight), generates a ``--size``^3 volume and measures it with
-:func:`npmrf3d.metrics.evaluate` (histogram KL, autocorrelation L2, orientation KL, patch sliced
+:func:`npmrf3d.analysis.metrics.evaluate` (histogram KL, autocorrelation L2, orientation KL, patch sliced
 Wasserstein; lower is better), with NP_K (:func:`npmrf3d.kopf_synthesize`, seed 0, 2 levels,
 window 8) on the same exemplar and size as the reference. Every trained model is measured twice:
 its raw output (``neural w=X``) and through its calibration map (``neural w=X calibrated``, the
@@ -29,11 +29,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
-
-from npmrf3d import kopf_synthesize, metrics, neural  # noqa: E402
-from npmrf3d.exemplar import named_exemplar  # noqa: E402
-
 from _common import hardware  # noqa: E402
+
+from npmrf3d import kopf_synthesize
+from npmrf3d.analysis import metrics
+from npmrf3d.methods import neural  # noqa: E402
+from npmrf3d.model.exemplar import named_exemplar  # noqa: E402
 
 
 def _scores(volume, exemplar) -> dict:

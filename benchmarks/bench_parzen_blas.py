@@ -24,18 +24,21 @@ import os
 import time
 
 import numpy as np
+from _common import hardware, matmul_gflops
 
 import npmrf3d
 from npmrf3d import data
 from npmrf3d._kernels._jit import single_threaded_blas, thread_count
-from npmrf3d._kernels.gemm import make_gemm_operands, sites_best_distances, sites_best_distances_direct
+from npmrf3d._kernels.gemm import (
+    make_gemm_operands,
+    sites_best_distances,
+    sites_best_distances_direct,
+)
 from npmrf3d.config import VARIANTS
-from npmrf3d.exemplar import make_labels
-from npmrf3d.neighborhood import colour_classes
-from npmrf3d.parzen import build_view_models
-from npmrf3d.relax import RELAXATIONS, Relaxation
-
-from _common import hardware, matmul_gflops
+from npmrf3d.model.exemplar import make_labels
+from npmrf3d.model.neighbourhood import colour_classes
+from npmrf3d.model.parzen import build_view_models
+from npmrf3d.model.relax import RELAXATIONS, Relaxation
 
 VIEWS = ("front", "right", "top")
 

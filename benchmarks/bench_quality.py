@@ -50,7 +50,8 @@ from pathlib import Path
 import numpy as np
 
 import npmrf3d
-from npmrf3d import data, metrics
+from npmrf3d import data
+from npmrf3d.analysis import metrics
 from npmrf3d.plotting import preview_figure, save_figure
 
 EXEMPLARS = ("gravel64", "brick", "grass")

@@ -27,14 +27,14 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import hardware
 
 import npmrf3d
 from npmrf3d import data
-from npmrf3d.baselines import chen_wang_synthesize, kopf_synthesize
 from npmrf3d.errors import ParameterError
+from npmrf3d.methods.chen_wang import chen_wang_synthesize
+from npmrf3d.methods.kopf import kopf_synthesize
 from npmrf3d.plotting import save_figure
-
-from _common import hardware
 
 METHODS = ("full-Parzen (sharp)", "default (coherent)", "NP_K (kopf)", "Chen-Wang")
 

@@ -19,7 +19,7 @@ values by default, so the phase is the bright one, a rock's grain; several value
 interface of a multi-phase scan; ``otsu`` takes Otsu's threshold of the exemplar crop, for a grey
 scan): volume fraction, specific surface area (marching cubes) and radial two-point correlation
 S2(r), r = 0..16, each "inside" when it lies within the crops' min-max; and the volume's copy
-repetition (:func:`npmrf3d.repetition.copy_repetition`: the largest share of voxels whose exemplar
+repetition (:func:`npmrf3d.analysis.repetition.copy_repetition`: the largest share of voxels whose exemplar
 coordinate recurs at one shift of 16 voxels or more), which those statistics do not see.
 
 Usage::
@@ -43,14 +43,13 @@ import matplotlib
 matplotlib.use("Agg")
 import numpy as np  # noqa: E402
 
-from npmrf3d import materials  # noqa: E402
+from npmrf3d.analysis import materials  # noqa: E402
 from npmrf3d.errors import ParameterError  # noqa: E402
-from npmrf3d.volume import load_volume_exemplar  # noqa: E402
-from npmrf3d.volume_synthesis import STARTS, VolumeConfig, volume_synthesize  # noqa: E402
+from npmrf3d.methods.volume_lh import STARTS, VolumeConfig, volume_synthesize  # noqa: E402
+from npmrf3d.model.exemplar3d import load_volume_exemplar  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
-from bench_volume_scan import (block_mean, crops_of, inside, print_spread, report, spread_of,  # noqa: E402
-                               statistics)
+from bench_volume_scan import block_mean, crops_of, inside, print_spread, report, spread_of, statistics  # noqa: E402
 
 DEFAULT_THRESHOLD = "0.5"
 

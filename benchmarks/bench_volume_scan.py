@@ -34,8 +34,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from npmrf3d import materials  # noqa: E402
-from npmrf3d.volume_synthesis import STARTS, VolumeConfig, volume_synthesize  # noqa: E402
+from npmrf3d.analysis import materials  # noqa: E402
+from npmrf3d.methods.volume_lh import STARTS, VolumeConfig, volume_synthesize  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
 from scan_volume import CORNER, TEMPLATE  # noqa: E402

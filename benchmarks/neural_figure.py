@@ -1,7 +1,7 @@
 """The neural method's picture and numbers: ``figures/neural_gravel64.png`` / ``.json``.
 
 Generates 64^3 at the origin from a trained model, draws it beside the exemplar (centre slices
-and cube), computes the metrics of :func:`npmrf3d.metrics.evaluate` for it and for NP_K
+and cube), computes the metrics of :func:`npmrf3d.analysis.metrics.evaluate` for it and for NP_K
 (``kopf_synthesize``, seed 0, 64^3, same exemplar), and writes four 48x48 blocks generated
 apart at coordinate 10^6, put side by side, as ``*_blocks.png`` (a seam would show there).
 
@@ -22,9 +22,11 @@ import torch
 
 matplotlib.use("Agg")
 
-from npmrf3d import __version__, metrics, neural  # noqa: E402
-from npmrf3d.baselines import kopf_synthesize  # noqa: E402
-from npmrf3d.exemplar import named_exemplar  # noqa: E402
+from npmrf3d import __version__
+from npmrf3d.analysis import metrics
+from npmrf3d.methods import neural  # noqa: E402
+from npmrf3d.methods.kopf import kopf_synthesize  # noqa: E402
+from npmrf3d.model.exemplar import named_exemplar  # noqa: E402
 from npmrf3d.plotting import preview_figure, save_figure  # noqa: E402
 
 

@@ -22,14 +22,15 @@ ParameterError
 
 from importlib.metadata import PackageNotFoundError, version
 
-from . import data, metrics
-from .baselines import kopf_synthesize
+from . import data
+from .analysis import metrics
 from .config import VARIANTS, DecisionRule, SynthesisConfig, SynthesisResult
 from .errors import ParameterError
-from .exemplar import load_exemplar
-from .heuristics import HEURISTICS
 from .methods import METHODS, get_method
-from .synthesis import make_config, synthesize
+from .methods.kopf import kopf_synthesize
+from .methods.npmrf import make_config, synthesize
+from .model.exemplar import load_exemplar
+from .model.heuristics import HEURISTICS
 
 try:
     __version__ = version("npmrf3d")

@@ -1,5 +1,5 @@
 """``python -m npmrf3d``: the command line of :mod:`npmrf3d.cli`."""
 
-from npmrf3d.cli import main
+from .cli import main
 
 raise SystemExit(main())

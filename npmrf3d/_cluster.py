@@ -1,5 +1,5 @@
 """Local Dask clusters: the studies' (:mod:`npmrf3d.studies.runner`) and the neural Zarr
-writer's (:mod:`npmrf3d.neural.zarr_volume`), started the same way.
+writer's (:mod:`npmrf3d.methods.neural.zarr_volume`), started the same way.
 
 Why a module of its own: both start worker processes whose memory allocator needs one setting
 before the process exists. Dask's Nanny sets ``MALLOC_TRIM_THRESHOLD_`` in every worker's

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from .relax import RELAXATIONS, AnnealOptions, IcmOptions
+from .model.relax import RELAXATIONS, AnnealOptions, IcmOptions
 
 #: Side of the cube made when no size is given (API and command line, every method).
 DEFAULT_SIZE = 32
@@ -58,7 +58,7 @@ class DecisionRule:
 
 
 VARIANTS: dict[str, DecisionRule] = {
-    # the coherent NP-MRF sampler (npmrf3d.coherent; issue 12): each view's Parzen estimate sums
+    # the coherent NP-MRF sampler (npmrf3d.methods.npmrf_coherent; issue 12): each view's Parzen estimate sums
     # over coherent candidates; here centre_bandwidth is a factor of the exemplar's standard
     # deviation and outlier the uniform share of each view's estimate (the other fields unused)
     "coherent": DecisionRule(centre_bandwidth=0.1, outlier=0.01),
@@ -77,7 +77,7 @@ VARIANT_ALIASES: dict[str, str] = {"default": "sharp"}
 #: The variant used when none is asked for, per relaxation (annealing needs a full-Parzen rule).
 DEFAULT_VARIANT: dict[str, str] = {"icm": "coherent", "anneal": "sharp"}
 #: ``segmented``: whether the coherent variant uses its preset for segmented exemplars
-#: (:data:`npmrf3d.coherent.SEGMENTED`): "auto" when the exemplars hold few grey values.
+#: (:data:`npmrf3d.methods.npmrf_coherent.SEGMENTED`): "auto" when the exemplars hold few grey values.
 SEGMENTED_MODES = ("auto", "yes", "no")
 
 
@@ -85,8 +85,8 @@ SEGMENTED_MODES = ("auto", "yes", "no")
 class SynthesisConfig:
     """A validated NP-MRF synthesis run (see :func:`npmrf3d.synthesize` for the meaning).
 
-    ``xi``, ``stop`` and ``max_sweeps`` drive ICM (:class:`npmrf3d.relax.IcmOptions`);
-    ``sampler`` ... ``proposal`` drive annealing (:class:`npmrf3d.relax.AnnealOptions`). Both
+    ``xi``, ``stop`` and ``max_sweeps`` drive ICM (:class:`npmrf3d.model.relax.IcmOptions`);
+    ``sampler`` ... ``proposal`` drive annealing (:class:`npmrf3d.model.relax.AnnealOptions`). Both
     sets stay flat fields here so that ``run.json`` records and checkpoints keep their layout;
     their defaults come from the two options classes, and :attr:`relaxation_options` gives the
     chosen relaxation's own options.
@@ -173,7 +173,7 @@ class SynthesisMethod:
     run : callable
         ``run(per_view_exemplars, config, rng, *, progress=None, checkpoint=None) ->
         SynthesisResult``; ``progress(level, step, steps, value)`` as in
-        :func:`npmrf3d.pyramid.run_pyramid`. Method-specific inputs that are not configuration
+        :func:`npmrf3d.model.pyramid.run_pyramid`. Method-specific inputs that are not configuration
         (NP_K's constraint volume) may follow as further keyword arguments.
     make_config : callable
         Plain keyword arguments -> a validated ``config_class`` instance (raises
@@ -186,7 +186,7 @@ class SynthesisMethod:
         validate, load the exemplars, run.
     fit : callable
         ``fit(config) -> dict(window=..., levels=..., toroidal=...)``: what
-        :func:`npmrf3d.exemplar.resolve_exemplars` checks every exemplar against.
+        :func:`npmrf3d.model.exemplar.resolve_exemplars` checks every exemplar against.
     description : str
         One line for ``npmrf3d info`` and error messages.
     resources : callable, optional

@@ -24,7 +24,7 @@ from matplotlib.figure import Figure
 from matplotlib.image import AxesImage
 from matplotlib.transforms import Affine2D
 
-from npmrf3d._files import as_volume, atomic_write
+from .io.files import as_volume, atomic_write
 
 __all__ = ["plot_cube", "plot_slices", "preview_figure", "save_figure", "to_display"]
 

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import ParameterError
-from .parzen import KERNEL_TABLE_BYTES
+from .model.parzen import KERNEL_TABLE_BYTES
 
 __all__ = ["Estimate", "ResourceError", "available_memory", "check_memory", "format_bytes",
            "generic_estimate", "kopf_estimate", "npmrf_estimate", "one_after_another", "patch_count"]
@@ -144,7 +144,7 @@ def _voxels(size) -> int:
 
 def patch_count(height: int, width: int, window: int, level: int, toroidal: bool = False) -> int:
     """Exemplar patches of one view at ``level``, summed over its ``4**level`` decimation
-    phases (:func:`npmrf3d.parzen.build_view_models`)."""
+    phases (:func:`npmrf3d.model.parzen.build_view_models`)."""
     f = 2 ** level
     total = 0
     for a in range(min(f, height)):
@@ -214,7 +214,7 @@ COHERENT_SITES = 2.5e5
 
 def coherent_estimate(config, exemplars) -> Estimate:
     """Peak memory (and a time guess) of the coherent methods (Chen–Wang and the coherent NP-MRF
-    sampler, :mod:`npmrf3d.baselines.chen_wang`, :mod:`npmrf3d.coherent`): the volume, per view
+    sampler, :mod:`npmrf3d.methods.chen_wang`, :mod:`npmrf3d.methods.npmrf_coherent`): the volume, per view
     its sources, matches, weights (int32, int32, float32), the visiting order (int64) and a copy
     of the volume; per exemplar level the PCA projections (float64, 20 dimensions), the
     k-coherence sets and the patch matrix the PCA is computed from."""
@@ -241,9 +241,9 @@ def npmrf_estimate(config, exemplars) -> Estimate:
     ``exemplars``: view -> each constrained view's exemplar (an array, or its (H, W, C) shape).
     The label count ``K`` is bounded by the distinct values (the pixels when only shapes are
     given, or the palette / grey levels); the label kernel tables by their cap
-    (:data:`npmrf3d.parzen.KERNEL_TABLE_BYTES`).
+    (:data:`npmrf3d.model.parzen.KERNEL_TABLE_BYTES`).
     (The ``coherent`` variant is estimated by :func:`coherent_estimate` on its own options, see
-    :func:`npmrf3d.synthesis.npmrf_resources`.)
+    :func:`npmrf3d.methods.npmrf.npmrf_resources`.)
     """
     exemplar_shapes = _shapes(exemplars)
     n = _voxels(config.size)
@@ -288,7 +288,7 @@ def npmrf_estimate(config, exemplars) -> Estimate:
 
 
 def kopf_estimate(config, exemplars) -> Estimate:
-    """Peak memory (and a time guess) of NP_K, :func:`npmrf3d.baselines.kopf_synthesize`."""
+    """Peak memory (and a time guess) of NP_K, :func:`npmrf3d.methods.kopf_synthesize`."""
     exemplar_shapes = _shapes(exemplars)
     n = _voxels(config.size)
     c = _channels(exemplar_shapes)

@@ -30,10 +30,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy import ndimage  # noqa: E402
 
-from npmrf3d import materials  # noqa: E402
 from npmrf3d._kernels import _jit  # noqa: E402
-from npmrf3d.fields import level_frames  # noqa: E402
-from npmrf3d.volume_synthesis import volume_synthesize  # noqa: E402
+from npmrf3d.analysis import materials  # noqa: E402
+from npmrf3d.methods.volume_lh import volume_synthesize  # noqa: E402
+from npmrf3d.model.fields import level_frames  # noqa: E402
 
 
 def porous_scan(side: int, seed: int) -> np.ndarray:

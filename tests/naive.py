@@ -4,7 +4,7 @@ Everything here is plain numpy in float64 with explicit loops or broadcasting: n
 label-histogram identity, no kernel tables, no scratch buffers. The tests compare the library
 against these functions (STYLE.md practice 2).
 
-Axis mapping of the views (npmrf3d.neighborhood's documented table, restated independently):
+Axis mapping of the views (npmrf3d.model.neighbourhood's documented table, restated independently):
 front = plane (i, j) -> exemplar (row, col); right = plane (j, k); top = plane (i, k).
 """
 
@@ -325,8 +325,8 @@ def naive_kopf_update(volume, assign, omega, views, exemplars, window, order, *,
 
 
 # --------------------------------------------------------------------------- k-coherence (Chen & Wang 2010)
-# Literal twins of the k-coherence kernels (:mod:`npmrf3d._kernels.coherence`), written from the
-# paper and the docstrings of :mod:`npmrf3d.coherence`, in float64 loops without scratch buffers.
+# Literal twins of the k-coherence kernels (:mod:`npmrf3d._kernels.kcoherence`), written from the
+# paper and the docstrings of :mod:`npmrf3d.model.kcoherence`, in float64 loops without scratch buffers.
 # Geometry: a window of side ``w`` at plane position ``u`` covers ``u - a .. u - a + w - 1``,
 # ``a = (w-1)//2``; the volume wraps around, the exemplar does not; sources and centres are flat
 # ``row * W + col``.

@@ -8,7 +8,6 @@ import pytest
 from scipy import stats
 
 import npmrf3d
-from npmrf3d import parzen
 from npmrf3d._kernels.relax import (
     HEAT_BATH,
     METROPOLIS,
@@ -23,11 +22,12 @@ from npmrf3d._kernels.relax import (
 )
 from npmrf3d.config import VARIANTS
 from npmrf3d.errors import ParameterError
-from npmrf3d.exemplar import make_labels
-from npmrf3d.heuristics import get_heuristic
-from npmrf3d.neighborhood import colour_classes
-from npmrf3d.parzen import PRUNE, adaptive_floor, build_view_models
-from npmrf3d.relax.anneal import geometric_schedule, linear_schedule, relax_anneal
+from npmrf3d.model import parzen
+from npmrf3d.model.exemplar import make_labels
+from npmrf3d.model.heuristics import get_heuristic
+from npmrf3d.model.neighbourhood import colour_classes
+from npmrf3d.model.parzen import PRUNE, adaptive_floor, build_view_models
+from npmrf3d.model.relax.anneal import geometric_schedule, linear_schedule, relax_anneal
 from tests import naive
 
 VIEWS3 = ("front", "right", "top")
@@ -273,7 +273,7 @@ def stripes_rgb(period: int = 4, side: int = 24, diagonal: bool = False) -> np.n
 
 def stripe_correlation(volume: np.ndarray, view: str, axis_in_slice: int, lag: int) -> float:
     """Correlation at ``lag`` along one in-slice axis of the view's slices (channel 0)."""
-    from npmrf3d.metrics import view_slices
+    from npmrf3d.analysis.metrics import view_slices
 
     s = view_slices(volume[..., :1], view)[..., 0].astype(np.float64)
     s = s - s.mean()
@@ -310,7 +310,7 @@ def test_with_two_views_the_unconstrained_view_is_free():
 
 
 def metrics_view(volume, view):
-    from npmrf3d.metrics import view_slices
+    from npmrf3d.analysis.metrics import view_slices
 
     return view_slices(volume[..., :1], view)[..., 0]
 

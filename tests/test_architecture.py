@@ -3,8 +3,8 @@
 * no import cycles among the package's modules (module-level and function-level imports);
 * the package's own modules are imported at module top, never inside a function;
 * only ``npmrf3d/_kernels/`` imports numba;
-* only the torch modules of ``npmrf3d/neural/`` import torch, and they are reached only through
-  the one documented lazy import, ``npmrf3d/neural/_extra.py`` (issue 16: torch is an optional
+* only the torch modules of ``npmrf3d/methods/neural/`` import torch, and they are reached only through
+  the one documented lazy import, ``npmrf3d/methods/neural/_extra.py`` (issue 16: torch is an optional
   extra, so the function-level-import rule above cannot hold for them: ``importlib`` does it);
 * every library module stays under ~400 lines or says at its top why not.
 """
@@ -116,9 +116,9 @@ def test_only_the_kernels_import_numba():
     assert users and all(u.startswith("_kernels/") for u in users)
 
 
-#: The modules of ``npmrf3d/neural/`` that import torch (everything else there must not).
-TORCH_MODULES = {"neural/descriptor.py", "neural/engine.py", "neural/generator.py",
-                 "neural/noise.py", "neural/zarr_volume.py"}
+#: The modules of ``npmrf3d/methods/neural/`` that import torch (everything else there must not).
+TORCH_MODULES = {f"methods/neural/{m}.py" for m in ("descriptor", "engine", "generator", "noise",
+                                                   "zarr_volume")}
 
 
 def test_only_the_neural_torch_modules_import_torch_and_only_lazily():
@@ -139,8 +139,8 @@ def test_only_the_neural_torch_modules_import_torch_and_only_lazily():
         name = "npmrf3d." + rel[:-3].replace("/", ".")
         assert imported_by.get(name, set()) <= TORCH_MODULES, (name, imported_by.get(name))
     lazy = [str(f.relative_to(PACKAGE)) for f in PACKAGE.rglob("*.py")
-            if 'import_module("npmrf3d.neural.' in f.read_text(encoding="utf-8")]
-    assert lazy == ["neural/_extra.py"]
+            if 'import_module("npmrf3d.methods.neural.' in f.read_text(encoding="utf-8")]
+    assert lazy == ["methods/neural/_extra.py"]
 
 
 def test_long_modules_say_why():

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from npmrf3d import metrics
+from npmrf3d.analysis import metrics
 
 _BENCH = pathlib.Path(__file__).resolve().parents[1] / "benchmarks"
 

@@ -1,4 +1,4 @@
-"""Chen & Wang 2010 (npmrf3d.coherence, npmrf3d.baselines.chen_wang) against literal twins.
+"""Chen & Wang 2010 (npmrf3d.model.kcoherence, npmrf3d.methods.chen_wang) against literal twins.
 
 Kernels against ``tests/naive.py``; k-coherence sets against brute force; the candidate
 set of a site against its definition; discrete copies only; the position histogram spreading a
@@ -16,15 +16,14 @@ import textwrap
 import numpy as np
 import pytest
 
-from npmrf3d import coherence as coh
-from npmrf3d._kernels import coherence as _k
-from npmrf3d.baselines import ChenWangConfig, chen_wang_synthesize
-from npmrf3d.baselines import chen_wang as CW
+from npmrf3d._kernels import kcoherence as _k
 from npmrf3d.config import SynthesisResult
-from npmrf3d.coherent import coherent_synthesize
 from npmrf3d.errors import ParameterError
-from npmrf3d.neighborhood import VIEW_AXES
-
+from npmrf3d.methods import chen_wang as CW
+from npmrf3d.methods.chen_wang import ChenWangConfig, chen_wang_synthesize
+from npmrf3d.methods.npmrf_coherent import coherent_synthesize
+from npmrf3d.model import kcoherence as coh
+from npmrf3d.model.neighbourhood import VIEW_AXES
 from tests.naive import (
     naive_candidates,
     naive_exemplar_patch,
@@ -468,10 +467,10 @@ def test_same_seed_same_volume_at_one_and_two_threads(tmp_path):
     script = textwrap.dedent(
         """
         import sys, numba, numpy as np
-        from npmrf3d.baselines import chen_wang
+        from npmrf3d.methods import chen_wang
         assert numba.get_num_threads() == int(sys.argv[2])
         ex = np.random.default_rng(3).random((24, 24, 3)).astype(np.float32)
-        from npmrf3d.coherent import coherent_synthesize
+        from npmrf3d.methods.npmrf_coherent import coherent_synthesize
         vols = [chen_wang.chen_wang_synthesize(ex, size=16, window=(4, 4), levels=2, iterations=2,
                                                solver=solver, rng=7).volume
                 for solver in chen_wang.SOLVERS]

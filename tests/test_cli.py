@@ -16,8 +16,9 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from npmrf3d import cli, io, runs
+from npmrf3d import cli, io
 from npmrf3d.errors import ParameterError
+from npmrf3d.io import runs
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 TINY = ["--size", "8", "--levels", "1", "--window", "3"]
@@ -209,12 +210,12 @@ def test_checkpoint_of_another_configuration_is_a_user_error(tmp_path, exemplar,
 
 
 def test_keyboard_interrupt_exits_130(tmp_path, exemplar, capsys, monkeypatch):
-    import npmrf3d.synthesis
+    import npmrf3d.methods.npmrf
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(npmrf3d.synthesis, "run", interrupted)
+    monkeypatch.setattr(npmrf3d.methods.npmrf, "run", interrupted)
     out_dir = tmp_path / "run"
     code, out, err = run_cli(capsys, "synth", str(exemplar), *TINY, "--variant", "sharp", "--out", str(out_dir))
     assert code == 130 and len(err.strip().splitlines()) == 1
@@ -238,8 +239,8 @@ def _swallowed_interrupt():
 @pytest.mark.parametrize("where", ["between levels", "after the last level", "in the compiler"])
 def test_swallowed_interrupt_still_exits_130_and_writes_nothing(tmp_path, exemplar, capsys, monkeypatch,
                                                                  where):
-    import npmrf3d.synthesis
-    real_run = npmrf3d.synthesis.run
+    import npmrf3d.methods.npmrf
+    real_run = npmrf3d.methods.npmrf.run
 
     def run(*args, progress=None, **kwargs):
         if where == "between levels":
@@ -255,25 +256,25 @@ def test_swallowed_interrupt_still_exits_130_and_writes_nothing(tmp_path, exempl
         _swallowed_interrupt()
         return result
 
-    monkeypatch.setattr(npmrf3d.synthesis, "run", run)
+    monkeypatch.setattr(npmrf3d.methods.npmrf, "run", run)
     out_dir = tmp_path / "run"
     code, out, err = run_cli(capsys, "synth", str(exemplar), *TINY, "--variant", "sharp", "--quiet",
                              "--out", str(out_dir))
     assert code == 130 and err.startswith("npmrf3d: interrupted; nothing was written"), err
     assert len(err.strip().splitlines()) == 1 and not out_dir.exists()
     # the latch is cleared with the run: the next one in the same process is not interrupted
-    monkeypatch.setattr(npmrf3d.synthesis, "run", real_run)
+    monkeypatch.setattr(npmrf3d.methods.npmrf, "run", real_run)
     assert run_cli(capsys, "synth", str(exemplar), *TINY, "--variant", "sharp", "--quiet",
                    "--out", str(out_dir))[0] == 0
 
 
 def test_an_unexpected_error_without_an_interrupt_is_not_called_one(tmp_path, exemplar, capsys, monkeypatch):
-    import npmrf3d.synthesis
+    import npmrf3d.methods.npmrf
 
     def broken(*args, **kwargs):
         raise RuntimeError("a real bug")
 
-    monkeypatch.setattr(npmrf3d.synthesis, "run", broken)
+    monkeypatch.setattr(npmrf3d.methods.npmrf, "run", broken)
     with pytest.raises(RuntimeError, match="a real bug"):
         cli.main(["synth", str(exemplar), *TINY, "--variant", "sharp", "--quiet", "--out", str(tmp_path / "r")])
 
@@ -456,6 +457,7 @@ def test_segmented_preset_says_which_pyramid_runs_and_which_it_kept(tmp_path, ca
 
 def test_only_dropped_interrupts_are_kept_quiet():
     from types import SimpleNamespace
+
     from npmrf3d.cli import _interrupt
     seen = []
     previous = _interrupt.install()

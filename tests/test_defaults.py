@@ -13,16 +13,20 @@ import inspect
 import pytest
 
 from npmrf3d import kopf_synthesize, synthesize
-from npmrf3d.baselines.chen_wang import ChenWangConfig, chen_wang_synthesize, make_chen_wang_config
-from npmrf3d.baselines.kopf import KopfConfig, make_kopf_config
-from npmrf3d.coherent import CoherentConfig, coherent_synthesize, make_coherent_config
 from npmrf3d.cli import build_parser
 from npmrf3d.config import DEFAULT_SIZE, SynthesisConfig
 from npmrf3d.methods import METHODS, get_method
-from npmrf3d.relax import RELAXATIONS
-from npmrf3d.synthesis import make_config
-from npmrf3d.volume_npmrf import NpmrfVolumeConfig, make_npmrf_volume_config, npmrf_volume_synthesize
-from npmrf3d.volume_synthesis import VolumeConfig, make_volume_config, volume_synthesize
+from npmrf3d.methods.chen_wang import ChenWangConfig, chen_wang_synthesize, make_chen_wang_config
+from npmrf3d.methods.kopf import KopfConfig, make_kopf_config
+from npmrf3d.methods.npmrf import make_config
+from npmrf3d.methods.npmrf_3d import (
+    NpmrfVolumeConfig,
+    make_npmrf_volume_config,
+    npmrf_volume_synthesize,
+)
+from npmrf3d.methods.npmrf_coherent import CoherentConfig, coherent_synthesize, make_coherent_config
+from npmrf3d.methods.volume_lh import VolumeConfig, make_volume_config, volume_synthesize
+from npmrf3d.model.relax import RELAXATIONS
 
 
 def _sub_parser(*path):

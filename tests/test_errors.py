@@ -180,10 +180,10 @@ def test_full_disk_is_one_line(where, place, capsys, monkeypatch):
         raise OSError(errno.ENOSPC, "No space left on device")
 
     if where == "volume":
-        monkeypatch.setattr("npmrf3d.runs.np.save", full)
+        monkeypatch.setattr("npmrf3d.io.runs.np.save", full)
         argv = ["synth", *TINY, "good.png", "--out", "out", "--quiet"]
     else:
-        monkeypatch.setattr("npmrf3d._files.np.savez", full)
+        monkeypatch.setattr("npmrf3d.io.files.np.savez", full)
         argv = ["synth", *TINY, "good.png", "--out", "out", "--quiet", "--checkpoint", "c.npz"]
     line = check_one_line_error(argv, place, capsys)
     assert "No space left on device" in line and "free some space" in line

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from npmrf3d import data
-from npmrf3d.exemplar import decimation_phases, extract_patches, load_exemplar, make_labels
+from npmrf3d.model.exemplar import decimation_phases, extract_patches, load_exemplar, make_labels
 from tests import naive
 
 #: Seed of the shared ``rng`` fixture (tests/conftest.py).

@@ -20,8 +20,8 @@ from hypothesis import strategies as st
 
 import npmrf3d
 from npmrf3d import cli
-from npmrf3d.baselines import kopf_synthesize
 from npmrf3d.errors import ParameterError
+from npmrf3d.methods.kopf import kopf_synthesize
 
 settings.register_profile("ci", max_examples=60, deadline=None, derandomize=True,
                           suppress_health_check=[HealthCheck.too_slow,

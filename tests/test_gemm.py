@@ -7,7 +7,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from npmrf3d import parzen
 from npmrf3d._kernels._jit import single_threaded_blas
 from npmrf3d._kernels.gemm import (
     BLOCK,
@@ -23,8 +22,9 @@ from npmrf3d._kernels.gemm import (
     sites_best_distances_direct,
 )
 from npmrf3d.config import DecisionRule
-from npmrf3d.parzen import PRUNE
-from npmrf3d.relax._sweep import mean_class_sites, resolve_distances
+from npmrf3d.model import parzen
+from npmrf3d.model.parzen import PRUNE
+from npmrf3d.model.relax._sweep import mean_class_sites, resolve_distances
 from tests import naive
 from tests.test_kernels import VIEWS3, assert_matches, make_case, naive_for, random_volume
 

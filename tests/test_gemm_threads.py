@@ -18,7 +18,7 @@ THREADS_SCRIPT = textwrap.dedent("""
     import sys, numba, numpy as np
     import npmrf3d
     from npmrf3d import data
-    from npmrf3d.relax._sweep import GEMM_MIN_DIMENSION
+    from npmrf3d.model.relax._sweep import GEMM_MIN_DIMENSION
     assert numba.get_num_threads() == int(sys.argv[2])
     ihc = data.path("ihc64")
     assert 3 * (7 * 7 - 1) >= GEMM_MIN_DIMENSION  # colour 7x7 runs take the batched path

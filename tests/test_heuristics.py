@@ -8,8 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.special import logsumexp
 
-from npmrf3d import heuristics
 from npmrf3d.errors import ParameterError
+from npmrf3d.model import heuristics
 from tests import naive
 
 pytestmark = pytest.mark.kernels

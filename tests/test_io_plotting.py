@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 import tifffile
 
-from npmrf3d import data, io, plotting, runs
+from npmrf3d import data, io, plotting
 from npmrf3d.errors import ParameterError
+from npmrf3d.io import runs
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 

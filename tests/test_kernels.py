@@ -1,6 +1,6 @@
 """The compiled Parzen kernels against their naive twins (SPEC.md section 2).
 
-``npmrf3d.parzen.log_lcpdf`` (label-histogram identity, kernel tables, pruning, float32
+``npmrf3d.model.parzen.log_lcpdf`` (label-histogram identity, kernel tables, pruning, float32
 distances) is compared with ``tests.naive.naive_log_lcpdf`` (every patch and label in float64,
 straight from the SPEC) on tiny random inputs.
 """
@@ -18,10 +18,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from npmrf3d import parzen
 from npmrf3d._kernels.parzen import label_kernel_table, label_log_norm_const
 from npmrf3d.config import DecisionRule
-from npmrf3d.exemplar import decimation_phases, make_labels
+from npmrf3d.model import parzen
+from npmrf3d.model.exemplar import decimation_phases, make_labels
 from tests import naive
 
 pytestmark = pytest.mark.kernels
@@ -431,8 +431,8 @@ def test_property_log_lcpdf_matches_naive(compiled, seed, channels, window, n_vi
 PRUNE_INF_SCRIPT = textwrap.dedent("""
     import numpy as np
     from npmrf3d.config import DecisionRule
-    from npmrf3d.exemplar import make_labels
-    from npmrf3d.parzen import build_view_models, log_lcpdf
+    from npmrf3d.model.exemplar import make_labels
+    from npmrf3d.model.parzen import build_view_models, log_lcpdf
 
     def case(seed, shape, bandwidth, size):
         rng = np.random.default_rng(seed)

@@ -1,4 +1,4 @@
-"""NP_K (npmrf3d.baselines.kopf) against literal numpy twins of the paper's formulas.
+"""NP_K (npmrf3d.methods.kopf) against literal numpy twins of the paper's formulas.
 
 Kopf et al. 2007 / SPEC.md section 6: the search (PCA + cKDTree with eps, sparse grid), the IRLS
 update (eq. 4) with histogram (eq. 5) and constraint (eq. 6) re-weighting, histogram matching,
@@ -19,12 +19,18 @@ import numpy as np
 import pytest
 
 from npmrf3d import cli
-from npmrf3d.baselines import KopfConfig, kopf_synthesize
-from npmrf3d.baselines import kopf as K
+from npmrf3d.analysis.metrics import histogram_kl
 from npmrf3d.config import SynthesisResult
 from npmrf3d.errors import ParameterError
-from npmrf3d.metrics import histogram_kl
-from tests.naive import NAIVE_VIEW_AXES, naive_bin, naive_kopf_neighbourhood, naive_kopf_patches, naive_kopf_update
+from npmrf3d.methods import kopf as K
+from npmrf3d.methods.kopf import KopfConfig, kopf_synthesize
+from tests.naive import (
+    NAIVE_VIEW_AXES,
+    naive_bin,
+    naive_kopf_neighbourhood,
+    naive_kopf_patches,
+    naive_kopf_update,
+)
 
 #: Seed of the shared ``rng`` fixture (tests/conftest.py).
 RNG_SEED = 1234
@@ -378,7 +384,7 @@ def test_identical_volume_with_one_and_two_threads(tmp_path):
         """
         import hashlib, sys
         import numpy as np
-        from npmrf3d.baselines import kopf_synthesize
+        from npmrf3d.methods.kopf import kopf_synthesize
         rng = np.random.default_rng(0)
         ex = rng.random((24, 24, 3), dtype=np.float32)
         res = kopf_synthesize(ex, size=16, window=4, levels=2, iterations=2, mean_shift=(1.0, 0.3), rng=11)

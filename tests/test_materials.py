@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from npmrf3d import materials
+from npmrf3d.analysis import materials
 from npmrf3d.errors import ParameterError
 
 

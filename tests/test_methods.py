@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from npmrf3d.errors import ParameterError
-from npmrf3d.exemplar import resolve_exemplars
 from npmrf3d.methods import METHODS
+from npmrf3d.model.exemplar import resolve_exemplars
 
 #: id -> (method name, keyword arguments of its public function): tiny runs of two levels.
 CASES = {

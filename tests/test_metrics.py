@@ -1,4 +1,4 @@
-"""Tests for npmrf3d.metrics: each metric against an independent implementation, sanity on
+"""Tests for npmrf3d.analysis.metrics: each metric against an independent implementation, sanity on
 stacked exemplars and white noise, colour, input checks.
 
 Independent references: ``scipy.stats.entropy`` (KL), ``scipy.stats.wasserstein_distance``
@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 from scipy import ndimage, stats
 
-from npmrf3d import metrics
+from npmrf3d.analysis import metrics
 from npmrf3d.errors import ParameterError
-from npmrf3d.neighborhood import VIEW_AXES, VIEWS
+from npmrf3d.model.neighbourhood import VIEW_AXES, VIEWS
 
 S = metrics.DEFAULT_SETTINGS
 

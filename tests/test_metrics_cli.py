@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from npmrf3d import cli, io, metrics
+from npmrf3d import cli, io
+from npmrf3d.analysis import metrics
 from npmrf3d.cli.metrics import OUT_FILES
 
 SIDE, DEPTH = 24, 12

@@ -7,7 +7,7 @@ import itertools
 import numpy as np
 import pytest
 
-from npmrf3d import neighborhood as nb
+from npmrf3d.model import neighbourhood as nb
 from tests import naive
 
 VIEWS3 = ("front", "right", "top")

@@ -14,11 +14,10 @@ import sys
 import numpy as np
 import pytest
 
-from npmrf3d import neural
 from npmrf3d.cli.main import main
 from npmrf3d.errors import ParameterError
-from npmrf3d.methods import METHODS
-from npmrf3d.neural import MissingExtraError
+from npmrf3d.methods import METHODS, neural
+from npmrf3d.methods.neural import MissingExtraError
 
 
 @pytest.fixture
@@ -28,7 +27,7 @@ def no_torch(monkeypatch):
 
 def test_importing_the_package_and_its_cli_imports_no_torch():
     code = ("import sys, npmrf3d, npmrf3d.cli.main, npmrf3d.methods; "
-            "print('torch' in sys.modules, 'npmrf3d.neural.engine' in sys.modules)")
+            "print('torch' in sys.modules, 'npmrf3d.methods.neural.engine' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["False", "False"]
 

@@ -1,4 +1,4 @@
-"""Output folders that cannot be mixed (npmrf3d.runs): the exclusive lock on --out, atomic
+"""Output folders that cannot be mixed (npmrf3d.io.runs): the exclusive lock on --out, atomic
 --overwrite, run.json last, stale staging folders of killed runs cleaned by the next run."""
 
 from __future__ import annotations
@@ -11,9 +11,9 @@ import sys
 import numpy as np
 import pytest
 
-from npmrf3d import runs
 from npmrf3d.errors import ParameterError
-from npmrf3d.runs import RUN_FILES, OutputLock, clean_stale_staging, write_run
+from npmrf3d.io import runs
+from npmrf3d.io.runs import RUN_FILES, OutputLock, clean_stale_staging, write_run
 
 TINY = ["--size", "8", "--levels", "1", "--window", "3"]
 

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from skimage.filters import threshold_otsu
 
-from npmrf3d.baselines.chen_wang import chen_wang_synthesize
-from npmrf3d.coherent import coherent_synthesize
+from npmrf3d.analysis.materials import otsu_split
 from npmrf3d.errors import ParameterError
-from npmrf3d.materials import otsu_split
-from npmrf3d.phase_histogram import PhaseControl, bin_phase_error, bin_phases, phase_prior_target
+from npmrf3d.methods.chen_wang import chen_wang_synthesize
+from npmrf3d.methods.npmrf_coherent import coherent_synthesize
+from npmrf3d.model.phases import PhaseControl, bin_phase_error, bin_phases, phase_prior_target
 
 
 @pytest.mark.parametrize("seed", range(6))

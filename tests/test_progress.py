@@ -1,5 +1,5 @@
 """Progress bars count the work that will really be done: ICM's expected sweeps
-(npmrf3d.relax.icm.expected_sweeps), from the cooling step, corrected after every sweep."""
+(npmrf3d.model.relax.icm.expected_sweeps), from the cooling step, corrected after every sweep."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 
 import npmrf3d
 from npmrf3d.cli._common import LevelProgress
-from npmrf3d.relax.icm import expected_sweeps
+from npmrf3d.model.relax.icm import expected_sweeps
 
 
 def test_expected_sweeps_bounds():

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.naive import naive_copy_repetition
+from npmrf3d.analysis.repetition import copy_repetition
 from npmrf3d.errors import ParameterError
-from npmrf3d.repetition import copy_repetition
+from tests.naive import naive_copy_repetition
 
 
 @pytest.mark.parametrize("shape, values, min_shift, tolerance",
@@ -64,7 +64,7 @@ def test_volume_lh_records_the_repetition_of_its_tiled_start():
     """With neither jitter nor correction the tiled start is the exemplar laid side by side
     (period: the valid box, 12 voxels of a 16^3 exemplar, seen at 24 >= MIN_SHIFT); uniform
     random coordinates are not, nor tiles that each take their own offset ('blocks')."""
-    from npmrf3d.volume_synthesis import volume_synthesize
+    from npmrf3d.methods.volume_lh import volume_synthesize
     exemplar = np.random.default_rng(3).random((16, 16, 16, 1)).astype(np.float32)
     common = dict(size=48, levels=2, passes=0, jitter=0.0, usage=0.0, balance=0.0, rng=0)
     tiled = volume_synthesize(exemplar, start="tiled", **common).stats["repetition"]

@@ -18,8 +18,8 @@ import pytest
 
 from npmrf3d import cli, resources
 from npmrf3d.config import SynthesisMethod
-from npmrf3d.exemplar import resolve_exemplars
 from npmrf3d.methods import METHODS, check_resources, estimate, get_method
+from npmrf3d.model.exemplar import resolve_exemplars
 from npmrf3d.resources import ResourceError
 
 SMALL = np.random.default_rng(1).integers(0, 4, (12, 12)).astype(np.uint8) * 80
@@ -124,7 +124,7 @@ def test_absurd_size_subprocess(size, tmp_path):
 
 def test_api_refuses_too(tiny_rgb):
     from npmrf3d import synthesize
-    from npmrf3d.baselines import kopf_synthesize
+    from npmrf3d.methods.kopf import kopf_synthesize
     with pytest.raises(ResourceError):
         synthesize(tiny_rgb, size=65536, levels=1, window=3)
     with pytest.raises(ResourceError):

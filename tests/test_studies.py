@@ -11,12 +11,22 @@ import sys
 import numpy as np
 import pytest
 
-import npmrf3d.exemplar
 import npmrf3d.methods
+import npmrf3d.model.exemplar
 from npmrf3d import cli
 from npmrf3d.errors import ParameterError
-from npmrf3d.studies import STUDIES, Method, Scale, Study, get_study, run_study
-from npmrf3d.studies import catalog, groundtruth, report, runner
+from npmrf3d.studies import (
+    STUDIES,
+    Method,
+    Scale,
+    Study,
+    catalog,
+    get_study,
+    groundtruth,
+    report,
+    run_study,
+    runner,
+)
 
 TINY = Scale(exemplars=("gravel64",), seeds=(0,), sizes=(8,), levels=1, crop=24,
              common=(("window", 3), ("max_sweeps", 2)))
@@ -165,7 +175,7 @@ def test_study_exemplars_load():
 
 
 def test_etr_terrains_only_at_run_time(monkeypatch, tmp_path):
-    monkeypatch.setattr(npmrf3d.exemplar, "ETR_DIR", tmp_path / "missing")
+    monkeypatch.setattr(npmrf3d.model.exemplar, "ETR_DIR", tmp_path / "missing")
     with pytest.raises(ParameterError, match="extremetuxracer-data.*not bundled"):
         catalog.load_exemplar("etr:snow")
     assert catalog.etr_available(tmp_path / "missing") == []
@@ -174,7 +184,7 @@ def test_etr_terrains_only_at_run_time(monkeypatch, tmp_path):
     import imageio.v3 as iio
 
     iio.imwrite(folder / "snow.png", np.full((64, 64, 3), 200, np.uint8))
-    monkeypatch.setattr(npmrf3d.exemplar, "ETR_DIR", folder)
+    monkeypatch.setattr(npmrf3d.model.exemplar, "ETR_DIR", folder)
     assert catalog.etr_available() == ["etr:snow"]
     assert catalog.load_exemplar("etr:snow").shape == (64, 64, 3)
     with pytest.raises(ParameterError, match="no terrain photograph 'ice'"):

@@ -11,14 +11,14 @@ import numpy as np
 import pytest
 
 import npmrf3d
-from npmrf3d import metrics
+from npmrf3d.analysis import metrics
 from npmrf3d.config import VARIANTS
-from npmrf3d.exemplar import make_labels
-from npmrf3d.heuristics import DECISIONS, get_heuristic
-from npmrf3d.neighborhood import colour_classes
-from npmrf3d.parzen import PRUNE, adaptive_floor, build_view_models
-from npmrf3d.pyramid import random_state, upsample
-from npmrf3d.relax import relax_icm
+from npmrf3d.model.exemplar import make_labels
+from npmrf3d.model.heuristics import DECISIONS, get_heuristic
+from npmrf3d.model.neighbourhood import colour_classes
+from npmrf3d.model.parzen import PRUNE, adaptive_floor, build_view_models
+from npmrf3d.model.pyramid import random_state, upsample
+from npmrf3d.model.relax import relax_icm
 
 
 def checkerboard(side: int = 24, block: int = 2) -> np.ndarray:
@@ -165,7 +165,7 @@ def _phase_slice(side: int = 24) -> np.ndarray:
 def _preset_twins(image, size, levels, seed):
     """The segmented preset's two runs, made by hand: the coherent sampler with the preset's
     window and vote weighting, ``levels`` then ``levels - 1`` levels, on one generator in turn."""
-    from npmrf3d.coherent import SEGMENTED, coherent_synthesize
+    from npmrf3d.methods.npmrf_coherent import SEGMENTED, coherent_synthesize
     generator = np.random.default_rng(seed)
     return [coherent_synthesize(image, size=size, levels=n, window=(SEGMENTED.window,) * n,
                                 value_weight=SEGMENTED.value_weight, rng=generator)
@@ -173,7 +173,7 @@ def _preset_twins(image, size, levels, seed):
 
 
 def test_segmented_preset_keeps_the_trial_nearer_the_exemplars_two_point_shape():
-    from npmrf3d.coherent import SEGMENTED
+    from npmrf3d.methods.npmrf_coherent import SEGMENTED
     image = _phase_slice()
     res = npmrf3d.synthesize(image, size=16, levels=2, rng=3)
     assert res.stats["segmented"] is True
@@ -193,10 +193,10 @@ def test_segmented_preset_keeps_the_trial_nearer_the_exemplars_two_point_shape()
 
 @pytest.mark.parametrize("kept", [0, 1])
 def test_segmented_preset_returns_whichever_trial_scores_lower(monkeypatch, kept):
-    from npmrf3d import coherent
+    from npmrf3d.methods import npmrf_coherent
     image = _phase_slice()
     scores = iter([0.5, 0.9] if kept == 0 else [0.9, 0.5])
-    monkeypatch.setattr(coherent, "two_point_shape_error", lambda exemplars, volume, reference: next(scores))
+    monkeypatch.setattr(npmrf_coherent, "two_point_shape_error", lambda exemplars, volume, reference: next(scores))
     res = npmrf3d.synthesize(image, size=16, levels=2, rng=4)
     assert res.stats["levels_kept"] == (2, 1)[kept]
     assert np.array_equal(res.volume, _preset_twins(image, 16, 2, 4)[kept].volume)
@@ -248,7 +248,7 @@ def test_segmented_no_and_photographs_keep_the_window():
 
 
 def test_is_segmented_counts_grey_values_over_all_exemplars():
-    from npmrf3d.coherent import SEGMENTED_MAX_VALUES, is_segmented
+    from npmrf3d.methods.npmrf_coherent import SEGMENTED_MAX_VALUES, is_segmented
     n = SEGMENTED_MAX_VALUES
     values = np.arange(n, dtype=np.float32).reshape(-1, 1)
     assert is_segmented([np.tile(values, (1, 3))])

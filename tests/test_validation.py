@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 import npmrf3d
-from npmrf3d import ParameterError, synthesis
+from npmrf3d import ParameterError
+from npmrf3d.methods import npmrf
 
 
 @pytest.fixture(autouse=True)
@@ -19,9 +20,9 @@ def no_compiled_work(monkeypatch):
     def forbidden(*args, **kwargs):
         raise AssertionError("validation passed: synthesis started")
 
-    monkeypatch.setattr(synthesis, "run", forbidden)
-    monkeypatch.setattr(synthesis, "_run_coherent", forbidden)
-    monkeypatch.setattr(synthesis, "build_view_models", forbidden)
+    monkeypatch.setattr(npmrf, "run", forbidden)
+    monkeypatch.setattr(npmrf, "_run_coherent", forbidden)
+    monkeypatch.setattr(npmrf, "build_view_models", forbidden)
 
 
 @pytest.fixture

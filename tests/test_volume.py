@@ -10,8 +10,8 @@ import pytest
 import tifffile
 
 from npmrf3d.errors import ParameterError
-from npmrf3d.exemplar import load_exemplar
-from npmrf3d.volume import check_spacing, interpret, load_volume_exemplar, volume_fits
+from npmrf3d.model.exemplar import load_exemplar
+from npmrf3d.model.exemplar3d import check_spacing, interpret, load_volume_exemplar, volume_fits
 
 
 @pytest.mark.parametrize(("shape", "kind"), [

@@ -9,16 +9,32 @@ import sys
 import numpy as np
 import pytest
 
-from npmrf3d import fields
-from npmrf3d._kernels import volume as _k
+from npmrf3d._kernels import volume_lh as _k
+from npmrf3d.analysis.materials import otsu_threshold
 from npmrf3d.errors import ParameterError
 from npmrf3d.methods import get_method
+from npmrf3d.methods.volume_lh import (
+    NEIGHBOURHOODS,
+    appearance_space,
+    cell_usage,
+    initial_coordinates,
+    make_volume_config,
+    set_positions,
+    upsample,
+    volume_synthesize,
+)
+from npmrf3d.model import fields
+from npmrf3d.model.phases import (
+    PRICE_STEPS,
+    PhaseControl,
+    class_balance,
+    next_prices,
+    phase_classes,
+    phase_error,
+    phase_footprint,
+    phase_membership,
+)
 from npmrf3d.resources import ResourceError
-from npmrf3d.volume_synthesis import (NEIGHBOURHOODS, appearance_space, cell_usage, initial_coordinates,
-                                      make_volume_config, set_positions, upsample, volume_synthesize)
-from npmrf3d.materials import otsu_threshold
-from npmrf3d.phase_histogram import (PRICE_STEPS, PhaseControl, class_balance, next_prices, phase_classes, phase_error,
-                                     phase_footprint, phase_membership)
 from tests import naive
 
 RNG_SEED = 15
@@ -302,7 +318,7 @@ _THREADS = """
 import hashlib, sys, numpy as np
 from npmrf3d._kernels import _jit
 _jit.use_threads(int(sys.argv[1]))
-from npmrf3d.volume_synthesis import volume_synthesize
+from npmrf3d.methods.volume_lh import volume_synthesize
 ex = (np.arange(24)[:, None, None] % 6 < 3) * np.ones((24, 24, 24))
 res = volume_synthesize(ex.astype(np.float32), size=16, levels=2, passes=2, rng=9, vector_field="twist")
 sys.stdout.write(hashlib.sha256(res.volume.tobytes()).hexdigest())
@@ -364,7 +380,7 @@ def test_cli_writes_a_run_and_refuses_an_image(tmp_path):
 @pytest.mark.kernels
 @pytest.mark.parametrize(("window", "channels", "twisted"), [(3, 1, False), (3, 2, True), (5, 1, False)])
 def test_correct_parzen_matches_naive(rng, window, channels, twisted):
-    from npmrf3d.volume_synthesis import window_offsets
+    from npmrf3d.methods.volume_lh import window_offsets
 
     shape, n, h = (7, 6, 8), (4, 4, 6), 1
     values = rng.random(shape + (channels,))
@@ -385,7 +401,7 @@ def test_correct_parzen_matches_naive(rng, window, channels, twisted):
 
 
 def test_npmrf_3d_keeps_the_layers_and_refuses_a_field():
-    from npmrf3d.volume_npmrf import make_npmrf_volume_config, npmrf_volume_synthesize
+    from npmrf3d.methods.npmrf_3d import make_npmrf_volume_config, npmrf_volume_synthesize
 
     res = npmrf_volume_synthesize(layers(), size=16, levels=2, window=3, rng=1)
     v = res.volume[..., 0]
@@ -434,7 +450,7 @@ def test_initial_coordinates_lie_in_the_valid_box_and_tiled_ones_are_coherent(st
 
 
 def test_octant_fractions_and_the_stationarity_warning(rng):
-    from npmrf3d.materials import octant_fractions, stationarity_warning
+    from npmrf3d.analysis.materials import octant_fractions, stationarity_warning
 
     v = rng.random((5, 6, 7))
     got = octant_fractions(v, threshold=0.5)

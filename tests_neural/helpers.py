@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import torch
 
-from npmrf3d.neural.config import make_neural_config
-from npmrf3d.neural.engine import NeuralModel
-from npmrf3d.neural.generator import SolidGenerator
+from npmrf3d.methods.neural.config import make_neural_config
+from npmrf3d.methods.neural.engine import NeuralModel
+from npmrf3d.methods.neural.generator import SolidGenerator
 
 
 def random_generator(**kwargs) -> SolidGenerator:

@@ -8,9 +8,9 @@ import json
 import numpy as np
 import torch
 
-from npmrf3d import neural
 from npmrf3d.cli.main import main
-from npmrf3d.neural import engine
+from npmrf3d.methods import neural
+from npmrf3d.methods.neural import engine
 from tests_neural.helpers import random_model
 
 

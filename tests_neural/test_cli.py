@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 import zarr
 
-from npmrf3d import neural
 from npmrf3d.cli.main import main
-from npmrf3d.neural.zarr_volume import DONE
+from npmrf3d.methods import neural
+from npmrf3d.methods.neural.zarr_volume import DONE
 
 TRAIN = ["--iterations", "2", "--size", "16", "--scales", "3", "--channel-step", "2",
          "--noise-channels", "2", "--tile", "16", "--filters", "4", "--descriptor-scales", "2",

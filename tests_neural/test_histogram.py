@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 import torch
 
-from npmrf3d import neural
 from npmrf3d.cli.main import main
 from npmrf3d.errors import ParameterError
-from npmrf3d.neural import engine
-from npmrf3d.neural.descriptor import histogram_loss, histogram_target
+from npmrf3d.methods import neural
+from npmrf3d.methods.neural import engine
+from npmrf3d.methods.neural.descriptor import histogram_loss, histogram_target
 
 
 def _w2(values, exemplar) -> float:

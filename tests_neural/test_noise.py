@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import torch
 
-from npmrf3d.neural.noise import mix64, noise_block
+from npmrf3d.methods.neural.noise import mix64, noise_block
 
 
 def test_overlapping_blocks_hold_the_same_values():

@@ -7,9 +7,8 @@ import numpy as np
 import pytest
 
 from npmrf3d.errors import ParameterError
-from npmrf3d.exemplar import resolve_exemplars
 from npmrf3d.methods import METHODS, check_resources
-
+from npmrf3d.model.exemplar import resolve_exemplars
 from tests_neural.conftest import TINY
 
 

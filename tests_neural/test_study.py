@@ -7,8 +7,7 @@ import json
 
 import numpy as np
 
-from npmrf3d.studies import STUDIES, run_study
-from npmrf3d.studies import catalog, runner
+from npmrf3d.studies import STUDIES, catalog, run_study, runner
 
 
 def test_the_npk_study_runs_the_neural_method(tmp_path):

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import torch
 
-from npmrf3d.neural.engine import generate_block
-from npmrf3d.neural.generator import SolidGenerator, plan
+from npmrf3d.methods.neural.engine import generate_block
+from npmrf3d.methods.neural.generator import SolidGenerator, plan
 from tests_neural.helpers import random_generator
 from tests_neural.helpers import random_model as _model
 
@@ -68,7 +68,7 @@ def test_one_voxel_needs_the_papers_noise_support():
 def test_same_block_with_one_and_two_threads(tmp_path):
     code = ("import sys, numpy as np, torch; torch.set_num_threads(int(sys.argv[1])); "
             "sys.path.insert(0, sys.argv[3]); from tests_neural.helpers import random_model; "
-            "from npmrf3d.neural.engine import generate_block; "
+            "from npmrf3d.methods.neural.engine import generate_block; "
             "np.save(sys.argv[2], generate_block(random_model(32), (0, 0, 0), (48, 40, 32)))")
     root = str(pathlib.Path(__file__).parents[1])
     for n in (1, 2):

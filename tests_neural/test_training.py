@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 import torch
 
-from npmrf3d import neural
 from npmrf3d.errors import ParameterError
-from npmrf3d.neural.descriptor import VGG19_CONVS
+from npmrf3d.methods import neural
+from npmrf3d.methods.neural.descriptor import VGG19_CONVS
 
 
 def _state(model):

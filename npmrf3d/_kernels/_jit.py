@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numba
 import scipy.linalg.cython_blas  # noqa: F401  (loads the BLAS that np.dot in a kernel calls,
+
 # so that threadpoolctl finds it and limits it: see single_threaded_blas)
 from threadpoolctl import threadpool_limits
 

@@ -475,7 +475,7 @@ def anneal_update_class_gemm_serial(
 def sites_log_lcpdfs(volume, temps, sites, models, ops, adapt_eps, min_two_h2, prune, outlier,
                      out):
     """Per-view log-LCPDFs of every site of ``sites`` (S, 3) into ``out`` (S, V, K), block by
-    block (the public :func:`npmrf3d.parzen.log_lcpdf_sites`)."""
+    block (the public :func:`npmrf3d.model.parzen.log_lcpdf_sites`)."""
     n_sites = sites.shape[0]
     rows = np.arange(BLOCK)
     log_l = np.empty((BLOCK, models.offsets.shape[0], models.labels.shape[0]), dtype=np.float64)

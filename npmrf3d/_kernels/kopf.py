@@ -1,6 +1,6 @@
 """Compiled loops of the NP_K baseline (Kopf et al. 2007; SPEC.md section 6).
 
-Private: called by :mod:`npmrf3d.baselines.kopf` with validated arrays only; no user-facing
+Private: called by :mod:`npmrf3d.methods.kopf` with validated arrays only; no user-facing
 errors are raised here. Two kernels:
 
 * :func:`gather_texels` (parallel, one voxel per iteration, no shared writes): for every voxel,
@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from npmrf3d._kernels._jit import jit, jit_parallel, prange
+from ._jit import jit, jit_parallel, prange
 
 
 @jit

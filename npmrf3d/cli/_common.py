@@ -18,13 +18,13 @@ import numpy as np
 from tqdm import tqdm
 
 from ..errors import ParameterError
-from . import _interrupt
-from ..exemplar import exemplar_source, resolve_exemplars
-from ..neighborhood import VIEWS
+from ..io.runs import RUN_FILES, OutputLock, run_record, write_run
 from ..methods import check_resources, estimate
-from ..pyramid import level_shape
+from ..model.exemplar import exemplar_source, resolve_exemplars
+from ..model.neighbourhood import VIEWS
+from ..model.pyramid import level_shape
 from ..resources import available_memory, format_bytes
-from ..runs import RUN_FILES, OutputLock, run_record, write_run
+from . import _interrupt
 
 PROG = "npmrf3d"
 
@@ -295,7 +295,7 @@ class LevelProgress:
     """One tqdm bar per level on stderr: steps (``unit``) done, a level quantity as postfix.
 
     Called as ``progress(level, step, steps, value)`` with ``step = 0`` at the start of each
-    level (:func:`npmrf3d.pyramid.run_pyramid`): sweeps and the global temperature ``T`` for
+    level (:func:`npmrf3d.model.pyramid.run_pyramid`): sweeps and the global temperature ``T`` for
     synth, iterations and the energy ``E`` for NP_K.
     """
 

@@ -16,10 +16,18 @@ import time
 
 from .. import data
 from ..errors import ParameterError
-from ..exemplar import BUNDLED_PREFIX
-from ..neighborhood import VIEWS
-from ..runs import RUN_FILES
-from ._common import add_exemplar_kind, claim_output, dry_run, parse_size, prepare_run, run_method, write_result
+from ..io.runs import RUN_FILES
+from ..model.exemplar import BUNDLED_PREFIX
+from ..model.neighbourhood import VIEWS
+from ._common import (
+    add_exemplar_kind,
+    claim_output,
+    dry_run,
+    parse_size,
+    prepare_run,
+    run_method,
+    write_result,
+)
 
 __all__ = ["add_method_parser"]
 

@@ -1,7 +1,7 @@
 """Command line of the baselines: ``npmrf3d baseline kopf [EXEMPLAR] ...`` (NP_K).
 
 Registered by :data:`npmrf3d.cli.main.COMMANDS`. Every option's default is the field default of
-:class:`npmrf3d.baselines.kopf.KopfConfig`; the sub-command runs the ``kopf`` entry of
+:class:`npmrf3d.methods.kopf.KopfConfig`; the sub-command runs the ``kopf`` entry of
 :data:`npmrf3d.methods.METHODS`. Same
 conventions as ``npmrf3d synth``: every option shows its default in ``--help``; a tqdm bar per
 level on stderr (``--quiet`` turns it off); the run folder holds ``volume.npy``, ``volume.tif``,
@@ -15,14 +15,24 @@ import argparse
 import time
 
 from .. import data, io
-from ..baselines import chen_wang
-from ..baselines.kopf import DEFAULT_ITERATIONS, METHOD, UPSAMPLING, KopfConfig
 from ..config import DEFAULT_SIZE
 from ..errors import ParameterError
-from ..exemplar import BUNDLED_PREFIX
-from ..neighborhood import VIEWS
-from ..runs import RUN_FILES
-from ._common import add_exemplar_kind, claim_output, dry_run, choices, default, parse_size, prepare_run, run_method, write_result
+from ..io.runs import RUN_FILES
+from ..methods import chen_wang
+from ..methods.kopf import DEFAULT_ITERATIONS, METHOD, UPSAMPLING, KopfConfig
+from ..model.exemplar import BUNDLED_PREFIX
+from ..model.neighbourhood import VIEWS
+from ._common import (
+    add_exemplar_kind,
+    choices,
+    claim_output,
+    default,
+    dry_run,
+    parse_size,
+    prepare_run,
+    run_method,
+    write_result,
+)
 from ._generic import add_method_parser
 
 __all__ = ["register"]
@@ -147,7 +157,7 @@ def register(commands, formatter_class) -> None:
         out="npmrf3d-chen-wang-out", field_help=CHEN_WANG_HELP, formatter_class=formatter_class,
     )
 
-#: One line per configuration field of :class:`npmrf3d.baselines.chen_wang.ChenWangConfig`.
+#: One line per configuration field of :class:`npmrf3d.methods.chen_wang.ChenWangConfig`.
 CHEN_WANG_HELP = {
     "window": "window side per level, coarsest first: one number or one per level (the paper: 8,8,6 or 8,6,4)",
     "levels": "resolution levels, coarse to fine (the paper: 3)",

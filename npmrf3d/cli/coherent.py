@@ -1,18 +1,18 @@
-"""``npmrf3d coherent``: the coherent NP-MRF sampler (:mod:`npmrf3d.coherent`, issue 12).
+"""``npmrf3d coherent``: the coherent NP-MRF sampler (:mod:`npmrf3d.methods.npmrf_coherent`, issue 12).
 
-Options, defaults and ``--help`` come from :class:`npmrf3d.coherent.CoherentConfig` through
+Options, defaults and ``--help`` come from :class:`npmrf3d.methods.npmrf_coherent.CoherentConfig` through
 :func:`npmrf3d.cli._generic.add_method_parser`.
 """
 
 from __future__ import annotations
 
-from ..coherent import METHOD
+from ..methods.npmrf_coherent import METHOD
 from ._generic import add_method_parser
 from .baseline import CHEN_WANG_HELP
 
 __all__ = ["register", "FIELD_HELP"]
 
-#: One line per configuration field of :class:`npmrf3d.coherent.CoherentConfig`.
+#: One line per configuration field of :class:`npmrf3d.methods.npmrf_coherent.CoherentConfig`.
 FIELD_HELP = {
     "window": "window side per level, coarsest first: one number or one per level",
     "levels": "resolution levels, coarse to fine",

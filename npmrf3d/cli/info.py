@@ -9,9 +9,9 @@ import os
 from .. import __version__, data, io
 from .._kernels import _jit
 from ..config import VARIANTS
-from ..exemplar import BUNDLED_PREFIX
-from ..heuristics import HEURISTICS
 from ..methods import METHODS
+from ..model.exemplar import BUNDLED_PREFIX
+from ..model.heuristics import HEURISTICS
 from ._common import say
 
 __all__ = ["register", "run"]

@@ -1,7 +1,7 @@
 """``npmrf3d metrics EXEMPLAR VOLUME``: compare a volume with its exemplars (SPEC.md section 7).
 
 Prints a table (one row per view plus the mean, one column per metric of
-:data:`npmrf3d.metrics.METRICS`) and writes ``histograms.png`` and ``metrics.json`` (last) into
+:data:`npmrf3d.analysis.metrics.METRICS`) and writes ``histograms.png`` and ``metrics.json`` (last) into
 the output folder, each atomically and only after every number was computed, so a user error
 leaves no file behind. See ``docs/metrics.md`` for the definitions.
 """
@@ -20,12 +20,13 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from .. import _validation as check
-from .. import io, metrics
+from .. import io
+from ..analysis import metrics
+from ..analysis.metrics import METRICS
 from ..errors import ParameterError
-from ..exemplar import BUNDLED_PREFIX, exemplar_source, load_exemplar
-from ..metrics import METRICS
+from ..model.exemplar import BUNDLED_PREFIX, exemplar_source, load_exemplar
+from ..model.neighbourhood import VIEWS
 from ..plotting import save_figure
-from ..neighborhood import VIEWS
 from ._common import PROG, check_out, say
 
 __all__ = ["OUT_FILES", "register"]

@@ -1,6 +1,6 @@
 """``npmrf3d neural train`` and ``npmrf3d neural generate``: the on-demand generator (issue 16).
 
-Options and defaults come from :class:`npmrf3d.neural.NeuralConfig` (its field defaults). The
+Options and defaults come from :class:`npmrf3d.methods.neural.NeuralConfig` (its field defaults). The
 commands need the ``[neural]`` extra; without it they stop with one line naming the install
 command (exit 2). This module imports no torch: ``npmrf3d --help`` and the other commands work
 without the extra.
@@ -15,13 +15,14 @@ import time
 import numpy as np
 
 from .. import _validation as check
-from .. import data, neural
-from .._files import atomic_write, write_volume_tiff
+from .. import data
 from ..errors import ParameterError
-from ..exemplar import BUNDLED_PREFIX
-from ..neighborhood import VIEWS
-from ..neural import _extra
-from ..neural.config import DESCRIPTORS, ZARR_BLOCK, ZARR_WORKERS, NeuralConfig
+from ..io.files import atomic_write, write_volume_tiff
+from ..methods import neural
+from ..methods.neural import _extra
+from ..methods.neural.config import DESCRIPTORS, ZARR_BLOCK, ZARR_WORKERS, NeuralConfig
+from ..model.exemplar import BUNDLED_PREFIX
+from ..model.neighbourhood import VIEWS
 from ._common import CountProgress, choices, default, parse_size, say, view_sources
 
 __all__ = ["register"]

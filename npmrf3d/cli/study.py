@@ -15,8 +15,16 @@ from ..errors import ParameterError
 from ..studies.catalog import NPK_FULL_EXEMPLARS, STUDIES, STUDY_EXEMPLARS, get_study
 from ..studies.report import write_report
 from ..studies.runner import run_study
-from ._common import (PROG, HelpFormatter, Parser, RunsProgress, guarded, non_negative_int,
-                      positive_int, say)
+from ._common import (
+    PROG,
+    HelpFormatter,
+    Parser,
+    RunsProgress,
+    guarded,
+    non_negative_int,
+    positive_int,
+    say,
+)
 from .synth import OPTION_NAMES
 
 __all__ = ["register", "study_main"]

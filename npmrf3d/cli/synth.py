@@ -1,8 +1,8 @@
 """``npmrf3d synth``: make a solid texture with the NP-MRF sampler and write a run folder.
 
 Every option's default is the field default of :class:`npmrf3d.config.SynthesisConfig` (whose
-relaxation fields come from :class:`npmrf3d.relax.IcmOptions` and
-:class:`npmrf3d.relax.AnnealOptions`), and every choice list comes from its registry, so the
+relaxation fields come from :class:`npmrf3d.model.relax.IcmOptions` and
+:class:`npmrf3d.model.relax.AnnealOptions`), and every choice list comes from its registry, so the
 API, the configuration and the command line cannot disagree (``tests/test_defaults.py``).
 """
 
@@ -14,17 +14,29 @@ import time
 import numpy as np
 
 from .. import data
-from ..coherent import SEGMENTED, SEGMENTED_MAX_VALUES
 from ..config import DEFAULT_SIZE, SEGMENTED_MODES, VARIANT_ALIASES, VARIANTS, SynthesisConfig
-from ..exemplar import BUNDLED_PREFIX
-from ..heuristics import DECISIONS, HEURISTICS
-from ..neighborhood import VIEWS
-from ..pyramid import INHERIT, UPSAMPLING
-from ..relax import RELAXATIONS
-from ..relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
-from ..runs import RUN_FILES
-from ..synthesis import METHOD
-from ._common import add_exemplar_kind, claim_output, dry_run, PROG, choices, default, parse_size, prepare_run, run_method, say, write_result
+from ..io.runs import RUN_FILES
+from ..methods.npmrf import METHOD
+from ..methods.npmrf_coherent import SEGMENTED, SEGMENTED_MAX_VALUES
+from ..model.exemplar import BUNDLED_PREFIX
+from ..model.heuristics import DECISIONS, HEURISTICS
+from ..model.neighbourhood import VIEWS
+from ..model.pyramid import INHERIT, UPSAMPLING
+from ..model.relax import RELAXATIONS
+from ..model.relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
+from ._common import (
+    PROG,
+    add_exemplar_kind,
+    choices,
+    claim_output,
+    default,
+    dry_run,
+    parse_size,
+    prepare_run,
+    run_method,
+    say,
+    write_result,
+)
 
 __all__ = ["register", "run"]
 

@@ -2,7 +2,7 @@
 VOLUME`` (``npmrf-3d``): synthesise from a 3D exemplar (a scan crop).
 
 Options and defaults come from the methods' config classes
-(:class:`npmrf3d.volume_synthesis.VolumeConfig`, :class:`npmrf3d.volume_npmrf.NpmrfVolumeConfig`); the run folder
+(:class:`npmrf3d.methods.volume_lh.VolumeConfig`, :class:`npmrf3d.methods.npmrf_3d.NpmrfVolumeConfig`); the run folder
 is the one ``npmrf3d synth`` writes (its preview shows the exemplar's centre slice).
 """
 
@@ -15,17 +15,25 @@ import time
 
 import numpy as np
 
+from ..analysis.materials import stationarity_warning
 from ..errors import ParameterError
-from ..exemplar import exemplar_source
-from ..fields import FIELDS, field_input
-from ..materials import stationarity_warning
+from ..io.runs import RUN_FILES
 from ..methods import check_resources
-from ..runs import RUN_FILES
-from ..volume import load_volume_exemplar
-from ..volume_npmrf import METHOD as NPMRF_METHOD
-from ..volume_synthesis import METHOD
-from ._common import (claim_output, check_checkpoint, dry_run, output_folder, parse_size, run_method,
-                      say, write_result)
+from ..methods.npmrf_3d import METHOD as NPMRF_METHOD
+from ..methods.volume_lh import METHOD
+from ..model.exemplar import exemplar_source
+from ..model.exemplar3d import load_volume_exemplar
+from ..model.fields import FIELDS, field_input
+from ._common import (
+    check_checkpoint,
+    claim_output,
+    dry_run,
+    output_folder,
+    parse_size,
+    run_method,
+    say,
+    write_result,
+)
 
 __all__ = ["FIELD_HELP", "register"]
 

@@ -32,7 +32,7 @@ import contextlib
 import importlib.resources
 import pathlib
 
-from npmrf3d.errors import ParameterError
+from ..errors import ParameterError
 
 __all__ = ["DEFAULT_EXEMPLAR", "available", "path"]
 

@@ -25,11 +25,8 @@ Names resolve with :func:`load_exemplar`:
 
 from __future__ import annotations
 
-
-
-from npmrf3d.errors import ParameterError
-from npmrf3d.exemplar import ETR_DIR, etr_available, named_exemplar  # noqa: F401 (re-exported)
-
+from ..errors import ParameterError
+from ..model.exemplar import ETR_DIR, etr_available, named_exemplar  # noqa: F401 (re-exported)
 from .grid import Method, Scale, Study
 
 __all__ = [
@@ -60,7 +57,7 @@ COLOUR_EXEMPLARS: tuple[str, ...] = ("ihc64", "hubble", "wood", "tabby_fur", "re
 #: Layered / anisotropic exemplars whose layers run along the image rows (two versus three views).
 LAYERED_EXEMPLARS: tuple[str, ...] = ("stripes", "wood", "tabby_fur", "phase_bands", "brick")
 
-#: Study exemplar names resolve in the model layer (:mod:`npmrf3d.exemplar`); kept here under
+#: Study exemplar names resolve in the model layer (:mod:`npmrf3d.model.exemplar`); kept here under
 #: their old names.
 load_exemplar = named_exemplar
 
@@ -218,13 +215,13 @@ NPK = Study(
     notes="ML_H2b: annealing as in the colour study (64-colour palette for colour exemplars, 64 "
           "levels for grey ones), with the paper's Metropolis sampler and with this project's "
           "heat-bath sampler. NP_K: Kopf et al. 2007 as implemented in "
-          "npmrf3d.baselines.kopf with its default settings and the study's levels. 'control' is "
+          "npmrf3d.methods.kopf with its default settings and the study's levels. 'control' is "
           "the structureless control (voxels drawn independently from the exemplar): a method "
           "no better than it made no structure. 'default' is synth's default (the coherent "
           "NP-MRF sampler, ICM, 7x7 at every level); 'coherent-anneal' the same annealed over "
           "its candidates (t0 1 to 0.05 per level); both on the full colours, no palette. "
           "'neural' is the on-demand 3D CNN generator "
-          "(seed 004; npmrf3d.neural) trained on the same exemplar (150 steps of one 64x64 "
+          "(seed 004; npmrf3d.methods.neural) trained on the same exemplar (150 steps of one 64x64 "
           "slice per view, Gram and value-histogram loss), its train and generate seconds "
           "apart; it needs the optional extra npmrf3d[neural] (torch) and is left out, with a "
           "note in study.json, where that is not installed.",

@@ -4,6 +4,6 @@ Kept so that ``from npmrf3d.studies.cli import study_main`` (the one-line script
 ``studies/`` in older checkouts) still works. Imported by nothing in the package.
 """
 
-from npmrf3d.cli.study import register, study_main
+from ..cli.study import register, study_main
 
 __all__ = ["register", "study_main"]

@@ -22,11 +22,10 @@ from collections import defaultdict
 import numpy as np
 from matplotlib.figure import Figure
 
-from npmrf3d.exemplar import named_exemplar
-from npmrf3d.io import read_volume
-from npmrf3d.metrics import view_slices
-from npmrf3d.plotting import save_figure, to_display
-
+from ..analysis.metrics import view_slices
+from ..io import read_volume
+from ..model.exemplar import named_exemplar
+from ..plotting import save_figure, to_display
 from .groundtruth import exemplar_slices
 from .table import metric_columns, summarise, unique, write_csv
 

@@ -15,7 +15,7 @@ Registered methods (:data:`npmrf3d.methods.METHODS`) are called through their ``
   ``levels`` and ``rng=seed``; keyword arguments are passed through unchanged, so settings of
   newer samplers (``relaxation="anneal"``, ``proposals``, ``schedule``, ``t0``, ``t_end``,
   ``sampler``) need nothing here.
-* ``kopf`` methods call :func:`npmrf3d.baselines.kopf.kopf_synthesize` with only the
+* ``kopf`` methods call :func:`npmrf3d.methods.kopf.kopf_synthesize` with only the
   method's ``params`` plus ``size``, ``levels``, ``views`` and ``rng``.
 * ``control`` is the structureless control: voxels drawn independently from the exemplar.
 * ``real`` (ground-truth study only) is a crop of the real volume itself: the floor.
@@ -44,9 +44,9 @@ import re
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
-from npmrf3d.errors import ParameterError
-from npmrf3d.methods import ALIASES, METHODS
-from npmrf3d.neighborhood import VIEWS
+from ..errors import ParameterError
+from ..methods import ALIASES, METHODS
+from ..model.neighbourhood import VIEWS
 
 __all__ = ["ALGORITHMS", "MODES", "Method", "RunSpec", "Scale", "Study", "run_id"]
 

@@ -23,7 +23,7 @@ synthesises volumes with several methods and compares each with the real volume:
 * **slice metrics along all three axes**: the study metrics (:func:`npmrf3d.studies.runner.
   evaluate_metrics`) of each view's slices against the real volume's middle slice in that view.
 
-Grey values are the mean over channels. Slices follow :mod:`npmrf3d.neighborhood`:
+Grey values are the mean over channels. Slices follow :mod:`npmrf3d.model.neighbourhood`:
 across axis 0 ``volume[i]`` (rows j, columns k), across axis 1 ``volume[:, j]`` (rows i,
 columns k), across axis 2 ``volume[:, :, k]`` (rows i, columns j).
 """
@@ -32,11 +32,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from npmrf3d import metrics
-from npmrf3d.coherent import SEGMENTED_MAX_VALUES
-from npmrf3d.errors import ParameterError
-from npmrf3d.exemplar import exemplar_slice
-from npmrf3d._files import read_volume
+from ..analysis import metrics
+from ..errors import ParameterError
+from ..io.files import read_volume
+from ..methods.npmrf_coherent import SEGMENTED_MAX_VALUES
+from ..model.exemplar import exemplar_slice
 
 __all__ = [
     "GREY_BINS",

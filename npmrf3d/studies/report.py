@@ -21,11 +21,9 @@ import pathlib
 from datetime import datetime, timezone
 from typing import Any
 
-
-from npmrf3d.errors import ParameterError
-from npmrf3d.io import atomic_write
-from npmrf3d.methods import METHODS
-
+from ..errors import ParameterError
+from ..io import atomic_write
+from ..methods import METHODS
 from .figures import make_figures  # noqa: F401 (re-exported: report.make_figures)
 from .table import as_float, metric_columns, read_results, separations, summarise, unique
 

@@ -44,20 +44,26 @@ from datetime import datetime, timezone
 
 import numpy as np
 
-from npmrf3d._cluster import local_cluster
-from npmrf3d._kernels import _jit
-from npmrf3d.errors import ParameterError
-from npmrf3d.exemplar import named_exemplar
-from npmrf3d.methods import METHODS
-from npmrf3d.runs import run_record, write_run
-from npmrf3d import io, metrics
-from npmrf3d.metrics import METRICS, largest_value_share
-
+from .. import io
+from .._cluster import local_cluster
+from .._kernels import _jit
+from ..analysis import metrics
+from ..analysis.metrics import METRICS, largest_value_share
+from ..errors import ParameterError
+from ..io.runs import run_record, write_run
+from ..methods import METHODS
+from ..model.exemplar import named_exemplar
 from . import groundtruth
 from .figures import make_figures
 from .grid import RunSpec, Study
-from .table import BASE_COLUMNS, is_finished, load_row, make_row, write_csv
-from .table import read_results  # noqa: F401 (re-exported: runner.read_results)
+from .table import (
+    BASE_COLUMNS,
+    is_finished,
+    load_row,
+    make_row,
+    read_results,  # noqa: F401 (re-exported: runner.read_results)
+    write_csv,
+)
 
 __all__ = [
     "StudyOutcome",
@@ -71,14 +77,14 @@ __all__ = [
     "structureless",
 ]
 
-#: The metrics of the studies (the paper's three first), as :data:`npmrf3d.metrics.METRICS`.
+#: The metrics of the studies (the paper's three first), as :data:`npmrf3d.analysis.metrics.METRICS`.
 HEADLINE_METRICS = METRICS
 
 # --------------------------------------------------------------------------- metrics
 
 def evaluate_metrics(volume: np.ndarray, exemplars: dict[str, np.ndarray],
                      views: Sequence[str] | None = None) -> dict:
-    """:func:`npmrf3d.metrics.evaluate` of ``volume`` against the exemplars of ``views``."""
+    """:func:`npmrf3d.analysis.metrics.evaluate` of ``volume`` against the exemplars of ``views``."""
     views = tuple(exemplars) if views is None else tuple(views)
     return metrics.evaluate(volume, {v: exemplars[v] for v in views}, views=list(views))
 

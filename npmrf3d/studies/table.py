@@ -13,8 +13,7 @@ import pathlib
 from collections.abc import Sequence
 from typing import Any
 
-from npmrf3d._files import atomic_write
-
+from ..io.files import atomic_write
 from .grid import RunSpec
 
 __all__ = ["BASE_COLUMNS", "FINISHED_FILES", "as_float", "is_finished", "metric_columns", "unique", "load_row", "make_row", "read_results",

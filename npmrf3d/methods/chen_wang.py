@@ -1,0 +1,614 @@
+"""Chen & Wang 2010: k-coherence search, discrete solver, position and index histograms.
+
+Why one module of ~600 lines: the configuration, its validation, the level loop and the
+checkpoint of one method, most of it the documented public signature.
+
+"High quality solid texture synthesis using position and index histogram matching" (The Visual
+Computer 26(4), 2010; issue 11). Like NP_K (:mod:`npmrf3d.methods.kopf`) the volume minimises
+
+    E = sum_v sum_{i in views} ||s_{v,i} - e_{v,i}||^r,        r = 0.8,
+
+over the 2D neighbourhoods of the axis-orthogonal slices, coarse to fine, alternating a search
+and an optimisation phase; three things differ:
+
+* **search** (paper section 4.3): every voxel keeps, per view, the exemplar pixel it was copied
+  from (its *source*). A site's candidates are the coherent shifts of its 3 x 3 in-plane
+  neighbours' sources and their k-coherence sets (:func:`npmrf3d.model.kcoherence.candidate_set`);
+  distances are measured between PCA-reduced neighbourhoods (about 20 dimensions) and multiplied
+  by the **index-histogram** factor ``1 + index_weight * max(0, H_i(e) / phi - 1)`` (eq. 5-6),
+  ``H_i`` counting the sites matched with each exemplar centre, ``phi`` its even share.
+* **discrete solver** (section 4.2): every voxel *copies* one exemplar texel, colour and source:
+  among the texels voted by all overlapping neighbourhoods of all views (a neighbourhood at ``u``
+  matched with centre ``e`` votes for ``e + (x - u)``), the one nearest to their weighted mean
+  (``solver="mean"``, the paper's practice) or, by default, a weighted medoid of the votes
+  (``solver="medoid"``: the paper's practice is mean-seeking and drifts to mid values, measured
+  in ``docs/chen_wang.md``).
+  Votes carry the IRLS weight ``||s - e||^(r - 2)`` divided by the **position-histogram** factor
+  ``1 + position_weight * max(0, H_p(texel) / theta - 1)`` (eq. 4), ``H_p`` counting the voxels
+  that copy each exemplar pixel. The volume's colours are therefore exemplar colours.
+* **windows per level** (section 5): 8, 8, 6 or 8, 6, 4 from coarse to fine.
+
+Choices where the paper is silent (also in ``docs/chen_wang.md``)
+-----------------------------------------------------------------
+* Geometry: views and axes of :mod:`npmrf3d.model.neighbourhood`; a window at ``u`` covers
+  ``u - a .. u - a + w - 1``, ``a = (w - 1) // 2``; the volume is toroidal, exemplar windows lie
+  inside the exemplar (valid centres). Coarse exemplars are 2 x 2 box averages, so sources
+  up-sample as ``2 * parent + offset``. A coherent shift that leaves the valid centres is
+  clamped back.
+* Candidates: the 3 x 3 in-plane neighbours (the site included), ``k = 5``; k-coherence sets in
+  the PCA space, optionally skipping centres within ``coherence_exclude`` pixels of the query.
+* Sources per view: the chosen texel is the source of the view that voted for it; every other
+  view takes its own voted texel nearest (in colour) to the copied one. Initial volume: every
+  voxel a uniformly random pixel of the first view's exemplar (colour and source), other distinct
+  exemplars drawn independently. Up-sampled colours are read at the first view's source.
+* Histograms are counts with strengths relative to the even share (``H / even - 1``), see
+  :func:`npmrf3d.model.kcoherence.histogram_factor`. The index histogram is updated between batches of
+  slices (``batches`` interleaved groups along the view's normal axis), the position histogram
+  between batches of a random voxel order; within a batch they are frozen, so the parallel loops
+  write only their own site or voxel and results do not depend on the thread count.
+* IRLS distances are the PCA-space distances of the match, floored at
+  ``1e-3 * sigma * sqrt(d)``.
+* This project's additions (defaults chosen by measurement, 0 = the paper): ``position_boost``
+  (votes for under-used pixels weigh more), ``random_candidates`` (hashed random valid
+  centres join each candidate set, so the index histogram can reach parts of the exemplar the
+  coherent candidates never propose), ``value_weight`` and ``value_prior`` (histogram matching
+  of the voxel values, after Kopf et al. 2007: votes for over-used value bins weigh less and
+  under-used values get a prior, so sparse bright spots survive; the position histogram, spread
+  over thousands of pixels, cannot see that 1 % of the exemplar is missing) and
+  ``global_share`` (the worst-matched sites also get a global k-d tree search; off by default).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .. import _validation as check
+from .._kernels import _jit
+from .._kernels import kcoherence as _k
+from ..config import SynthesisMethod, SynthesisResult
+from ..io.files import load_checkpoint, save_checkpoint
+from ..model import kcoherence as coh
+from ..model.exemplar import resolve_exemplars
+from ..model.neighbourhood import VIEW_AXES, VIEWS
+from ..model.phases import PhaseControl, bin_phase_error, bin_phases, phase_prior_target
+from ..model.pyramid import level_shape
+from ..resources import check_memory, coherent_estimate
+
+__all__ = ["ChenWangConfig", "chen_wang_synthesize", "make_chen_wang_config", "run"]
+
+ProgressCallback = Callable[[int, int, int, float], None]
+
+#: How a voxel picks among its voted texels: ``mean`` = nearest to their weighted mean (the
+#: paper's practice), ``medoid`` = a weighted medoid (``sum_q w_q ||e_p - e_q||``).
+SOLVERS = ("mean", "medoid")
+_SOLVE_CHUNK = 512
+#: The medoid solver tries the heaviest (merged) votes only; the energy sums over all votes.
+_MEDOID_CANDIDATES = 8  # voxels per parallel work item of the solver (any value gives the same result)
+
+
+@dataclass(frozen=True)
+class ChenWangConfig:
+    """A validated Chen–Wang run; every default lives here (see :func:`chen_wang_synthesize`)."""
+
+    size: tuple[int, int, int] = (64, 64, 64)
+    window: tuple[int, ...] = (8, 6, 4)
+    levels: int = 3
+    views: tuple[str, ...] = VIEWS
+    iterations: tuple[int, ...] = (4, 4, 3)
+    k: int = 5
+    pca_dims: int = 20
+    r: float = 0.8
+    grid: int = 1
+    index_weight: float = 8.0
+    position_weight: float = 32.0
+    position_boost: float = 16.0
+    coherence_exclude: float = 0.0
+    random_candidates: int = 8
+    global_share: float = 0.0
+    coherence_bias: float = 0.0
+    value_weight: float = 32.0
+    value_prior: float = 3.0
+    value_bins: int = 16
+    phase_weight: float = 0.0
+    batches: int = 8
+    solver: str = "medoid"
+    balance_views: bool = False
+    seed: int | None = None
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able dictionary."""
+        return asdict(self)
+
+
+DEFAULTS = ChenWangConfig()
+
+
+def make_chen_wang_config(
+    *, size=DEFAULTS.size, window=DEFAULTS.window, levels=DEFAULTS.levels, views=DEFAULTS.views,
+    iterations=DEFAULTS.iterations, k=DEFAULTS.k, pca_dims=DEFAULTS.pca_dims, r=DEFAULTS.r,
+    grid=DEFAULTS.grid, index_weight=DEFAULTS.index_weight,
+    position_weight=DEFAULTS.position_weight, position_boost=DEFAULTS.position_boost,
+    coherence_exclude=DEFAULTS.coherence_exclude, random_candidates=DEFAULTS.random_candidates,
+    global_share=DEFAULTS.global_share, coherence_bias=DEFAULTS.coherence_bias,
+    value_weight=DEFAULTS.value_weight, value_prior=DEFAULTS.value_prior, value_bins=DEFAULTS.value_bins,
+    phase_weight=DEFAULTS.phase_weight, batches=DEFAULTS.batches, solver=DEFAULTS.solver, balance_views=DEFAULTS.balance_views,
+    seed=None,
+) -> ChenWangConfig:
+    """Validate plain keyword arguments into a frozen :class:`ChenWangConfig`.
+
+    ``window`` and ``iterations`` take one integer or one per level (coarsest first); when the
+    default per-level tuples meet another level count, the last ``levels`` entries are used.
+    """
+    levels = check.integer("levels", levels, low=1, high=8)
+    if window is DEFAULTS.window and levels != len(DEFAULTS.window):
+        window = (DEFAULTS.window * levels)[-levels:] if levels > 3 else DEFAULTS.window[-levels:]
+    if iterations is DEFAULTS.iterations and levels != len(DEFAULTS.iterations):
+        iterations = (DEFAULTS.iterations * levels)[-levels:] if levels > 3 else DEFAULTS.iterations[-levels:]
+    window = check.per_level("window", window, levels, low=2, high=32)
+    dims = check.size(size, levels=levels, window=1)
+    grid = check.integer("grid", grid, low=1, high=min(window))
+    for li, w in enumerate(window):
+        level = levels - 1 - li
+        for n in dims:
+            side = n // 2 ** level
+            if side < w:
+                check.fail(f"size {n} is too small for window {w} at level {level}: that level has "
+                           f"{side} voxels per side, needs at least {w}; use a larger size, smaller "
+                           f"windows or fewer levels")
+            if side % grid:
+                check.fail(f"size {n} does not suit grid {grid} with {levels} levels: level {level} "
+                           f"has {side} voxels per side, not a multiple of {grid}")
+    iterations = check.per_level("iterations", iterations, levels, low=1)
+    k = check.integer("k", k, low=1, high=64)
+    pca_dims = check.integer("pca_dims", pca_dims, low=1)
+    r = check.real("r", r, low=0.0, high=2.0, low_open=True)
+    index_weight = check.real("index_weight", index_weight, low=0.0)
+    position_weight = check.real("position_weight", position_weight, low=0.0)
+    position_boost = check.real("position_boost", position_boost, low=0.0)
+    coherence_exclude = check.real("coherence_exclude", coherence_exclude, low=0.0)
+    random_candidates = check.integer("random_candidates", random_candidates, low=0, high=256)
+    global_share = check.real("global_share", global_share, low=0.0, high=1.0)
+    coherence_bias = check.real("coherence_bias", coherence_bias, low=0.0)
+    value_weight = check.real("value_weight", value_weight, low=0.0)
+    value_prior = check.real("value_prior", value_prior, low=0.0)
+    value_bins = check.integer("value_bins", value_bins, low=2, high=256)
+    phase_weight = check.real("phase_weight", phase_weight, low=0.0)
+    batches = check.integer("batches", batches, low=1, high=1024)
+    solver = check.choice("solver", solver, SOLVERS)
+    views = check.views(views, VIEWS)
+    if seed is not None:
+        seed = check.integer("seed", seed, low=0)
+    return ChenWangConfig(size=dims, window=window, levels=levels, views=views,
+                          iterations=iterations, k=k, pca_dims=pca_dims, r=r, grid=grid,
+                          index_weight=index_weight, position_weight=position_weight,
+                          position_boost=position_boost, coherence_exclude=coherence_exclude,
+                          random_candidates=random_candidates, global_share=global_share,
+                          coherence_bias=coherence_bias, value_weight=value_weight,
+                          value_prior=value_prior, value_bins=value_bins, phase_weight=phase_weight,
+                          batches=batches, solver=solver, balance_views=bool(balance_views), seed=seed)
+
+
+def _check_exemplar_levels(config: ChenWangConfig, per_view: Mapping[str, np.ndarray]) -> None:
+    for v, a in per_view.items():
+        for li, w in enumerate(config.window):
+            level = config.levels - 1 - li
+            h, wd = a.shape[0] // 2 ** level, a.shape[1] // 2 ** level
+            if min(h, wd) < w + 1:
+                check.fail(f"exemplar for view {v} of size {a.shape[0]}x{a.shape[1]} is too small "
+                           f"for window {w} at level {level}: that level sees {h}x{wd} pixels, "
+                           f"needs at least {w + 1} per side; use a larger exemplar, smaller "
+                           f"windows or fewer levels")
+
+
+# --------------------------------------------------------------------------- public
+
+
+def chen_wang_synthesize(
+    exemplar=None, *, size=DEFAULTS.size, window=DEFAULTS.window, levels: int = DEFAULTS.levels,
+    views=DEFAULTS.views, exemplars: Mapping | None = None, iterations=DEFAULTS.iterations,
+    k: int = DEFAULTS.k, pca_dims: int = DEFAULTS.pca_dims, r: float = DEFAULTS.r,
+    grid: int = DEFAULTS.grid, index_weight: float = DEFAULTS.index_weight,
+    position_weight: float = DEFAULTS.position_weight,
+    position_boost: float = DEFAULTS.position_boost,
+    coherence_exclude: float = DEFAULTS.coherence_exclude,
+    random_candidates: int = DEFAULTS.random_candidates,
+    global_share: float = DEFAULTS.global_share, coherence_bias: float = DEFAULTS.coherence_bias,
+    value_weight: float = DEFAULTS.value_weight, value_prior: float = DEFAULTS.value_prior,
+    value_bins: int = DEFAULTS.value_bins, phase_weight: float = DEFAULTS.phase_weight,
+    batches: int = DEFAULTS.batches, solver: str = DEFAULTS.solver, balance_views: bool = DEFAULTS.balance_views, rng=None,
+    progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
+) -> SynthesisResult:
+    """Synthesize a solid texture with Chen & Wang's method (2010; issue 11).
+
+    Parameters
+    ----------
+    exemplar : path, (H, W) or (H, W, C) array, or None
+        The 2D sample (None: the bundled default); used for every view without an entry in
+        ``exemplars``. Any channel count.
+    size : int or (N1, N2, N3)
+        Output size, divisible by ``2**(levels - 1)``; every level needs at least its window
+        in voxels per side.
+    window : int or sequence of int
+        Window side per level, coarsest first (the paper: ``(8, 8, 6)`` or ``(8, 6, 4)``).
+    levels : int
+        Resolution levels (the paper: 3).
+    views : sequence of {"front", "right", "top"} (or a comma-separated string)
+        Constrained views (1 to 3).
+    exemplars : dict view -> exemplar, optional
+        A different exemplar for some views (same channel count).
+    iterations : int or sequence of int
+        Search + solve iterations per level, coarsest first (the paper: about 5).
+    k : int
+        Size of the k-coherence sets (the paper: 5).
+    pca_dims : int
+        Dimensions of the PCA-reduced neighbourhoods (the paper: about 20).
+    r : float in (0, 2]
+        Exponent of the robust energy; IRLS weights ``||s - e||^(r - 2)``.
+    grid : int
+        Sites searched every ``grid`` voxels along both plane axes (1: every voxel, the paper).
+    index_weight, position_weight : float >= 0
+        Strengths of the index- and position-histogram factors ``1 + w * max(0, H / even - 1)``
+        (0 = off; see :func:`npmrf3d.model.kcoherence.histogram_factor`).
+    position_boost : float >= 0
+        This project's addition: votes for under-used exemplar pixels get their weight
+        multiplied by ``1 + position_boost * (1 - H_p / theta)`` (0 = off, the paper).
+    coherence_exclude : float >= 0
+        k-coherence sets skip centres within this many pixels of the query (0 = off).
+    random_candidates : int >= 0
+        This project's addition: that many uniformly random valid centres join every site's
+        candidate set (drawn per site from a hash of the seed, so thread-independent; 0 = the
+        paper). They let the index histogram reach exemplar parts the coherent candidates miss.
+    global_share : float in [0, 1]
+        This project's addition: after each view's search, that share of its sites -- the worst
+        matched -- also search all exemplar neighbourhoods (``cKDTree``), and take the global
+        match where it is clearly better (:func:`npmrf3d.model.kcoherence.global_matches`; 0 = the
+        paper). A structure that no coherent candidate proposes (a sparse bright spot) can then
+        be matched, so it survives.
+    coherence_bias : float >= 0
+        A global match replaces the coherent one only if its distance times
+        ``1 + coherence_bias`` is smaller (Hertzmann et al. 2001's coherence parameter).
+    value_weight : float >= 0
+        This project's addition after Kopf et al. 2007's histogram matching: the solver divides
+        each vote's weight by ``1 + value_weight * sum_c max(0, H_c(b) - T_c(b))``, ``H_c`` the
+        volume's histogram of channel ``c`` and ``T_c`` the exemplars' (``value_bins`` bins over
+        the exemplars' range, in units of an even bin's share), ``b`` the voted texel's bin; the
+        histogram follows the solver between batches. It keeps the exemplar's share of rare
+        values (sparse bright spots) that the position histogram, spread over thousands of
+        pixels, cannot see (0 = off, the paper).
+    value_prior : float >= 0
+        The histogram prior ``P = value_prior * sum_c log(T_c(b) / H_c(b))`` of each candidate
+        texel, positive for under-represented values and zero once the histograms agree: the
+        medoid solver divides a candidate's energy by ``exp(P)``, the coherent NP-MRF decision
+        (:mod:`npmrf3d.methods.npmrf_coherent`) adds ``P`` to its ML_H2b log-score (0 = off; the mean solver
+        ignores it).
+    value_bins : int
+        Bins per channel of those histograms.
+    phase_weight : float >= 0
+        A phase control through the histogram prior (this project's addition, stop 33): each
+        channel's value bins split at the Otsu threshold of the exemplars' histogram into two
+        phases, and after every iteration a :class:`npmrf3d.model.phases.PhaseControl` per
+        channel prices the phase the volume over-uses; a candidate's prior loses
+        ``phase_weight`` times its phase's cost (excess plus the integral of the error, times
+        the control's gain). It restores a thin minority phase that the plain prior lets erode
+        (0 = off; acts only with ``value_prior > 0``).
+    batches : int
+        Histogram updates per pass (search: interleaved slice groups; solver: parts of a random
+        voxel order). More batches track the histograms more closely, fewer run more in parallel.
+    solver : {"mean", "medoid"}
+        How a voxel picks among its voted texels: the one nearest to their weighted mean (the
+        paper's practice, section 4.2), or a weighted medoid: among the texels of the 8 heaviest
+        votes, the one ``p`` minimising ``sum_q w_q ||e_p - e_q||`` over all votes
+        (mode-seeking: keeps the exemplar's contrast, docs/chen_wang.md).
+    balance_views : bool
+        Scale each view's votes of a voxel to the same total weight, so no view's (coherent,
+        heavily weighted) neighbourhoods outvote the others (the paper: off).
+    rng : None, int or numpy Generator
+        Seed; the result depends on it only (not on the number of threads).
+    progress : callable, optional
+        ``progress(level, iteration, iterations, energy)`` before the first iteration of each
+        level (``iteration = 0``, energy nan) and after each (energy = mean ``||s - e||^r``).
+    checkpoint : path, optional
+        ``.npz`` file written after each level; if it exists and holds a checkpoint of the same
+        configuration and exemplars, synthesis resumes after its last finished level.
+
+    Returns
+    -------
+    SynthesisResult
+        ``volume`` (N1, N2, N3, C) float32, every voxel an exemplar texel of its level;
+        ``history`` the mean energy per iteration, one list per level (coarsest first);
+        ``config`` a :class:`ChenWangConfig`; ``timings``; ``labels`` the distinct colours of the
+        exemplars; ``stats`` per level: shape, window, candidates per site, PCA dimensions,
+        search and solve seconds, changed voxels per iteration, position-histogram spread, and
+        the thread count.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> stripes = np.tile(np.array([0, 0, 1, 1], dtype=np.uint8) * 255, (16, 4))
+    >>> res = chen_wang_synthesize(stripes, size=8, window=4, levels=1, iterations=2, rng=0)
+    >>> res.volume.shape, sorted(np.unique(res.volume).tolist())
+    ((8, 8, 8, 1), [0.0, 1.0])
+    """
+    t_start = time.perf_counter()
+    seed = rng if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) else None
+    config = make_chen_wang_config(
+        size=size, window=window, levels=levels, views=views, iterations=iterations, k=k,
+        pca_dims=pca_dims, r=r, grid=grid, index_weight=index_weight,
+        position_weight=position_weight, position_boost=position_boost,
+        coherence_exclude=coherence_exclude, random_candidates=random_candidates,
+        global_share=global_share, coherence_bias=coherence_bias, value_weight=value_weight,
+        value_prior=value_prior, value_bins=value_bins, phase_weight=phase_weight, batches=batches, solver=solver,
+        balance_views=balance_views, seed=seed)
+    generator = check.rng(rng)
+    per_view = resolve_exemplars(exemplar, exemplars, config.views, **_fit(config))
+    _check_exemplar_levels(config, per_view)
+    check_memory(coherent_estimate(config, per_view))
+    return run(config, per_view, generator, progress=progress, checkpoint=checkpoint, t_start=t_start)
+
+
+# --------------------------------------------------------------------------- the method
+
+
+def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rng: np.random.Generator, *,
+        progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
+        t_start: float | None = None, decision: tuple = (0, 0.0, 0.0)) -> SynthesisResult:
+    """Run a validated configuration on validated float32 ``(H, W, C)`` exemplars (one per view).
+
+    The body of :func:`chen_wang_synthesize`, with the signature of a registered method.
+    ``decision = (likelihood, centre_bandwidth, outlier)`` switches the solver's choice among the
+    heaviest votes to the NP-MRF rule (``likelihood`` 1 = ML_H2b, 2 = ML_H2a; the centre kernel's
+    width is ``centre_bandwidth`` times the exemplar's standard deviation); used by the coherent
+    NP-MRF sampler (:mod:`npmrf3d.methods.npmrf_coherent`), 0 = Chen–Wang's own solver. A fourth entry, one
+    tuple of temperatures per level (coarsest first, one per iteration), anneals that decision
+    (a heat-bath draw among the candidates; 0 = the highest score).
+    """
+    t_start = time.perf_counter() if t_start is None else t_start
+    views = config.views
+    per_view = {v: np.ascontiguousarray(per_view_exemplars[v], dtype=np.float32) for v in views}
+    distinct = list({id(a): a for a in per_view.values()}.values())
+    channels = distinct[0].shape[2]
+    pooled = np.concatenate([a.reshape(-1, channels) for a in distinct])
+    labels = np.unique(pooled, axis=0).astype(np.float32)
+    sigma = float(pooled.astype(np.float64).std()) or 1.0
+    value_lo = pooled.min(axis=0).astype(np.float64)
+    value_span = pooled.max(axis=0).astype(np.float64) - value_lo
+    view_axes = np.array([VIEW_AXES[v] for v in views], dtype=np.int64)
+    n_views = len(views)
+    timings = {"setup": time.perf_counter() - t_start}
+    history: list[list[float]] = []
+    stats: dict = {"threads": _jit.thread_count(), "levels": {}}
+    volume = src = None
+    prev_widths = None
+    first_level = config.levels - 1
+    key = _config_key(config, per_view) + (f"|decision={list(decision)}" if decision[0] else "")
+    resumed = _load_checkpoint(checkpoint, key)
+    phases = control = None
+    if config.phase_weight > 0.0 and config.value_prior > 0.0:
+        phases = bin_phases(coh.value_counts(pooled, value_lo, coh.value_scale(value_span, config.value_bins),
+                                             config.value_bins)[1])
+        control = [PhaseControl.start(2) for _ in range(channels)]
+    if resumed is not None:
+        volume, src, done_level, rng_state, history, timings, stats, prev_widths, saved = resumed
+        if control is not None and saved is not None:
+            control = [PhaseControl.from_array(a, 2) for a in saved]
+        rng.bit_generator.state = rng_state
+        first_level = done_level - 1
+    for level in range(first_level, -1, -1):
+        t0 = time.perf_counter()
+        li = config.levels - 1 - level
+        window = config.window[li]
+        shape = level_shape(config.size, level)
+        level_ex = {id(a): coh.downsample_exemplar(a, level) for a in distinct}
+        models = {key_: coh.build_level_model(ex, window, dims=config.pca_dims, k=config.k,
+                                              exclude=config.coherence_exclude)
+                  for key_, ex in level_ex.items()}
+        vmodels = [models[id(per_view[v])] for v in views]
+        widths = [m.exemplar.shape[1] for m in vmodels]
+        if volume is None:
+            src = np.empty((n_views, *shape), dtype=np.int32)
+            drawn = {key_: coh.random_sources(shape, ex.shape, rng) for key_, ex in level_ex.items()}
+            for vi, v in enumerate(views):
+                src[vi] = drawn[id(per_view[v])]
+        else:
+            src = np.stack([coh.upsample_sources(src[vi], v, prev_widths[vi], vmodels[vi].exemplar.shape)
+                            for vi, v in enumerate(views)])
+        volume = initial_colours(src, [m.exemplar for m in vmodels])
+        ex_flat, ex_off, hist_off = _pack(vmodels)
+        values = coh.ValueHistogram.build([m.exemplar for m in vmodels], ex_flat, volume,
+                                          bins=config.value_bins, lo=value_lo, span=value_span)
+        ewidth = np.array(widths, dtype=np.int64)
+        pos_hist = np.concatenate([coh.position_histogram(src[vi], m.pixels) for vi, m in enumerate(vmodels)])
+        theta = np.array([volume.shape[0] * volume.shape[1] * volume.shape[2] / m.pixels for m in vmodels])
+        assign = np.full((n_views, *shape), -1, dtype=np.int32)
+        fresh = np.empty(shape, dtype=np.int32)
+        omega = np.zeros((n_views, *shape), dtype=np.float32)
+        index_hist = [np.zeros(m.pixels, dtype=np.float64) for m in vmodels]
+        d = window * window * channels
+        floor = 1e-3 * sigma * math.sqrt(d)
+        n_iter = config.iterations[li]
+        n_vox = shape[0] * shape[1] * shape[2]
+        bounds = np.linspace(0, n_vox, min(config.batches, n_vox) + 1).astype(np.int64)
+        if progress is not None:
+            progress(level, 0, n_iter, float("nan"))
+        level_history, changed, global_counts = [], [], []
+        t_search = t_solve = 0.0
+        sites = 0
+        for it in range(n_iter):
+            ts = time.perf_counter()
+            energy_sum = 0.0
+            sites = 0
+            global_count = 0
+            for vi, v in enumerate(views):
+                m = vmodels[vi]
+                ra, ca = VIEW_AXES[v]
+                na = 3 - ra - ca
+                energy = np.zeros(shape[na], dtype=np.float64)
+                n_sites = shape[na] * (shape[ra] // config.grid) * (shape[ca] // config.grid)
+                phi = n_sites / m.centres
+                lo_r, hi_r, lo_c, hi_c = m.bounds
+                _k.search_view(volume, src[vi], ra, ca, window, m.anchor, config.grid, widths[vi],
+                               lo_r, hi_r, lo_c, hi_c, m.mean, m.basis, m.proj, m.kcoh,
+                               min(config.batches, shape[na]), index_hist[vi], phi,
+                               config.index_weight, config.r, floor, config.random_candidates,
+                               int(rng.integers(0, 2**31)), assign[vi], fresh, omega[vi], energy)
+                energy_sum += float(energy.sum())
+                if config.global_share > 0.0:
+                    n_global, change = coh.global_matches(
+                        volume, v, m, assign[vi], omega[vi], index_hist[vi], share=config.global_share,
+                        bias=config.coherence_bias, phi=phi, index_weight=config.index_weight,
+                        r=config.r, floor=floor)
+                    energy_sum += change
+                    global_count += n_global
+                sites += n_sites
+            global_counts.append(global_count)
+            t_search += time.perf_counter() - ts
+            ts = time.perf_counter()
+            order = rng.permutation(n_vox).astype(np.int64)
+            temperature = float(decision[3][li][it]) if len(decision) > 3 else 0.0
+            target = values.target if control is None else phase_prior_target(
+                values.target, phases, np.stack([c.phase_costs(config.phase_weight) for c in control]),
+                config.value_prior)
+            salt = int(rng.integers(0, 2**31)) if temperature > 0.0 else 0
+            for b in range(len(bounds) - 1):
+                # within a batch the histograms are frozen and every voxel depends only on them
+                # and the votes, so visiting a batch in memory order gives the same volume faster
+                order[bounds[b]:bounds[b + 1]].sort()
+            changed.append(int(_k.solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth,
+                                        window, vmodels[0].anchor, config.grid, order, bounds, pos_hist,
+                                        hist_off, theta, config.position_weight, config.position_boost,
+                                        _MEDOID_CANDIDATES if config.solver == "medoid" or decision[0] else 0,
+                                        config.balance_views, _SOLVE_CHUNK, decision[0],
+                                        2.0 * (decision[1] * sigma) ** 2 or 1.0, decision[2],
+                                        values.ex_bins, values.hist, target, config.value_weight,
+                                        config.value_prior, values.lo, values.scale, values.unit,
+                                        temperature, salt)))
+            t_solve += time.perf_counter() - ts
+            if control is not None:
+                for c, e in zip(control, bin_phase_error(values.hist, values.target, phases)):
+                    c.step(e)
+            level_history.append(energy_sum / max(1, sites))
+            if progress is not None:
+                progress(level, it + 1, n_iter, level_history[-1])
+        history.append(level_history)
+        prev_widths = widths
+        timings[f"level_{level}"] = time.perf_counter() - t0
+        used = [float((pos_hist[hist_off[vi]:hist_off[vi] + m.pixels] > 0).mean()) for vi, m in enumerate(vmodels)]
+        stats["levels"][f"level_{level}"] = {
+            "shape": list(shape), "window": window, "iterations": n_iter,
+            "candidates_per_site": 9 * (1 + config.k) + config.random_candidates, "sites_per_iteration": sites,
+            "pca_dims": {v: int(vmodels[vi].basis.shape[1]) for vi, v in enumerate(views)},
+            "centres": {v: int(vmodels[vi].centres) for vi, v in enumerate(views)},
+            "search_seconds": t_search, "solve_seconds": t_solve, "changed": changed,
+            "global_matches": global_counts,
+            "exemplar_pixels_used": {v: used[vi] for vi, v in enumerate(views)},
+        }
+        if control is not None:
+            stats["levels"][f"level_{level}"]["phase_error"] = [c.last_error.tolist() for c in control]
+            stats["levels"][f"level_{level}"]["phase_gain"] = [c.gain for c in control]
+        if checkpoint is not None:
+            _save_checkpoint(checkpoint, key, volume, src, level, rng, history, timings, stats, widths,
+                             None if control is None else np.stack([c.to_array() for c in control]))
+    timings["total"] = time.perf_counter() - t_start
+    return SynthesisResult(volume=volume, history=history, config=config, timings=timings,
+                           labels=labels, stats=stats)
+
+
+def initial_colours(src: np.ndarray, exemplars) -> np.ndarray:
+    """Colour of every voxel from its sources: among the views' source texels, the one nearest to
+    their mean (the views' first on ties).
+
+    One view's up-sampled sources repeat along that view's normal axis (``2 * parent + offset``
+    has no offset there), so copying one view's texels would duplicate slices in pairs; taking
+    the most central of the views' texels keeps the colours exemplar colours without that.
+
+    Parameters
+    ----------
+    src : (V, N1, N2, N3) int32 flat sources per view
+    exemplars : V arrays (H, W, C)
+
+    Returns
+    -------
+    (N1, N2, N3, C) float32
+    """
+    texels = np.stack([ex.reshape(-1, ex.shape[2])[s] for ex, s in zip(exemplars, src)])  # (V, ..., C)
+    if len(texels) == 1:
+        return np.ascontiguousarray(texels[0], dtype=np.float32)
+    centre = texels.astype(np.float64).mean(axis=0)
+    dist = ((texels - centre) ** 2).sum(axis=-1)
+    pick = np.argmin(dist, axis=0)
+    return np.ascontiguousarray(np.take_along_axis(texels, pick[None, ..., None], axis=0)[0], dtype=np.float32)
+
+
+def _pack(models):
+    """Views' exemplars packed as rows of one array (shared exemplars once) and histogram offsets."""
+    flat, ex_off, hist_off, seen = [], [], [], {}
+    start = hstart = 0
+    for m in models:
+        if id(m) not in seen:
+            seen[id(m)] = start
+            flat.append(m.exemplar.reshape(-1, m.exemplar.shape[2]))
+            start += flat[-1].shape[0]
+        ex_off.append(seen[id(m)])
+        hist_off.append(hstart)
+        hstart += m.pixels
+    return (np.ascontiguousarray(np.concatenate(flat), dtype=np.float32),
+            np.array(ex_off, dtype=np.int64), np.array(hist_off, dtype=np.int64))
+
+
+def _config_key(config: ChenWangConfig, per_view) -> str:
+    digest = {v: [list(a.shape), float(a.astype(np.float64).sum()), float((a.astype(np.float64) ** 2).sum())]
+              for v, a in per_view.items()}
+    return json.dumps({"method": "chen-wang", "config": config.to_dict(),
+                       "exemplars": digest}, sort_keys=True, default=str)
+
+
+def _save_checkpoint(path, key, volume, src, level, rng, history, timings, stats, widths, control=None) -> None:
+    extra = {} if control is None else {"phase_control": control}
+    save_checkpoint(path, config=key, volume=volume, sources=src, level=level, **extra,
+                    widths=np.asarray(widths, dtype=np.int64),
+                    rng_state=json.dumps(rng.bit_generator.state), history=json.dumps(history),
+                    timings=json.dumps(timings), stats=json.dumps(stats, default=str))
+
+
+def _load_checkpoint(path, key):
+    """State after the last finished level, or None when there is nothing to resume."""
+    if path is None or not Path(path).exists():
+        return None
+    data = load_checkpoint(path)
+    if str(data.get("config")) != key or "sources" not in data:
+        check.fail(f"checkpoint '{path}' was written by a different configuration or exemplar; "
+                   f"delete it or choose another checkpoint path")
+    return (np.ascontiguousarray(data["volume"], dtype=np.float32),
+            np.ascontiguousarray(data["sources"], dtype=np.int32), int(data["level"]),
+            json.loads(str(data["rng_state"])), json.loads(str(data["history"])),
+            json.loads(str(data["timings"])), json.loads(str(data["stats"])),
+            [int(w) for w in np.atleast_1d(data["widths"])],
+            np.asarray(data["phase_control"], dtype=np.float64) if "phase_control" in data else None)
+
+
+def _fit(config) -> dict:
+    """What every exemplar must fit: the coarsest window, the level count (then
+    :func:`_check_exemplar_levels` checks each level's window)."""
+    return {"window": max(config.window), "levels": config.levels, "toroidal": False}
+
+
+def chen_wang_method(per_view, config: ChenWangConfig, rng: np.random.Generator, *,
+                     progress=None, checkpoint=None, t_start=None) -> SynthesisResult:
+    """The registered form of :func:`run` (exemplars first, as every method of the registry)."""
+    _check_exemplar_levels(config, per_view)
+    return run(config, per_view, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
+
+
+METHOD = SynthesisMethod(
+    name="chen-wang", run=chen_wang_method, make_config=make_chen_wang_config,
+    config_class=ChenWangConfig, synthesize=chen_wang_synthesize, fit=_fit,
+    description="Chen & Wang 2010: k-coherence search, discrete solver, position and index histograms",
+    resources=coherent_estimate,
+)

@@ -1,0 +1,431 @@
+"""NP_K: solid texture synthesis by texture optimisation with histogram matching.
+
+(Slightly over 400 lines because this docstring is the method's documentation: the paper's
+equations and every choice where the paper is silent. The steps are in ``_kopf_steps``.)
+
+The baseline the NP-MRF paper compares with (Kopf et al. 2007, "Solid texture synthesis from
+2D exemplars"; SPEC.md section 6). The volume minimises
+
+    E = sum_v sum_{i in views} ||s_{v,i} - e_{v,i}||^r,        r = 0.8,
+
+over the ``window x window`` neighbourhoods ``s_{v,i}`` of the axis-orthogonal slices through
+the voxels of a sparse grid, ``e_{v,i}`` being the closest exemplar neighbourhood. Each
+iteration alternates
+
+* **search**: every neighbourhood on the sparse grid (every ``grid``-th position along both
+  plane axes, every slice) is projected on the exemplar's principal components that keep
+  ``variance`` of the variance and matched with ``scipy.spatial.cKDTree.query(eps=eps)``
+  (approximate nearest neighbour within a factor ``1 + eps`` of the exact distance);
+* **optimisation** (IRLS): each voxel becomes the weighted average of the exemplar texels that
+  the overlapping neighbourhoods assign to it (paper eq. 4), with weights
+  ``omega = ||s - e||^(r - 2)`` divided by ``1 + histogram_weight * sum_c max(0, H_s,c(b) -
+  H_e,c(b))`` (paper eq. 5; ``H`` are per-channel histograms with ``histogram_bins`` bins,
+  in voxel counts, kept up to date while voxels change in a random order) and, for voxel
+  constraints, by ``1 + tau_v ||e - t_v||`` (paper eq. 6). Optionally only the dominant
+  mean-shift cluster of the texels is averaged, with a bandwidth that shrinks over the
+  iterations of a level (less blur).
+
+Levels run coarse to fine; a level's volume initialises the next finer one by trilinear
+up-sampling (the paper) or by the project's ``8/8`` / ``1/8`` pyramid (:mod:`npmrf3d.model.pyramid`).
+
+Choices where the paper is silent (also in ``docs/kopf.md``)
+-------------------------------------------------------------
+* Neighbourhood geometry: the views and axes of :mod:`npmrf3d.model.neighbourhood` (front = plane
+  ``(i, j)`` -> exemplar (row, column), right = ``(j, k)``, top = ``(i, k)``). A window is
+  anchored at its top-left sparse-grid site ``u`` and covers ``u .. u + window - 1`` along both
+  plane axes (toroidal volume), so even sizes such as the paper's 8x8 have no centre problem.
+  Exemplar neighbourhoods are the windows that lie fully inside the exemplar.
+* Coarse levels: the exemplar is box-averaged over ``2^l x 2^l`` blocks (the mean of its
+  decimation phases); the volume of level ``l`` has ``size / 2^l`` voxels per side.
+* Histograms: bins span each channel's range over all (full-resolution) exemplars; the target is
+  the mean of the views' exemplar histograms at the current level, scaled to the volume's voxel
+  count. ``H`` are bin *counts* (the paper's "value of bin b"), so ``histogram_weight = 1`` is
+  the paper's formula; with fractions (``histogram_weight = 1 / N``) the re-weighting is too
+  weak to counter the averaging's narrowing of the histogram (measured, ``docs/kopf.md``).
+* IRLS weights use the exact (full-dimensional) distance of the chosen exemplar neighbourhood,
+  floored at ``1e-3 * sigma * sqrt(d)`` (``sigma`` the exemplar standard deviation) so an exact
+  match does not get an infinite weight.
+* Mean-shift: Gaussian kernel; modes are sought from the heaviest contributors and from their
+  weighted mean, the densest mode wins, and the texels within one bandwidth of it are averaged.
+  Clusters are formed with the IRLS weights; the histogram and constraint re-weighting applies to
+  the members (it must run in the sequential random-order pass).
+* Determinism: voxel orders are drawn from ``rng`` before any parallel loop; KD-tree queries and
+  the parallel gather are per-query/per-voxel, and the order-dependent pass is sequential, so the
+  volume depends on the seed only, not on the thread count.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from .. import _validation as check
+from .._kernels import _jit
+from ..config import DEFAULT_SIZE, SynthesisMethod, SynthesisResult
+from ..model.exemplar import resolve_exemplars
+from ..model.neighbourhood import VIEW_AXES, VIEWS
+from ..model.pyramid import Levels, run_pyramid
+from ..resources import check_memory, kopf_estimate
+
+# The building blocks (search, IRLS optimisation, histograms, up-sampling, constraints) live in
+# _kopf_steps; they are re-exported here, where the tests and docs/kopf.md have always found them.
+from ._kopf_steps import (
+    PatchIndex,
+    _coarsen_constraint,
+    _constraint_arrays,
+    _pack_exemplars,
+    _upsample,
+    channel_bins,
+    channel_histograms,
+    downsample_exemplar,
+    exemplar_patches,
+    optimisation_phase,
+    pca_basis,
+    search_view,
+    volume_neighbourhoods,
+)
+
+__all__ = ["METHOD", "KopfConfig", "UPSAMPLING", "kopf_method", "kopf_synthesize", "make_kopf_config"]
+
+#: Up-sampling between levels: the paper's trilinear interpolation, or the project's pyramid
+#: (names of :data:`npmrf3d.model.pyramid.UPSAMPLERS`, the paper's first).
+UPSAMPLING = ("trilinear", "8/8", "1/8")
+#: Default mean-shift bandwidths (start, end) of each level, as multiples of the exemplar's
+#: standard deviation (pooled over channels).
+DEFAULT_MEAN_SHIFT = (1.0, 0.25)
+#: Default strength of the histogram re-weighting (1 = the paper's formula with bin counts).
+DEFAULT_HISTOGRAM_WEIGHT = 1.0
+#: Default search + optimisation iterations of every level.
+DEFAULT_ITERATIONS = 5
+
+ProgressCallback = Callable[[int, int, int, float], None]
+
+
+@dataclass(frozen=True)
+class KopfConfig:
+    """A validated NP_K run (see :func:`kopf_synthesize` for the meaning of each field)."""
+
+    size: tuple[int, int, int]
+    window: int = 8
+    levels: int = 3
+    views: tuple[str, ...] = VIEWS
+    iterations: tuple[int, ...] = (DEFAULT_ITERATIONS,) * 3
+    r: float = 0.8
+    eps: float = 2.0
+    variance: float = 0.95
+    grid: int = 2
+    histogram_bins: int = 16
+    histogram_weight: float = DEFAULT_HISTOGRAM_WEIGHT
+    mean_shift: tuple[float, float] | None = DEFAULT_MEAN_SHIFT
+    upsample: str = "trilinear"
+    constrained: bool = False
+    seed: int | None = None
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able dictionary."""
+        return asdict(self)
+
+
+# --------------------------------------------------------------------------- validation
+
+
+def make_kopf_config(
+    *, size=DEFAULT_SIZE, window=KopfConfig.window, levels=KopfConfig.levels, views=KopfConfig.views,
+    iterations=DEFAULT_ITERATIONS, r=KopfConfig.r, eps=KopfConfig.eps, variance=KopfConfig.variance,
+    grid=KopfConfig.grid, histogram_bins=KopfConfig.histogram_bins,
+    histogram_weight=KopfConfig.histogram_weight, mean_shift=KopfConfig.mean_shift,
+    upsample=KopfConfig.upsample, constrained=False, seed=None,
+) -> KopfConfig:
+    """Validate plain keyword arguments into a frozen :class:`KopfConfig`."""
+    levels = check.integer("levels", levels, low=1, high=8)
+    window = check.integer("window", window, low=2, high=64)
+    dims = check.size(size, levels=levels, window=1)
+    f = 2 ** (levels - 1)
+    grid = check.integer("grid", grid, low=1, high=window)
+    for n in dims:
+        if (n // f) % grid:
+            check.fail(f"size {n} does not suit grid {grid} with {levels} levels: every level's size "
+                       f"must be a multiple of grid, the coarsest is {n // f}; choose a multiple of "
+                       f"{f * grid}")
+        if n // f < window:
+            check.fail(f"size {n} is too small for window {window} with {levels} levels: the "
+                       f"coarsest level has {n // f} voxels per side, needs at least {window}; "
+                       f"use a larger size, a smaller window or fewer levels")
+    iterations = check.per_level("iterations", iterations, levels, low=1)
+    r = check.real("r", r, low=0.0, high=2.0, low_open=True)
+    eps = check.real("eps", eps, low=0.0)
+    variance = check.real("variance", variance, low=0.0, high=1.0, low_open=True)
+    histogram_bins = check.integer("histogram_bins", histogram_bins, low=2, high=4096)
+    histogram_weight = check.real("histogram_weight", histogram_weight, low=0.0)
+    if mean_shift is not None:
+        if isinstance(mean_shift, (int, float, np.integer, np.floating)) and not isinstance(mean_shift, bool):
+            mean_shift = (mean_shift, mean_shift)
+        try:
+            pair = tuple(mean_shift)
+        except TypeError:
+            check.fail(f"mean_shift must be None, a bandwidth or a pair (start, end); got {mean_shift!r}")
+        if len(pair) != 2:
+            check.fail(f"mean_shift must be None, a bandwidth or a pair (start, end); got {mean_shift!r}")
+        mean_shift = tuple(check.real("mean_shift", h, low=0.0, low_open=True) for h in pair)
+    upsample = check.choice("upsample", upsample, UPSAMPLING)
+    views = check.views(views, VIEWS)
+    if seed is not None:
+        seed = check.integer("seed", seed, low=0)
+    return KopfConfig(size=dims, window=window, levels=levels, views=views, iterations=iterations,
+                      r=r, eps=eps, variance=variance, grid=grid, histogram_bins=histogram_bins,
+                      histogram_weight=histogram_weight, mean_shift=mean_shift, upsample=upsample,
+                      constrained=bool(constrained), seed=seed)
+
+
+# --------------------------------------------------------------------------- public
+
+
+def kopf_synthesize(
+    exemplar=None, *, size=DEFAULT_SIZE, window: int = KopfConfig.window,
+    levels: int = KopfConfig.levels, views=KopfConfig.views, exemplars: Mapping | None = None,
+    iterations=DEFAULT_ITERATIONS, r: float = KopfConfig.r, eps: float = KopfConfig.eps,
+    variance: float = KopfConfig.variance, grid: int = KopfConfig.grid,
+    histogram_bins: int = KopfConfig.histogram_bins,
+    histogram_weight: float = KopfConfig.histogram_weight, mean_shift=KopfConfig.mean_shift,
+    upsample: str = KopfConfig.upsample, constraint=None, constraint_weight=None, rng=None,
+    progress: ProgressCallback | None = None, checkpoint=None,
+) -> SynthesisResult:
+    """Synthesize a solid texture with NP_K (Kopf et al. 2007; SPEC.md section 6).
+
+    Parameters
+    ----------
+    exemplar : path, (H, W) or (H, W, C) array, or None
+        The 2D sample (None: the bundled default). Used for every view without an entry in
+        ``exemplars``.
+    size : int or (N1, N2, N3)
+        Output size, divisible by ``2**(levels - 1)``; the coarsest level needs at least
+        ``window`` voxels per side.
+    window : int >= 2
+        Side of the square 2D neighbourhoods (the paper: 8). Even sizes are fine (windows are
+        anchored at their top-left site).
+    levels : int
+        Resolution levels, coarse to fine (the paper: 3). The window must fit the exemplar
+        box-averaged ``2**(levels - 1)`` times.
+    views : sequence of {"front", "right", "top"} (or a comma-separated string)
+        Views whose neighbourhoods enter the energy (2 or 3 in the paper; 1 is allowed). Axis
+        mapping as in :mod:`npmrf3d.model.neighbourhood`.
+    exemplars : dict view -> exemplar, optional
+        A different exemplar for some views (the paper's section 6.2).
+    iterations : int or sequence of int
+        Search + optimisation iterations per level (one number for all levels, or one per
+        level, coarsest first).
+    r : float in (0, 2]
+        Exponent of the robust energy (IRLS weights ``||s - e||^(r - 2)``; 2 = least squares).
+    eps : float >= 0
+        Error bound of the approximate nearest-neighbour search (``cKDTree.query(eps=...)``);
+        0 = exact search in the PCA space.
+    variance : float in (0, 1]
+        Fraction of the exemplar neighbourhoods' variance kept by the PCA projection.
+    grid : int >= 1
+        Spacing ``m`` of the sparse grid of searched neighbourhoods (1 = every voxel).
+    histogram_bins : int >= 2
+        Bins of each channel's histogram.
+    histogram_weight : float >= 0
+        Strength of the histogram re-weighting: weights are divided by
+        ``1 + histogram_weight * sum_c max(0, H_s,c(b) - H_e,c(b))`` with histograms in voxel
+        counts (the exemplar's scaled to the volume size); 0 = off, 1 = the paper's formula.
+    mean_shift : None, float or (float, float)
+        Mean-shift bandwidths (start, end) of each level as multiples of the exemplar's
+        standard deviation; the bandwidth shrinks geometrically over the iterations of a level.
+        None = plain weighted average (paper eq. 4).
+    upsample : {"trilinear", "8/8", "1/8"}
+        Initialisation of a finer level: trilinear interpolation (the paper), or the project's
+        pyramid (:mod:`npmrf3d.model.pyramid`): copy the parent into all 8 children, or only into the
+        child at the parent's position with random exemplar texels elsewhere.
+    constraint : (N1, N2, N3, C) array, optional
+        Target colours ``t_v`` of voxel constraints (the paper's section 6.2, eq. 6).
+    constraint_weight : float or (N1, N2, N3) array, optional
+        Constraint weights ``tau_v >= 0`` (0 = unconstrained voxel; default 1 everywhere when a
+        constraint is given). Coarse levels use block averages of targets and weights.
+    rng : None, int or numpy Generator
+        Seed; the result depends on it only (not on the number of threads).
+    progress : callable, optional
+        Called as ``progress(level, iteration, iterations, energy)`` before the first iteration
+        of each level (``iteration = 0``, energy nan) and after every iteration (energy = mean
+        ``||s - e||^r`` of that iteration's search).
+    checkpoint : path, optional
+        A ``.npz`` file written after each level; if it exists and holds a checkpoint of the
+        same configuration and exemplars, synthesis resumes after its last finished level.
+
+    Returns
+    -------
+    SynthesisResult
+        ``volume`` (N1, N2, N3, C) float32; ``history`` the mean energy of each iteration's
+        search, one list per level (coarsest first); ``config`` a :class:`KopfConfig`;
+        ``timings`` seconds (``setup``, ``level_<l>``, ``total``); ``labels`` an empty
+        ``(0, C)`` array (NP_K works with continuous values, not a label set); ``stats`` per
+        level: shape, iterations, queries, PCA dimensions and exemplar neighbourhoods per view,
+        search and optimisation seconds, and the thread count.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> stripes = np.tile(np.array([0, 0, 1, 1], dtype=np.uint8) * 255, (16, 4))
+    >>> res = kopf_synthesize(stripes, size=8, window=4, levels=1, views="front", iterations=2, rng=0)
+    >>> res.volume.shape
+    (8, 8, 8, 1)
+    """
+    t_start = time.perf_counter()
+    seed = rng if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) else None
+    config = make_kopf_config(
+        size=size, window=window, levels=levels, views=views, iterations=iterations, r=r, eps=eps,
+        variance=variance, grid=grid, histogram_bins=histogram_bins,
+        histogram_weight=histogram_weight, mean_shift=mean_shift, upsample=upsample,
+        constrained=constraint is not None, seed=seed,
+    )
+    generator = check.rng(rng)
+    per_view = resolve_exemplars(exemplar, exemplars, config.views, window=config.window,
+                                 levels=config.levels)
+    check_memory(kopf_estimate(config, per_view))
+    channels = next(iter(per_view.values())).shape[2]
+    target, tau = _constraint_arrays(constraint, constraint_weight, config.size, channels)
+    return run_kopf(config, per_view, generator, constraint=target, constraint_weight=tau,
+                    progress=progress, checkpoint=checkpoint, t_start=t_start)
+
+
+class _KopfLevels(Levels):
+    """NP_K's side of :func:`npmrf3d.model.pyramid.run_pyramid`; the state is the volume itself."""
+
+    def __init__(self, config: KopfConfig, per_view: Mapping[str, np.ndarray], constraint,
+                 constraint_weight):
+        self.config, self.per_view = config, per_view
+        self.constraint, self.constraint_weight = constraint, constraint_weight
+        self.size, self.levels = config.size, config.levels
+        self.key = json.dumps(config.to_dict(), sort_keys=True, default=str)
+        self.distinct = list({id(a): a for a in (per_view[v] for v in config.views)}.values())
+        self.channels = self.distinct[0].shape[2]
+        pooled = np.concatenate([a.reshape(-1, self.channels) for a in self.distinct]).astype(np.float64)
+        self.lo = pooled.min(axis=0)
+        span = pooled.max(axis=0) - self.lo
+        self.scale = np.where(span > 0, config.histogram_bins / np.where(span > 0, span, 1.0), 0.0)
+        self.sigma = float(pooled.std()) or 1.0
+        self.view_axes = np.array([VIEW_AXES[v] for v in config.views], dtype=np.int64)
+        # the volume's bytes depend on the exemplars and the constraint too
+        self.fingerprint = {"exemplars": np.concatenate([a.ravel() for a in self.distinct])}
+        if constraint is not None:
+            self.fingerprint["constraint"] = constraint
+            self.fingerprint["constraint_weight"] = constraint_weight
+
+    def prepare(self, level, shape):
+        config, views, per_view = self.config, self.config.views, self.per_view
+        level_ex = {id(a): downsample_exemplar(a, level) for a in self.distinct}
+        indices = {key: PatchIndex(ex, config.window, config.variance) for key, ex in level_ex.items()}
+        self.view_index = [indices[id(per_view[v])] for v in views]
+        self.pixels = np.concatenate([ex.reshape(-1, self.channels) for ex in level_ex.values()])
+        self.hist_target = np.mean(
+            [channel_histograms(level_ex[id(per_view[v])], self.lo, self.scale, config.histogram_bins)
+             / (level_ex[id(per_view[v])].shape[0] * level_ex[id(per_view[v])].shape[1])
+             for v in views], axis=0)
+        self.packed = _pack_exemplars(self.view_index, self.lo, self.scale, config.histogram_bins)
+        self.target, self.tau = _coarsen_constraint(self.constraint, self.constraint_weight, level)
+        self.floor = 1e-3 * self.sigma * math.sqrt(config.window ** 2 * self.channels)
+        self.n_iter = config.iterations[config.levels - 1 - level]
+
+    def initial(self, shape, rng):
+        return np.ascontiguousarray(self.pixels[rng.integers(0, len(self.pixels), size=shape)],
+                                    dtype=np.float32)
+
+    def upsample(self, state, rng):
+        return _upsample(state, self.config.upsample, self.pixels, rng)
+
+    def start(self, level, state):
+        return self.n_iter, float("nan")
+
+    def relax(self, level, volume, rng, on_step):
+        config, views, n_iter = self.config, self.config.views, self.n_iter
+        shape = volume.shape[:3]
+        level_history = []
+        t_search = t_opt = 0.0
+        queries = 0
+        for it in range(n_iter):
+            ts = time.perf_counter()
+            assign = np.empty((len(views), *shape), dtype=np.int32)
+            omega = np.empty((len(views), *shape), dtype=np.float32)
+            energy = 0.0
+            for vi, view in enumerate(views):
+                assign[vi], omega[vi], e, q = search_view(
+                    volume, view, self.view_index[vi], grid=config.grid, eps=config.eps, r=config.r,
+                    floor=self.floor, offset=int(self.packed.offsets[vi]))
+                energy += e
+                queries += q
+            t_search += time.perf_counter() - ts
+            ts = time.perf_counter()
+            if config.mean_shift is None:
+                bandwidth = 0.0
+            else:
+                h0, h1 = config.mean_shift
+                frac = it / (n_iter - 1) if n_iter > 1 else 1.0
+                bandwidth = self.sigma * h0 * (h1 / h0) ** frac
+            order = rng.permutation(volume.shape[0] * volume.shape[1] * volume.shape[2]).astype(np.int64)
+            hist = channel_histograms(volume, self.lo, self.scale, config.histogram_bins)
+            optimisation_phase(volume, assign, omega, self.view_axes, self.packed,
+                               window=config.window, grid=config.grid, order=order, hist=hist,
+                               hist_target=self.hist_target, histogram_weight=config.histogram_weight,
+                               lo=self.lo, scale=self.scale, bins=config.histogram_bins,
+                               bandwidth=bandwidth, constraint=self.target, tau=self.tau)
+            t_opt += time.perf_counter() - ts
+            sites = sum(int((assign[vi] >= 0).sum()) for vi in range(len(views)))
+            level_history.append(energy / max(1, sites))
+            on_step(it + 1, level_history[-1])
+        stats = {
+            "shape": list(shape), "iterations": n_iter, "queries": queries,
+            "search_seconds": t_search, "optimise_seconds": t_opt,
+            "pca_dims": {v: self.view_index[vi].dims for vi, v in enumerate(views)},
+            "patches": {v: int(self.view_index[vi].patches.shape[0]) for vi, v in enumerate(views)},
+        }
+        return volume, level_history, stats
+
+    def to_arrays(self, volume):
+        return {"volume": volume}
+
+    def from_arrays(self, arrays):
+        return np.ascontiguousarray(arrays["volume"], dtype=np.float32)
+
+
+def run_kopf(config: KopfConfig, per_view: Mapping[str, np.ndarray], rng: np.random.Generator, *,
+             constraint=None, constraint_weight=None, progress: ProgressCallback | None = None,
+             checkpoint=None, t_start: float | None = None) -> SynthesisResult:
+    """Run a validated configuration on validated exemplars (the body of :func:`kopf_synthesize`).
+
+    ``checkpoint``: a ``.npz`` file written after each level, resumed from when it matches (as
+    for :func:`npmrf3d.synthesize`).
+    """
+    t_start = time.perf_counter() if t_start is None else t_start
+    levels = _KopfLevels(config, per_view, constraint, constraint_weight)
+    out = run_pyramid(levels, rng, progress=progress, checkpoint=checkpoint,
+                      timings={"setup": time.perf_counter() - t_start},
+                      stats={"threads": _jit.thread_count()}, t_start=t_start)
+    return SynthesisResult(volume=out.state, history=out.history, config=config,
+                           timings=out.timings, labels=np.zeros((0, levels.channels), dtype=np.float32),
+                           stats=out.stats)
+
+
+def kopf_method(per_view: Mapping[str, np.ndarray], config: KopfConfig, rng: np.random.Generator, *,
+                progress: ProgressCallback | None = None, checkpoint=None, constraint=None,
+                constraint_weight=None, t_start: float | None = None) -> SynthesisResult:
+    """NP_K in the common method signature (:data:`npmrf3d.methods.METHODS`); ``constraint``
+    and ``constraint_weight`` are raw arrays, validated here."""
+    channels = next(iter(per_view.values())).shape[2]
+    target, tau = _constraint_arrays(constraint, constraint_weight, config.size, channels)
+    return run_kopf(config, per_view, rng, constraint=target, constraint_weight=tau,
+                    progress=progress, checkpoint=checkpoint, t_start=t_start)
+
+
+#: The registry entry of NP_K.
+METHOD = SynthesisMethod(
+    name="kopf", run=kopf_method, make_config=make_kopf_config, config_class=KopfConfig,
+    synthesize=kopf_synthesize,
+    fit=lambda c: {"window": c.window, "levels": c.levels, "toroidal": False},
+    resources=kopf_estimate,
+    description="NP_K, texture optimisation with histogram matching (Kopf et al. 2007)",
+)

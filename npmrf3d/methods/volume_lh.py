@@ -1,0 +1,641 @@
+"""Synthesis from a 3D exemplar with a vector-field deformation (seed 002; issue 15, item 3).
+
+Why a module of ~630 lines: configuration, validation, the appearance-space model, the level
+loop, the checkpoint and the registry entry of one method, most of it the documented signature.
+
+The method (registry name ``volume-lh``: it is Lefebvre & Hoppe's appearance-space, coordinate
+pyramid synthesis carried to 3D, as seed 002 does) makes a volume whose every voxel *copies* a
+voxel of the 3D exemplar: the synthesised volume is a field of exemplar coordinates ``S``.
+
+1. **Appearance space** (per level): the exemplar, Gaussian-smoothed for the level's spacing
+   ``h = 2**level`` (``sigma = h / 2``, none at the finest level), gives every voxel the vector of
+   its ``5 x 5 x 5`` neighbourhood sampled every ``h`` voxels (``125 C`` values, borders clamped);
+   PCA keeps ``pca_dims`` = 8 dimensions (the paper: 375 -> 8).
+2. **Similarity sets** (``k = 3``): the voxel itself, then the nearest voxels in appearance space
+   with each new one outside the ``7 x 7 x 7`` neighbourhood (``exclude = 3``) of the earlier ones.
+3. **Coordinate pyramid**: the coarsest level starts from the exemplar tiled at its spacing
+   with a random offset of its own for every tile, and jitter (``start = "blocks"``, since stop
+   33; ``"tiled"``: one offset for all, what the paper's pyramid from one voxel gives, which
+   repeats the exemplar at its period; ``"random"``: uniform coordinates);
+   each level's children take ``S[parent] + floor(h R^T (delta - 1/2) + 1/2)`` (``delta`` in
+   {0, 1}^3, ``R`` the child's frame), then a **jitter** ``floor(h r U + 1/2)``, ``U`` uniform in
+   [-1, 1]^3 (``r = jitter``, the paper's 0.7), then ``passes`` **correction** passes of 8
+   parity sub-passes (:func:`npmrf3d._kernels.volume_lh.correct`).
+4. **Deformation**: every voxel has a frame ``R`` (:mod:`npmrf3d.model.fields`); the neighbourhood of a
+   voxel ``p`` is read at the warped positions ``p + floor(R D + 1/2)`` of the 8 diagonals ``D``,
+   and compared with the exemplar's at ``u + h D``, so exemplar direction ``D`` is laid along
+   ``R D``: the structure turns with the field.
+
+Choices where the paper is silent (also in ``docs/volume.md``): a coarsest level of
+``size / 2**(levels-1)`` voxels holding the exemplar tiled at its spacing (what one voxel
+up-sampled would give) with a random offset per tile and jitter; the valid box keeps
+coordinates ``window // 2`` voxels from the exemplar's faces (the paper discards 2 voxels per
+border); coordinates are rounded after up-sampling and jitter; the similarity sets are searched
+(exact ``cKDTree``) for and among the valid voxels of a stride-2 lattice (1/8 of them), the
+exclusion rule applied to all earlier members, and the other voxels take their lattice voxel's
+set shifted by their offset; the correction keeps the current coordinate as a candidate
+and reads the sub-pass's input (Jacobi), so results do not depend on the thread count; a position
+histogram (``usage``, this project's addition after Chen & Wang 2010: :func:`cell_usage`) keeps
+non-stationary exemplars from collapsing onto one homogeneous region; the output is toroidal;
+colours are the exemplar's full-resolution values at the final coordinates.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+from scipy.spatial import cKDTree
+
+from .. import _validation as check
+from .._kernels import _jit
+from .._kernels import volume_lh as _k
+from ..analysis.repetition import copy_repetition
+from ..config import SynthesisMethod, SynthesisResult
+from ..io.files import load_checkpoint, save_checkpoint
+from ..model.exemplar3d import load_volume_exemplar, volume_fits
+from ..model.fields import FIELDS, field_input, level_frames
+from ..model.phases import (
+    MAX_PHASES,
+    SOFT_WIDTH,
+    PhaseControl,
+    phase_error,
+    phase_footprint,
+    phase_membership,
+)
+from ..resources import Estimate, check_memory
+
+__all__ = ["VolumeConfig", "appearance_space", "make_volume_config", "run", "similarity_sets",
+           "volume_synthesize"]
+
+ProgressCallback = Callable[[int, int, int, float], None]
+#: Exemplar voxels sampled to compute the PCA of each level.
+PCA_SAMPLES = 20000
+#: Stride of the lattice the similarity sets are searched in, and the neighbours queried.
+SET_STRIDE = 2
+SET_QUERY = 48
+#: How the coarsest level starts: the exemplar tiled (the paper's coordinate pyramid, from one
+#: voxel) with a random offset and jitter, uniformly random coordinates, or the tiling with an
+#: offset of its own for every tile.
+STARTS = ("tiled", "random", "blocks")
+#: The synthesis neighbourhoods: the paper's 8 diagonal neighbours, or those and the 6 faces.
+NEIGHBOURHOODS = {"diagonal": _k.DIAGONALS, "faces": np.concatenate([_k.DIAGONALS, _k.FACES])}
+
+
+@dataclass(frozen=True)
+class VolumeConfig:
+    """A validated run of the 3D-exemplar method; every default lives here."""
+
+    size: tuple[int, int, int] = (64, 64, 64)
+    levels: int = 4
+    window: int = 5
+    pca_dims: int = 8
+    k: int = 3
+    exclude: int = 3
+    passes: int = 4
+    neighbourhood: str = "faces"
+    jitter: float = 0.7
+    fine_jitter: float = 0.0
+    usage: float = 1.0
+    balance: float = 4.0
+    # stop 33 (docs/volume.md): the tiled start repeats 8-22 % of a 128^3 volume at the
+    # exemplar's period; blocks keeps the statistics of 6 scans x 3 seeds but one surface area
+    start: str = "blocks"
+    vector_field: str = "none"
+    angle: float = 180.0
+    seed: int | None = None
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able dictionary."""
+        return asdict(self)
+
+
+DEFAULTS = VolumeConfig()
+
+
+def make_volume_config(*, size=DEFAULTS.size, levels=DEFAULTS.levels, window=DEFAULTS.window,
+                       pca_dims=DEFAULTS.pca_dims, k=DEFAULTS.k, exclude=DEFAULTS.exclude,
+                       passes=DEFAULTS.passes, neighbourhood=DEFAULTS.neighbourhood,
+                       jitter=DEFAULTS.jitter, fine_jitter=DEFAULTS.fine_jitter,
+                       usage=DEFAULTS.usage, balance=DEFAULTS.balance, start=DEFAULTS.start,
+                       vector_field=DEFAULTS.vector_field, angle=DEFAULTS.angle,
+                       seed=None) -> VolumeConfig:
+    """Validate plain keyword arguments into a frozen :class:`VolumeConfig` (``vector_field``: a
+    name of :data:`npmrf3d.model.fields.FIELDS`, ``array`` or ``file:PATH`` as :func:`field_input`
+    records it)."""
+    levels = check.integer("levels", levels, low=1, high=6)
+    dims = check.size(size, levels=levels, window=3)
+    window = check.integer("window", window, low=3, high=7)
+    if window % 2 == 0:
+        check.fail(f"window must be odd; got {window}")
+    if not isinstance(vector_field, str) or not (vector_field in FIELDS or vector_field == "array"
+                                                 or vector_field.startswith("file:")):
+        check.fail(f"vector_field must be one of {', '.join(FIELDS)}, an array or a .npy file; "
+                   f"got {vector_field!r}")
+    if seed is not None:
+        seed = check.integer("seed", seed, low=0)
+    return VolumeConfig(
+        size=dims, levels=levels, window=window,
+        pca_dims=check.integer("pca_dims", pca_dims, low=1, high=64),
+        k=check.integer("k", k, low=1, high=16), exclude=check.integer("exclude", exclude, low=0, high=16),
+        passes=check.integer("passes", passes, low=0, high=16),
+        neighbourhood=check.choice("neighbourhood", neighbourhood, tuple(NEIGHBOURHOODS)),
+        jitter=check.real("jitter", jitter, low=0.0, high=4.0),
+        fine_jitter=check.real("fine_jitter", fine_jitter, low=0.0, high=4.0),
+        usage=check.real("usage", usage, low=0.0, high=100.0),
+        balance=check.real("balance", balance, low=0.0, high=100.0),
+        start=check.choice("start", start, STARTS),
+        vector_field=vector_field, angle=check.real("angle", angle, low=-3600.0, high=3600.0), seed=seed)
+
+
+# --------------------------------------------------------------------------- the exemplar model
+
+
+def appearance_space(exemplar: np.ndarray, level: int, window: int, dims: int,
+                     rng: np.random.Generator) -> np.ndarray:
+    """The appearance-space exemplar of one level: ``(D, H, W, dims)`` float64.
+
+    Each voxel's ``window^3`` neighbourhood, sampled every ``h = 2**level`` voxels in the exemplar
+    smoothed by a Gaussian of ``sigma = h / 2`` (none at level 0), borders clamped, projected on
+    the ``dims`` leading principal directions of :data:`PCA_SAMPLES` random voxels' vectors.
+    """
+    h = 2 ** level
+    ex = smoothed(exemplar, level)
+    shape = ex.shape[:3]
+    r = window // 2
+    offsets = [(a, b, c) for a in range(-r, r + 1) for b in range(-r, r + 1) for c in range(-r, r + 1)]
+    n = shape[0] * shape[1] * shape[2]
+    sample = np.sort(rng.choice(n, size=min(n, PCA_SAMPLES), replace=False))
+    pos = np.stack(np.unravel_index(sample, shape), axis=1)
+    vectors = np.concatenate([ex[tuple(np.clip(pos[:, a] + h * o[a], 0, shape[a] - 1) for a in range(3))]
+                              for o in offsets], axis=1)
+    mean = vectors.mean(axis=0)
+    _, vecs = np.linalg.eigh((vectors - mean).T @ (vectors - mean))
+    basis = vecs[:, ::-1][:, :min(dims, vectors.shape[1])]
+    out = np.empty(shape + (basis.shape[1],))
+    _k.project(np.ascontiguousarray(ex), h, r, mean, np.ascontiguousarray(basis), out)
+    return out
+
+
+def similarity_sets(feat: np.ndarray, lo: np.ndarray, hi: np.ndarray, k: int, exclude: int) -> np.ndarray:
+    """``(D * H * W, k)`` int64 flat indices: row ``q`` is the similarity set of valid voxel ``q``
+    (itself first; rows of voxels outside the valid box hold the voxel itself).
+
+    The sets are searched for the valid voxels of a lattice of stride :data:`SET_STRIDE` (exact
+    ``cKDTree`` over the lattice, :data:`SET_QUERY` nearest, then the exclusion rule,
+    :func:`npmrf3d._kernels.volume_lh.similarity_sets`); every other valid voxel takes its lattice
+    voxel's set shifted by its offset from it (a coherent shift), clamped to the valid box.
+    """
+    shape = feat.shape[:3]
+    flat_all = np.arange(shape[0] * shape[1] * shape[2], dtype=np.int64)
+    out = np.repeat(flat_all[:, None], k, axis=1)
+    if k == 1:
+        return out
+    axes = [np.arange(lo[a], hi[a] + 1) for a in range(3)]
+    lattice = np.stack(np.meshgrid(*[x[::SET_STRIDE] for x in axes], indexing="ij"), axis=-1).reshape(-1, 3)
+    points = feat[tuple(lattice.T)]
+    m = min(len(lattice), SET_QUERY)
+    _, idx = cKDTree(points).query(points, k=m, workers=_jit.thread_count())
+    idx = np.asarray(idx, dtype=np.int64).reshape(len(lattice), m)
+    # a point's own row first (exact duplicates could come back in another order)
+    own = np.arange(len(lattice))
+    idx = np.concatenate([own[:, None], np.where(idx == own[:, None], own[:, None], idx)], axis=1)
+    sets = np.empty((len(lattice), k), dtype=np.int64)
+    _k.similarity_sets(idx, lattice.astype(np.int64), k, exclude, sets)
+    members = lattice[sets]  # (L, k, 3) positions
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    rep = lo + (grid - lo) // SET_STRIDE * SET_STRIDE
+    steps = [len(x[::SET_STRIDE]) for x in axes]
+    row = np.ravel_multi_index(tuple(((rep - lo) // SET_STRIDE).T), steps)
+    shifted = np.clip(members[row] + (grid - rep)[:, None, :], lo, hi)
+    shifted[:, 0] = grid
+    out[np.ravel_multi_index(tuple(grid.T), shape)] = np.ravel_multi_index(
+        tuple(shifted.reshape(-1, 3).T), shape).reshape(-1, k)
+    return out
+
+
+def _valid_box(shape, window: int) -> tuple[np.ndarray, np.ndarray]:
+    r = window // 2
+    return np.full(3, r, dtype=np.int64), np.array([n - 1 - r for n in shape], dtype=np.int64)
+
+
+# --------------------------------------------------------------------------- the pyramid
+
+
+def upsample(coords: np.ndarray, frames: np.ndarray, h: int, lo, hi) -> np.ndarray:
+    """Children's coordinates ``S[parent] + floor(h R^T (delta - 1/2) + 1/2)``, clamped to the
+    valid box (``frames``: the children's, or one frame for all)."""
+    n1, n2, n3 = coords.shape[:3]
+    child = np.repeat(np.repeat(np.repeat(coords, 2, axis=0), 2, axis=1), 2, axis=2).astype(np.int64)
+    delta = np.stack(np.meshgrid(*[(np.arange(2 * n) % 2) - 0.5 for n in (n1, n2, n3)], indexing="ij"), axis=-1)
+    rt = np.swapaxes(frames.astype(np.float64), -1, -2)
+    offset = np.floor(h * np.einsum("...rc,...c->...r", rt, delta) + 0.5).astype(np.int64)
+    return np.clip(child + offset, lo, hi)
+
+
+def initial_coordinates(shape, h: int, lo, hi, start: str, jitter: float,
+                        rng: np.random.Generator) -> np.ndarray:
+    """The coarsest level's coordinates ``(*shape, 3)`` int64 in the valid box ``[lo, hi]``.
+
+    ``tiled``: the exemplar laid out at the level's spacing, ``lo + (h p + o) mod (hi - lo + 1)``
+    with one random offset ``o``, then jittered (:func:`jittered`, amplitude ``jitter``) — what the
+    paper's pyramid from a single voxel gives, with wrap-around seams for the correction to mend.
+    ``random``: every coordinate uniform in the box (the exemplar's parts mixed voxel by voxel,
+    from which the correction drifts to the parts easiest to match: ``docs/volume.md``).
+    ``blocks``: the tiling, but every tile (``extent // h`` coarse voxels per axis) takes its own
+    random offset, so no block of the exemplar repeats at one shift."""
+    lo, hi = np.asarray(lo, dtype=np.int64), np.asarray(hi, dtype=np.int64)
+    if start == "random":
+        return np.stack([rng.integers(lo[a], hi[a] + 1, size=shape) for a in range(3)], axis=-1)
+    extent = hi - lo + 1
+    grid = np.stack(np.meshgrid(*[np.arange(n, dtype=np.int64) for n in shape], indexing="ij"), axis=-1)
+    if start == "blocks":
+        tile = np.maximum(1, extent // h)  # coarse voxels per exemplar tile, per axis
+        blocks = tuple(int(-(-n // t)) for n, t in zip(shape, tile))
+        offsets = rng.integers(0, extent, size=blocks + (3,))
+        offset = offsets[tuple((grid // tile)[..., a] for a in range(3))]
+    else:
+        offset = rng.integers(0, extent)
+    uniforms = rng.uniform(-1.0, 1.0, size=tuple(shape) + (3,)).astype(np.float32)
+    return jittered(lo + (grid * h + offset) % extent, h, jitter, uniforms, lo, hi)
+
+
+def jittered(coords: np.ndarray, h: int, amount: float, uniforms: np.ndarray, lo, hi) -> np.ndarray:
+    """``S + floor(h * amount * U + 1/2)`` clamped to the valid box (``U`` pre-drawn in [-1, 1])."""
+    return np.clip(coords + np.floor(h * amount * uniforms + 0.5).astype(np.int64), lo, hi)
+
+
+def correction_pass(coords: np.ndarray, frames: np.ndarray, feat: np.ndarray, kset: np.ndarray,
+                    h: int, lo, hi, offsets: np.ndarray = _k.DIAGONALS,
+                    usage: float = 0.0, balance: float = 0.0,
+                    phases: tuple[np.ndarray, np.ndarray] | None = None,
+                    control: PhaseControl | None = None) -> tuple[np.ndarray, float]:
+    """One correction pass: the 8 parity sub-passes in a fixed order; returns the coordinates and
+    the mean matching score.
+
+    A sub-pass reads ``coords`` and writes its parity class into ``out``, which is then copied
+    back into ``coords`` (an eighth of the voxels), so every sub-pass reads its input unchanged.
+    ``usage`` is the strength of the position histogram (:func:`cell_usage`), recounted before
+    every sub-pass; 0 is seed 002's rule. ``balance`` is the strength of the phase histogram
+    (:func:`npmrf3d.model.phases.class_balance`, of ``phases = (phase_footprint(...),
+    share)``), also recounted before every sub-pass; ``control``
+    (:class:`npmrf3d.model.phases.PhaseControl`, ``PhaseControl.start(phases)`` at the start
+    of a run) holds its prices and gain, is **updated in place** every sub-pass and is carried
+    from pass to pass and level to level."""
+    coords = np.array(coords, dtype=np.int64, order="C")  # a copy: the caller's array stays
+    out = np.empty_like(coords)
+    feat = np.ascontiguousarray(feat)
+    positions = set_positions(kset, feat.shape[:3])
+    cost = np.zeros(coords.shape[:3])
+    scale = usage_scale(feat, offsets) if usage or balance else 0.0
+    weight = float(usage) * scale
+    counts, even = np.zeros((1, 1, 1)), 1.0  # read only when weight > 0
+    bias = np.zeros((1, 1, 1))  # none
+    if balance and (phases is None or control is None):
+        check.fail("balance > 0 needs the exemplar's phases and their control state "
+                   "(phases=(phase_footprint(...), share), control=PhaseControl.start(len(share)))")
+    for parity in np.ndindex(2, 2, 2):
+        if weight:
+            counts, even = cell_usage(coords, feat.shape[:3], h, lo, hi)
+        if balance:
+            control.step(phase_error(coords, *phases))
+            bias = control.cost(phases[0], float(balance) * scale)
+        _k.correct(coords, out, frames, feat, positions, h, lo, hi, offsets,
+                   np.array(parity, dtype=np.int64), cost, counts, even, weight, bias)
+        cls = tuple(slice(p, None, 2) for p in parity)
+        coords[cls] = out[cls]
+    return coords, float(cost.mean())
+
+
+def usage_scale(feat: np.ndarray, offsets: np.ndarray) -> float:
+    """The distance scale of the position-histogram penalty: half the expected matching distance
+    of two random exemplar voxels, ``len(offsets) * sum_e var(feat[..., e])``."""
+    return float(len(offsets) * feat.reshape(-1, feat.shape[-1]).var(axis=0).sum())
+
+
+def cell_usage(coords: np.ndarray, shape, h: int, lo, hi) -> tuple[np.ndarray, float]:
+    """The position histogram of a level: how many voxels' coordinates fall in each ``h``-cell
+    ``u // h`` of the exemplar (float64, ``ceil(shape / h)``), and ``even``, the count of every
+    cell that meets the valid box if all were used equally.
+
+    This project's addition after Chen & Wang 2010's position histogram (seed 002 has none, and
+    relies on a stationary exemplar): the correction adds ``usage * s * max(0, c / even - 1)`` to
+    a candidate's distance (``s``: :func:`usage_scale`), so that no part of the exemplar is
+    copied far more often than the rest. Without it a non-stationary exemplar (a scan with a
+    homogeneous region) collapses onto that region: uniform neighbourhoods match each other best
+    (``docs/volume.md``). Cells of the level's spacing make ``even`` the same at every level,
+    the ratio of output voxels to exemplar voxels."""
+    cells = tuple(-(-int(n) // h) for n in shape)
+    flat = np.ravel_multi_index(tuple((coords.reshape(-1, 3) // h).T), cells)
+    counts = np.bincount(flat, minlength=int(np.prod(cells))).astype(np.float64).reshape(cells)
+    valid = int(np.prod([int(hi[a]) // h - int(lo[a]) // h + 1 for a in range(3)]))
+    return counts, coords[..., 0].size / valid
+
+
+def set_positions(kset: np.ndarray, shape) -> np.ndarray:
+    """The similarity sets ``(D * H * W, k)`` of flat indices as positions ``(D * H * W, k, 3)``
+    int64, the form :func:`npmrf3d._kernels.volume_lh.correct` reads."""
+    return np.ascontiguousarray(np.stack(np.unravel_index(kset, tuple(shape)), axis=-1), dtype=np.int64)
+
+
+def smoothed(exemplar: np.ndarray, level: int) -> np.ndarray:
+    """The exemplar of a level: Gaussian-smoothed by ``sigma = 2**level / 2`` (none at level 0),
+    float64, borders by nearest values (as :func:`appearance_space` sees it)."""
+    h = 2 ** level
+    ex = exemplar.astype(np.float64)
+    if h > 1:
+        ex = ndimage.gaussian_filter(ex, sigma=(h / 2, h / 2, h / 2, 0), mode="nearest")
+    return np.ascontiguousarray(ex)
+
+
+def window_offsets(window: int) -> np.ndarray:
+    """The ``window^3 - 1`` offsets of a cube without its centre, lexicographic."""
+    r = window // 2
+    return np.array([o for o in np.ndindex(window, window, window) if o != (r, r, r)], dtype=np.int64) - r
+
+
+def parzen_pass(coords, frames, feat, values, kset, h: int, lo, hi, offsets, window: int,
+                adaptive: float, centre_h2: float) -> tuple[np.ndarray, float]:
+    """:func:`correction_pass` with the Parzen decision (:func:`_kernels.volume.correct_parzen`)."""
+    coords = np.ascontiguousarray(coords, dtype=np.int64)
+    cost = np.zeros(coords.shape[:3])
+    woff = window_offsets(window)
+    for parity in np.ndindex(2, 2, 2):
+        out = coords.copy()
+        _k.correct_parzen(coords, out, frames, feat, values, kset, h, lo, hi, offsets, woff,
+                          np.array(parity, dtype=np.int64), adaptive, centre_h2, cost)
+        coords = out
+    return coords, float(cost.mean())
+
+
+# --------------------------------------------------------------------------- public
+
+
+def volume_synthesize(exemplar, *, size=DEFAULTS.size, levels: int = DEFAULTS.levels,
+                      window: int = DEFAULTS.window, pca_dims: int = DEFAULTS.pca_dims,
+                      k: int = DEFAULTS.k, exclude: int = DEFAULTS.exclude, passes: int = DEFAULTS.passes,
+                      neighbourhood: str = DEFAULTS.neighbourhood, jitter: float = DEFAULTS.jitter,
+                      fine_jitter: float = DEFAULTS.fine_jitter, usage: float = DEFAULTS.usage,
+                      balance: float = DEFAULTS.balance, start: str = DEFAULTS.start,
+                      vector_field=DEFAULTS.vector_field,
+                      angle: float = DEFAULTS.angle, exemplar_kind: str = "auto", spacing=None,
+                      rng=None, progress: ProgressCallback | None = None,
+                      checkpoint: str | Path | None = None) -> SynthesisResult:
+    """Synthesise a volume from a 3D exemplar, optionally deformed by a vector field (seed 002).
+
+    Parameters
+    ----------
+    exemplar : path or (D, H, W) / (D, H, W, C) array
+        The 3D exemplar (``.npy``, TIFF stack); see :func:`npmrf3d.model.exemplar3d.load_volume_exemplar`.
+    size : int or (N1, N2, N3)
+        Output size, divisible by ``2**(levels - 1)``.
+    levels : int
+        Pyramid levels; the coarsest has ``size / 2**(levels - 1)`` voxels per side and spacing
+        ``2**(levels - 1)`` in exemplar coordinates.
+    window : odd int
+        Side of the appearance-space neighbourhoods (the paper's m = 5).
+    pca_dims : int
+        Appearance-space dimensions (the paper: 8).
+    k : int
+        Size of the similarity sets (the paper: 3).
+    exclude : int
+        Later similarity-set members lie farther than this (Chebyshev) from earlier ones (the
+        paper's n = 7, i.e. 3).
+    passes : int
+        Correction passes per level (8 parity sub-passes each).
+    neighbourhood : {"faces", "diagonal"}
+        The synthesis neighbourhood: the paper's 8 diagonal neighbours (``diagonal``), or those
+        and the 6 face neighbours (``faces``, the default: the diagonals alone split the grid into
+        four sub-lattices that drift apart, measured in ``docs/volume.md``).
+    jitter : float
+        Jitter amplitude ``r`` in units of the level's spacing at the coarser levels (the
+        paper: 0.7).
+    fine_jitter : float
+        Jitter amplitude at the finest level (0: none, chosen by measurement, docs/volume.md).
+    usage : float
+        Strength of the position histogram (:func:`cell_usage`): ``usage * s * max(0, c / even -
+        1)`` is added to a candidate's distance, ``c`` the voxels already copying its exemplar
+        cell, ``s`` half the distance of two random exemplar neighbourhoods. 0 is seed 002's rule, which collapses onto one homogeneous region of a
+        non-stationary scan (``docs/volume.md``).
+    balance : float
+        Strength of the phase histogram (:mod:`npmrf3d.model.phases`): a candidate whose
+        phase (a segmented exemplar's value, or a side of a grey one's Otsu threshold) the
+        volume already holds more often than the exemplar pays ``balance * g * s * (max(0,
+        share / exemplar share - 1) + price)``, the price summing that relative error over the
+        sub-passes, the gain ``g`` halved when the error flips sign between sub-passes (a
+        noisy exemplar's oscillation) and grown back otherwise; at the coarser levels a
+        coordinate counts as the phase mix its descendants will copy, and a grey voxel near the
+        threshold as partly both sides (:func:`npmrf3d.model.phases.phase_membership`). 0 leaves the phase
+        fractions free (a minority phase such as the pores of a rock then shrinks level by
+        level).
+    start : {"tiled", "random", "blocks"}
+        The coarsest level: the exemplar tiled at its spacing with a random offset and jitter
+        (the paper's pyramid, which repeats the exemplar at its period), uniformly random
+        coordinates, or (the default) the tiling with an offset of its own for every tile (no
+        block of the exemplar repeated at one shift).
+    vector_field : str, path or array
+        ``none``, ``twist``, ``bend``, ``radial`` (:mod:`npmrf3d.model.fields`), a ``.npy`` file, or an
+        array: directions ``(N1, N2, N3, 3)`` or frames ``(N1, N2, N3, 3, 3)``.
+    angle : float
+        Degrees of rotation of the named fields ``twist`` and ``bend``.
+    exemplar_kind : {"auto", "volume"}
+        ``volume`` reads a 3-D array whose last axis is at most 4 as a volume.
+    spacing : float or (z, y, x), optional
+        Voxel size of the exemplar; must be isotropic.
+    rng : None, int or numpy Generator
+        Seed; the result depends on it only (not on the number of threads).
+    progress : callable, optional
+        ``progress(level, pass, passes, mean distance)``; pass 0 at the start of each level.
+    checkpoint : path, optional
+        ``.npz`` file written after each level; a matching one is resumed from.
+
+    Returns
+    -------
+    SynthesisResult
+        ``volume`` (N1, N2, N3, C) float32 exemplar values; ``history`` the mean matching distance
+        per pass, per level; ``stats`` per level: shape, spacing, model seconds, PCA dimensions.
+
+    Examples
+    --------
+    >>> layers = np.tile((np.arange(20) // 2 % 2).astype(np.float32)[:, None, None], (1, 20, 20))
+    >>> res = volume_synthesize(layers, size=16, levels=2, rng=0)
+    >>> res.volume.shape, sorted(np.unique(res.volume).tolist())
+    ((16, 16, 16, 1), [0.0, 1.0])
+    """
+    t_start = time.perf_counter()
+    seed = rng if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) else None
+    dims = check.size(size, levels=check.integer("levels", levels, low=1, high=6), window=3)
+    field_name, field_array = field_input(vector_field, dims)
+    config = make_volume_config(size=size, levels=levels, window=window, pca_dims=pca_dims, k=k,
+                                exclude=exclude, passes=passes, neighbourhood=neighbourhood,
+                                jitter=jitter, fine_jitter=fine_jitter, usage=usage, balance=balance, start=start,
+                                vector_field=field_name, angle=angle, seed=seed)
+    generator = check.rng(rng)
+    volume = load_volume_exemplar(exemplar, exemplar_kind=exemplar_kind, spacing=spacing)
+    per_view = {"volume": volume}
+    check_memory(volume_estimate(config, per_view))
+    return run(per_view, config, generator, progress=progress, checkpoint=checkpoint,
+               t_start=t_start, vector_field=field_array)
+
+
+def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
+        progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
+        t_start: float | None = None, vector_field: np.ndarray | None = None,
+        parzen: tuple[float, float] | None = None) -> SynthesisResult:
+    """The method on a validated configuration and ``{"volume": (D, H, W, C) float32}``.
+
+    ``parzen = (adaptive, centre_bandwidth)`` decides every correction by the Parzen LCPDF of
+    full ``window^3`` neighbourhoods of the level's smoothed exemplar values
+    (:func:`npmrf3d._kernels.volume_lh.correct_parzen`; the ``npmrf-3d`` method,
+    :mod:`npmrf3d.methods.npmrf_3d`); None: seed 002's nearest candidate in appearance space."""
+    t_start = time.perf_counter() if t_start is None else t_start
+    exemplar = _exemplar(per_view, config)
+    if config.vector_field in ("array",) or config.vector_field.startswith("file:"):
+        if vector_field is None:
+            _, vector_field = field_input(config.vector_field[5:], config.size) if \
+                config.vector_field.startswith("file:") else (None, None)
+        if vector_field is None:
+            check.fail("vector_field 'array' needs the frames array (vector_field=...)")
+    lo, hi = _valid_box(exemplar.shape[:3], config.window)
+    membership = phase_membership(exemplar, lo, hi) if config.balance else None
+    control = None if membership is None else PhaseControl.start(len(membership[1]))
+    key = _key(config, exemplar, vector_field) + (f"|parzen={list(parzen)}" if parzen else "")
+    sigma = float(exemplar.astype(np.float64).std()) or 1.0
+    timings = {"setup": time.perf_counter() - t_start}
+    history: list[list[float]] = []
+    stats: dict = {"threads": _jit.thread_count(), "levels": {}}
+    coords = None
+    first = config.levels - 1
+    resumed = _resume(checkpoint, key)
+    if resumed is not None:
+        coords, done, state, history, timings, stats, saved_control = resumed
+        rng.bit_generator.state = state
+        if control is not None and saved_control is not None and saved_control.size:
+            control = PhaseControl.from_array(saved_control, len(membership[1]))
+        first = done - 1
+    for level in range(first, -1, -1):
+        t0 = time.perf_counter()
+        h = 2 ** level
+        shape = tuple(n // h for n in config.size)
+        frames = level_frames(config.vector_field, vector_field, config.size, level, config.angle)
+        feat = appearance_space(exemplar, level, config.window, config.pca_dims, rng)
+        kset = similarity_sets(feat, lo, hi, config.k, config.exclude)
+        phases = None if membership is None else (phase_footprint(membership[0], len(membership[1]), h), membership[1])
+        t_model = time.perf_counter() - t0
+        if coords is None:
+            coords = initial_coordinates(shape, h, lo, hi, config.start, config.jitter, rng)
+        else:
+            coords = upsample(coords, frames, h, lo, hi)
+            uniforms = rng.uniform(-1.0, 1.0, size=shape + (3,)).astype(np.float32)
+            coords = jittered(coords, h, config.jitter if level else config.fine_jitter, uniforms, lo, hi)
+        if progress is not None:
+            progress(level, 0, config.passes, float("nan"))
+        level_history = []
+        values = None if parzen is None else smoothed(exemplar, level)
+        for p in range(config.passes):
+            if parzen is None:
+                coords, mean_cost = correction_pass(coords, frames, feat, kset, h, lo, hi,
+                                                    NEIGHBOURHOODS[config.neighbourhood],
+                                                    usage=config.usage, balance=config.balance,
+                                                    phases=phases, control=control)
+            else:
+                coords, mean_cost = parzen_pass(coords, frames, feat, values, kset, h, lo, hi,
+                                                NEIGHBOURHOODS[config.neighbourhood], config.window,
+                                                parzen[0], (parzen[1] * sigma) ** 2)
+            level_history.append(mean_cost)
+            if progress is not None:
+                progress(level, p + 1, config.passes, mean_cost)
+        history.append(level_history)
+        timings[f"level_{level}"] = time.perf_counter() - t0
+        stats["levels"][f"level_{level}"] = {"shape": list(shape), "spacing": h, "model_seconds": t_model,
+                                             "correction_seconds": time.perf_counter() - t0 - t_model,
+                                             "pca_dims": int(feat.shape[3])}
+        if checkpoint is not None:
+            save_checkpoint(checkpoint, config=key, coords=coords, level=level,
+                            rng_state=json.dumps(rng.bit_generator.state), history=json.dumps(history),
+                            timings=json.dumps(timings), stats=json.dumps(stats),
+                            prices=np.zeros(0) if control is None else control.to_array())
+    out = np.ascontiguousarray(exemplar[coords[..., 0], coords[..., 1], coords[..., 2]], dtype=np.float32)
+    t0 = time.perf_counter()
+    stats["repetition"] = copy_repetition(coords)
+    timings["repetition"] = time.perf_counter() - t0
+    timings["total"] = time.perf_counter() - t_start
+    labels = np.unique(exemplar.reshape(-1, exemplar.shape[3]), axis=0) if exemplar.size <= 1 << 22 else np.empty((0, exemplar.shape[3]))
+    return SynthesisResult(volume=out, history=history, config=config, timings=timings,
+                           labels=labels.astype(np.float32), stats=stats)
+
+
+def _exemplar(per_view, config: VolumeConfig) -> np.ndarray:
+    volume = per_view.get("volume") if isinstance(per_view, dict) else None
+    if volume is None or np.ndim(volume) != 4:
+        shapes = {v: np.shape(a) for v, a in dict(per_view).items()}
+        check.fail(f"method volume-lh needs a 3D exemplar (D, H, W, C); got 2D exemplars {shapes}: "
+                   f"give a volume (npmrf3d volume FILE) or use a 2D method")
+    volume_fits(volume, window=config.window)
+    return np.ascontiguousarray(volume, dtype=np.float32)
+
+
+def _key(config: VolumeConfig, exemplar: np.ndarray, field) -> str:
+    digest = [list(exemplar.shape), float(exemplar.astype(np.float64).sum()),
+              float((exemplar.astype(np.float64) ** 2).sum())]
+    fdigest = None if field is None else float(np.asarray(field, dtype=np.float64).sum())
+    # the soft phases of stop 33 change a grey scan's run: a checkpoint from before is refused
+    return json.dumps({"method": "volume-lh", "config": config.to_dict(), "exemplar": digest,
+                       "field": fdigest, "soft_phases": SOFT_WIDTH}, sort_keys=True, default=str)
+
+
+def _resume(path, key):
+    if path is None or not Path(path).exists():
+        return None
+    data = load_checkpoint(path)
+    if str(data.get("config")) != key or "coords" not in data:
+        check.fail(f"checkpoint '{path}' was written by a different configuration or exemplar; "
+                   f"delete it or choose another checkpoint path")
+    return (np.asarray(data["coords"], dtype=np.int64), int(data["level"]),
+            json.loads(str(data["rng_state"])), json.loads(str(data["history"])),
+            json.loads(str(data["timings"])), json.loads(str(data["stats"])),
+            np.asarray(data["prices"], dtype=np.float64) if "prices" in data else None)
+
+
+def volume_estimate(config: VolumeConfig, exemplars) -> Estimate:
+    """Peak memory of a run: per output voxel the coordinates (int64 x 3, two copies while a
+    sub-pass runs, three while up-sampling), the frames (9 float32, when a field is used) and
+    the jitter (3 float32); per exemplar voxel the appearance space (float64 x dims, twice while
+    it is built), the similarity sets (int64 x k, and as positions int64 x 3k) and the smoothed
+    exemplar (float64 x C), and with the phase histogram the phases (int64), the cost (float64)
+    and the phase mix (float32 x phases, counted as ``MAX_PHASES``, twice while it is built)."""
+    n = int(np.prod(config.size))
+    shape = next(iter(dict(exemplars).values()))
+    shape = tuple(np.shape(shape)) if not isinstance(shape, tuple) else shape
+    m = int(np.prod(shape[:3]))
+    c = shape[3] if len(shape) > 3 else 1
+    field = 0 if config.vector_field == "none" else 36 * n
+    return Estimate({"coordinates": 3 * 24 * n + 12 * n + 4 * c * n, "vector field": field,
+                     "exemplar model": m * (16 * config.pca_dims + 32 * config.k + 16 * c),
+                     "phase histogram": m * (16 + 8 * MAX_PHASES) if config.balance else 0},
+                    seconds=n / 2.0e5)
+
+
+def _fit(config: VolumeConfig) -> dict:
+    return {"window": config.window, "levels": config.levels, "toroidal": False, "kind": "volume"}
+
+
+def volume_method(per_view, config: VolumeConfig, rng: np.random.Generator, *, progress=None,
+                  checkpoint=None, t_start=None, vector_field=None) -> SynthesisResult:
+    """The registered form of :func:`run` (exemplars first, as every method of the registry)."""
+    return run(per_view, config, rng, progress=progress, checkpoint=checkpoint, t_start=t_start,
+               vector_field=vector_field)
+
+
+METHOD = SynthesisMethod(
+    name="volume-lh", run=volume_method, make_config=make_volume_config, config_class=VolumeConfig,
+    synthesize=volume_synthesize, fit=_fit,
+    description="3D exemplar (seed 002): appearance-space coordinate pyramid, k = 3 similarity "
+                "sets, jitter and correction, vector-field deformation",
+    resources=volume_estimate,
+)

@@ -1,0 +1,271 @@
+"""Multi-scale grids and the one coarse-to-fine level loop (SPEC.md section 5).
+
+Level ``l`` is the level-0 grid decimated by ``2**l``; synthesis runs from ``l = levels - 1``
+down to 0. The voxel of level ``l - 1`` at ``2 * (i, j, k)`` is the *inherited* child of voxel
+``(i, j, k)`` of level ``l``: it always receives the parent's value and temperature 0. With
+``1/8`` up-sampling the other 7 children are re-initialised by random draws from the exemplar
+(temperature 1); with ``8/8`` they copy the parent's value (temperature 1); ``trilinear``
+(Kopf et al. 2007, continuous values only) interpolates the parent on the torus.
+
+:func:`run_pyramid` is the level loop every multi-scale method shares (the NP-MRF sampler and
+NP_K): initialise the coarsest level, up-sample into each finer one, relax it, report progress,
+write a checkpoint after each level and resume from one. A method gives it a :class:`Levels`
+object that knows how to do those steps for its own state.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+from scipy import ndimage
+
+from .. import _validation as check
+from ..io.files import load_checkpoint, save_checkpoint
+
+__all__ = ["INHERIT", "LABEL_UPSAMPLING", "LevelState", "Levels", "UPSAMPLERS", "UPSAMPLING",
+           "level_shape", "random_state", "run_pyramid", "upsample"]
+
+INHERIT = ("resynth", "fixed")
+
+#: ``progress(level, step, steps, value)``: ``step = 0`` before the first step of a level.
+ProgressCallback = Callable[[int, int, int, float], None]
+
+
+@dataclass
+class LevelState:
+    """The mutable state of one level: values, label indices, temperatures, inherited mask."""
+
+    volume: np.ndarray  # (N1, N2, N3, C) float32
+    labels_volume: np.ndarray  # (N1, N2, N3) int32
+    temps: np.ndarray  # (N1, N2, N3) float32
+    inherited: np.ndarray  # (N1, N2, N3) bool
+
+
+def level_shape(size: tuple[int, int, int], level: int) -> tuple[int, int, int]:
+    """Grid shape of ``level`` (size divided by ``2**level``)."""
+    return tuple(n // 2 ** level for n in size)
+
+
+def random_state(shape, labels: np.ndarray, label_freq: np.ndarray, rng: np.random.Generator) -> LevelState:
+    """Every voxel a label drawn from the exemplar's label frequencies, temperature 1."""
+    drawn = rng.choice(len(labels), size=shape, p=label_freq).astype(np.int32)
+    return LevelState(
+        volume=np.ascontiguousarray(labels[drawn], dtype=np.float32),
+        labels_volume=drawn,
+        temps=np.ones(shape, dtype=np.float32),
+        inherited=np.zeros(shape, dtype=bool),
+    )
+
+
+# --------------------------------------------------------------------------- up-sampling
+
+
+def _inherit(child: LevelState, parent: LevelState) -> LevelState:
+    child.volume[::2, ::2, ::2] = parent.volume
+    child.labels_volume[::2, ::2, ::2] = parent.labels_volume
+    child.temps[::2, ::2, ::2] = 0.0
+    child.inherited[::2, ::2, ::2] = True
+    return child
+
+
+def upsample_one_of_eight(parent: LevelState, labels, label_freq, rng) -> LevelState:
+    """``1/8``: the inherited child keeps the parent; the other 7 are random exemplar draws."""
+    shape = tuple(2 * n for n in parent.labels_volume.shape)
+    return _inherit(random_state(shape, labels, label_freq, rng), parent)
+
+
+def upsample_eight_of_eight(parent: LevelState, labels, label_freq, rng) -> LevelState:
+    """``8/8``: all 8 children copy the parent (only the inherited one at temperature 0)."""
+    shape = tuple(2 * n for n in parent.labels_volume.shape)
+    lab = parent.labels_volume
+    for axis in range(3):
+        lab = np.repeat(lab, 2, axis=axis)
+    vol = parent.volume
+    for axis in range(3):
+        vol = np.repeat(vol, 2, axis=axis)
+    child = LevelState(np.ascontiguousarray(vol), np.ascontiguousarray(lab),
+                       np.ones(shape, dtype=np.float32), np.zeros(shape, dtype=bool))
+    return _inherit(child, parent)
+
+
+def upsample_trilinear(parent: LevelState, labels, label_freq, rng) -> LevelState:
+    """``trilinear`` (Kopf et al. 2007): interpolate the values on the torus; no labels, no
+    inherited voxels (for methods with continuous values)."""
+    out = ndimage.zoom(parent.volume, (2, 2, 2, 1), order=1, mode="grid-wrap", grid_mode=True)
+    shape = out.shape[:3]
+    return LevelState(np.ascontiguousarray(out, dtype=np.float32), np.zeros(shape, dtype=np.int32),
+                      np.zeros(shape, dtype=np.float32), np.zeros(shape, dtype=bool))
+
+
+class Upsampler(NamedTuple):
+    """One way of initialising a finer level: ``fn(parent, labels, label_freq, rng)``."""
+
+    fn: Callable[[LevelState, np.ndarray, np.ndarray, np.random.Generator], LevelState]
+    labels: bool  # keeps label indices (usable by the label-based NP-MRF sampler)
+    description: str
+
+
+#: Up-sampling choices by name (SPEC.md section 5 and Kopf et al. 2007).
+UPSAMPLERS: dict[str, Upsampler] = {
+    "1/8": Upsampler(upsample_one_of_eight, True,
+                     "keep only the inherited voxel and draw the other 7 at random"),
+    "8/8": Upsampler(upsample_eight_of_eight, True, "copy the parent into all 8 children"),
+    "trilinear": Upsampler(upsample_trilinear, False,
+                           "trilinear interpolation of the values (continuous methods only)"),
+}
+#: The choices of the label-based NP-MRF sampler.
+LABEL_UPSAMPLING = tuple(name for name, u in UPSAMPLERS.items() if u.labels)
+#: Kept under its old name: the NP-MRF sampler's choices.
+UPSAMPLING = LABEL_UPSAMPLING
+
+
+def upsample(parent: LevelState, mode: str, labels: np.ndarray, label_freq: np.ndarray,
+             rng: np.random.Generator) -> LevelState:
+    """Up-sample a relaxed level to the next finer one (``mode`` a name of :data:`UPSAMPLERS`)."""
+    return UPSAMPLERS[mode].fn(parent, labels, label_freq, rng)
+
+
+# --------------------------------------------------------------------------- the level loop
+
+
+class Levels(ABC):
+    """What a multi-scale method tells :func:`run_pyramid` (override every method).
+
+    Attributes
+    ----------
+    size : (N1, N2, N3)
+    levels : int
+    key : str
+        Identity of the configuration; a checkpoint with another key is refused.
+    fingerprint : dict of arrays
+        Further arrays a checkpoint must match (e.g. the label set, which depends on the
+        exemplar).
+    """
+
+    size: tuple[int, int, int]
+    levels: int
+    key: str
+    fingerprint: dict[str, np.ndarray] = {}
+
+    def prepare(self, level: int, shape: tuple[int, int, int]) -> None:
+        """Per-level set-up that draws no random numbers (models, exemplar pyramids)."""
+
+    @abstractmethod
+    def initial(self, shape: tuple[int, int, int], rng: np.random.Generator) -> Any:
+        """The coarsest level's starting state."""
+
+    @abstractmethod
+    def upsample(self, state: Any, rng: np.random.Generator) -> Any:
+        """The finer level's starting state from the relaxed coarser ``state``."""
+
+    @abstractmethod
+    def start(self, level: int, state: Any) -> tuple[int, float]:
+        """(steps expected, the level quantity before the first step) for progress; ``relax``
+        may correct the expected steps as it goes (``on_step(step, value, expected)``)."""
+
+    @abstractmethod
+    def relax(self, level: int, state: Any, rng: np.random.Generator,
+              on_step: Callable[[int, float], None]) -> tuple[Any, list[float], dict]:
+        """Relax one level: (state, history of the level quantity, level statistics)."""
+
+    @abstractmethod
+    def to_arrays(self, state: Any) -> dict[str, np.ndarray]:
+        """The state as named arrays (for a checkpoint)."""
+
+    @abstractmethod
+    def from_arrays(self, arrays: dict[str, np.ndarray]) -> Any:
+        """Inverse of :meth:`to_arrays`."""
+
+
+@dataclass
+class PyramidRun:
+    """What :func:`run_pyramid` returns: the finest state and the run's records."""
+
+    state: Any
+    history: list[list[float]]
+    timings: dict
+    stats: dict
+
+
+def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressCallback | None = None,
+                checkpoint: str | Path | None = None, timings: dict | None = None,
+                stats: dict | None = None, t_start: float | None = None) -> PyramidRun:
+    """Run ``method`` from its coarsest level to level 0.
+
+    Parameters
+    ----------
+    method : Levels
+    rng : numpy Generator
+        The only source of randomness; restored from the checkpoint on resume.
+    progress : callable, optional
+        ``progress(level, step, steps, value)`` before the first step of a level (``step = 0``)
+        and after every step; ``steps`` is the number of steps expected on the level, which a
+        method may correct as it goes (ICM: the sweeps its stop rule will need).
+    checkpoint : path, optional
+        A ``.npz`` file written after each level; if it exists and matches ``method.key`` and
+        ``method.fingerprint``, the run resumes after its last finished level.
+    timings, stats : dict, optional
+        Start values (e.g. ``setup`` time, thread count); per-level entries are added.
+    t_start : float, optional
+        ``time.perf_counter()`` when the run started (for ``timings["total"]``).
+    """
+    t_start = time.perf_counter() if t_start is None else t_start
+    timings = dict(timings or {})
+    stats = dict(stats or {})
+    stats.setdefault("levels", {})
+    history: list[list[float]] = []
+    state = None
+    first_level = method.levels - 1
+    resumed = _load(checkpoint, method)
+    if resumed is not None:
+        state, done_level, rng_state, history, timings, stats = resumed
+        rng.bit_generator.state = rng_state
+        first_level = done_level - 1
+    for level in range(first_level, -1, -1):
+        t0 = time.perf_counter()
+        shape = level_shape(method.size, level)
+        method.prepare(level, shape)
+        state = method.initial(shape, rng) if state is None else method.upsample(state, rng)
+        steps, value = method.start(level, state)
+
+        def on_step(step, value, expected=None, level=level, steps=steps):
+            if progress is not None:
+                progress(level, step, steps if expected is None else expected, value)
+
+        if progress is not None:
+            progress(level, 0, steps, value)
+        state, level_history, level_stats = method.relax(level, state, rng, on_step)
+        history.append(level_history)
+        timings[f"level_{level}"] = time.perf_counter() - t0
+        stats["levels"][f"level_{level}"] = level_stats
+        if checkpoint is not None:
+            save_checkpoint(
+                checkpoint, config=method.key, **method.fingerprint, **method.to_arrays(state),
+                level=level, rng_state=json.dumps(rng.bit_generator.state),
+                history=json.dumps(history), timings=json.dumps(timings),
+                stats=json.dumps(stats, default=str),
+            )
+    timings["total"] = time.perf_counter() - t_start
+    return PyramidRun(state, history, timings, stats)
+
+
+def _load(path, method: Levels):
+    """State after the last finished level, or None when there is nothing (matching) to resume."""
+    if path is None or not Path(path).exists():
+        return None
+    data = load_checkpoint(path)
+    same = str(data.get("config")) == method.key and all(
+        name in data and np.array_equal(data[name], value) for name, value in method.fingerprint.items())
+    if not same:
+        check.fail(f"checkpoint '{path}' was written by a different configuration or exemplar; "
+                   f"delete it or choose another checkpoint path")
+    return (method.from_arrays(data), int(data["level"]), json.loads(str(data["rng_state"])),
+            json.loads(str(data["history"])), json.loads(str(data["timings"])),
+            json.loads(str(data["stats"])))
