@@ -18,7 +18,7 @@ import numpy as np
 from .model.relax import RELAXATIONS, AnnealOptions, IcmOptions
 
 #: Side of the cube made when no size is given (API and command line, every method).
-DEFAULT_SIZE = 32
+DEFAULT_SIZE = 64
 
 __all__ = ["DEFAULT_SIZE", "DEFAULT_VARIANT", "VARIANT_ALIASES", "DecisionRule", "SynthesisConfig", "SynthesisMethod", "SynthesisResult", "VARIANTS"]
 

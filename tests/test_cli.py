@@ -73,7 +73,7 @@ def test_synth_help_lists_every_option_with_its_default(capsys):
         assert action.help and action.help.strip()
         if action.option_strings != ["-h", "--help"]:
             assert "default" in action.help or action.default is not None
-    for expected in ("(default: 7)", "(default: 32)", "(default: 3)", "(default: ML_H2b)",
+    for expected in ("(default: 7)", "(default: 64)", "(default: 3)", "(default: ML_H2b)",
                      "(default: icm)", "(default: -3.0)", "(default: 0.95)", "(default: 30)",
                      "1/8 for icm and 8/8 for anneal", "(default: resynth)", "(default: front,right,top)",
                      "coherent for icm, sharp for anneal", "(default: 0)", "(default: npmrf3d-out)",

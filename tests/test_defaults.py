@@ -12,7 +12,7 @@ import inspect
 
 import pytest
 
-from npmrf3d import kopf_synthesize, synthesize
+from npmrf3d import kopf_synthesize, npmrf_synthesize, synthesize
 from npmrf3d.cli import build_parser
 from npmrf3d.config import DEFAULT_SIZE, SynthesisConfig
 from npmrf3d.methods import METHODS, get_method
@@ -62,7 +62,7 @@ def _as_cli(value):
 
 
 CASES = {
-    "npmrf": (("synth",), synthesize, make_config, SynthesisConfig),
+    "npmrf": (("synth",), npmrf_synthesize, make_config, SynthesisConfig),
     "kopf": (("baseline", "kopf"), kopf_synthesize, make_kopf_config, KopfConfig),
     "chen-wang": (("baseline", "chen-wang"), chen_wang_synthesize, make_chen_wang_config, ChenWangConfig),
     "coherent": (("coherent",), coherent_synthesize, make_coherent_config, CoherentConfig),
@@ -70,14 +70,27 @@ CASES = {
     "npmrf-3d": (("volume-npmrf",), npmrf_volume_synthesize, make_npmrf_volume_config, NpmrfVolumeConfig),
 }
 
+#: The leading keywords every method's public function shares, with their defaults.
+COMMON = {"exemplar": None, "size": DEFAULT_SIZE, "rng": None, "progress": None, "checkpoint": None,
+          "exemplars": None}
+
+
+@pytest.mark.parametrize("name", sorted(METHODS))
+def test_every_public_function_has_the_one_shape(name):
+    params = inspect.signature(METHODS[name].synthesize).parameters
+    assert list(params)[:len(COMMON)] == list(COMMON)
+    assert {k: params[k].default for k in COMMON} == COMMON
+    assert list(params.values())[-1].kind is inspect.Parameter.VAR_KEYWORD
+    dispatch = inspect.signature(synthesize).parameters
+    assert list(dispatch)[:2] == ["exemplar", "method"] and dispatch["size"].default == DEFAULT_SIZE
+
 
 @pytest.mark.parametrize("name", sorted(CASES))
-def test_api_config_and_cli_agree_on_every_default(name):
+def test_config_make_config_and_cli_agree_on_every_default(name):
     path, public, builder, config_class = CASES[name]
-    assert get_method(name).config_class is config_class
+    assert get_method(name).config_class is config_class and get_method(name).synthesize is public
     fields = _field_defaults(config_class)
     cli = _cli_defaults(*path)
-    api = _signature_defaults(public)
     made = _signature_defaults(builder)
     # options whose default is decided elsewhere on purpose
     special = {"upsample", "variant"} if name == "npmrf" else {"iterations"} if name == "kopf" else set()
@@ -85,8 +98,6 @@ def test_api_config_and_cli_agree_on_every_default(name):
     for field, value in fields.items():
         if field in special or field in ("seed", "constrained", "rule"):
             continue
-        if field in api:
-            assert api[field] == value, f"{name}: API default of {field}"
         if field in made:
             assert made[field] == value, f"{name}: make_config default of {field}"
         if field in cli:
@@ -97,25 +108,21 @@ def test_api_config_and_cli_agree_on_every_default(name):
             assert cli_value == expected, f"{name}: CLI default of --{field.replace('_', '-')}"
             checked += 1
     assert checked >= 8
-    if name in ("npmrf", "kopf"):
-        assert cli["size"] == str(DEFAULT_SIZE) == str(api["size"]) == str(made["size"])
-    else:  # the coherent methods default to the paper's scale, 64^3
-        assert cli["size"] == _as_cli(config_class.size) and made["size"] == config_class.size
+    # one default size for every method, the API's, the configuration's and the command line's
+    assert cli["size"] in (str(DEFAULT_SIZE), ",".join([str(DEFAULT_SIZE)] * 3))
+    assert made["size"] in (DEFAULT_SIZE, (DEFAULT_SIZE,) * 3)
 
 
 def test_special_defaults_agree_too():
     # NP-MRF up-sampling: None everywhere means "the relaxation's choice"
-    assert _signature_defaults(synthesize)["upsample"] is None
     assert _signature_defaults(make_config)["upsample"] is None
     assert _cli_defaults("synth")["upsample"] is None
     # NP-MRF variant: None everywhere means "the relaxation's choice" (coherent for icm)
-    assert _signature_defaults(synthesize)["variant"] is None
     assert _signature_defaults(make_config)["variant"] is None
     assert _cli_defaults("synth")["variant"] is None
     assert make_config().variant == SynthesisConfig.variant == "coherent"
     # NP_K iterations: one number for every level
-    one = _signature_defaults(kopf_synthesize)["iterations"]
-    assert one == _signature_defaults(make_kopf_config)["iterations"]
+    one = _signature_defaults(make_kopf_config)["iterations"]
     assert _cli_defaults("baseline", "kopf")["iterations"] == str(one)
     assert KopfConfig.iterations == (one,) * KopfConfig.levels
 
@@ -140,3 +147,19 @@ def test_unknown_method_lists_the_registered_ones():
     with pytest.raises(ParameterError, match="method must be one of npmrf, coherent, kopf, chen-wang, volume-lh, npmrf-3d, neural; got 'nope'"):
         get_method("nope")
     assert get_method("np_k") is METHODS["kopf"]
+
+
+def test_one_function_reaches_every_method_and_refuses_an_unknown_option():
+    import numpy as np
+
+    from npmrf3d.errors import ParameterError
+    from tests.conftest import checkerboard
+
+    image = checkerboard()
+    through = synthesize(image, method="kopf", size=8, window=4, levels=1, iterations=1, rng=1).volume
+    direct = kopf_synthesize(image, size=8, window=4, levels=1, iterations=1, rng=1).volume
+    np.testing.assert_array_equal(through, direct)
+    with pytest.raises(ParameterError, match="method kopf has no option 'xi'; its options are window, "):
+        synthesize(image, method="kopf", size=8, xi=-1.0)
+    with pytest.raises(ParameterError, match="needs a 3D exemplar"):
+        synthesize(method="volume-lh", size=16)

@@ -57,7 +57,7 @@ def test_the_api_and_the_registry_without_torch_raise_the_extra_error(no_torch, 
 
 
 def test_the_config_validates_without_torch(no_torch):
-    assert method_defaults() == (32, 32, 32)
+    assert method_defaults() == (64, 64, 64)
     with pytest.raises(ParameterError, match="iterations must be between 1 and 10000000; got 0"):
         neural.make_neural_config(iterations=0)
 

@@ -38,6 +38,28 @@ class Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {line} (see '{self.prog} --help')\n")
 
 
+def add_run_options(parser: argparse.ArgumentParser, *, out: str) -> argparse._ArgumentGroup:
+    """The options of every command that makes a volume, defined once: ``--seed``, ``--out``
+    (default ``out``), ``--overwrite``, ``--quiet``, ``--dry-run`` and ``--checkpoint``."""
+    run = parser.add_argument_group("run")
+    run.add_argument("--seed", type=int, default=0, metavar="S",
+                     help="random seed, a non-negative integer; the result depends on it only")
+    run.add_argument("--out", default=out, metavar="DIR",
+                     help="output folder for the run files; created if missing")
+    run.add_argument("--overwrite", action="store_true",
+                     help="replace the files of a previous run in --out instead of refusing")
+    run.add_argument("--quiet", action="store_true",
+                     help="print nothing but errors (no progress bars, no summary)")
+    run.add_argument("--dry-run", action="store_true",
+                     help="print the memory (and rough time) the run needs and whether it fits; "
+                          "write nothing")
+    run.add_argument("--checkpoint", default=None, metavar="PATH",
+                     help="a .npz file written after each level; if it exists and matches this run, "
+                          "synthesis resumes after its last finished level (default: none = no "
+                          "checkpoint)")
+    return run
+
+
 def positive_int(text: str) -> int:
     """An argparse type: an integer >= 1."""
     return _bounded_int(text, 1, "a positive integer")

@@ -21,6 +21,7 @@ from ..model.exemplar import BUNDLED_PREFIX
 from ..model.neighbourhood import VIEWS
 from ._common import (
     add_exemplar_kind,
+    add_run_options,
     claim_output,
     dry_run,
     parse_size,
@@ -88,18 +89,7 @@ def add_method_parser(commands, name: str, method, *, help: str, description: st
                            help=f"a different exemplar file (or {BUNDLED_PREFIX}NAME) for the {view} "
                                 f"view (default: none = EXEMPLAR)")
     add_exemplar_kind(views)
-    run = parser.add_argument_group("run")
-    run.add_argument("--seed", type=int, default=0, metavar="S",
-                     help="random seed, a non-negative integer; the result depends on it only")
-    run.add_argument("--out", default=out, metavar="DIR", help="output folder for the run files; created if missing")
-    run.add_argument("--overwrite", action="store_true",
-                     help="replace the files of a previous run in --out instead of refusing")
-    run.add_argument("--quiet", action="store_true", help="print nothing but errors (no progress bars, no summary)")
-    run.add_argument("--dry-run", action="store_true",
-                     help="print the memory the run needs and whether it fits, then exit; write nothing")
-    run.add_argument("--checkpoint", default=None, metavar="PATH",
-                     help="a .npz file written after each level; if it exists and matches this run, "
-                          "synthesis resumes after its last finished level (default: none = no checkpoint)")
+    add_run_options(parser, out=out)
 
     def handler(args: argparse.Namespace, argv: list[str]) -> int:
         t_start = time.perf_counter()

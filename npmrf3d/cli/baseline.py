@@ -24,6 +24,7 @@ from ..model.exemplar import BUNDLED_PREFIX
 from ..model.neighbourhood import VIEWS
 from ._common import (
     add_exemplar_kind,
+    add_run_options,
     choices,
     claim_output,
     default,
@@ -124,22 +125,7 @@ def register(commands, formatter_class) -> None:
     views.add_argument("--constraint-weight", default=None, metavar="W|PATH",
                        help="constraint weights: a number >= 0 or a .npy/.tif volume (N1, N2, N3) "
                             "(default: none = 1 everywhere when --constraint is given)")
-    run_group = kopf.add_argument_group("run")
-    run_group.add_argument("--seed", type=int, default=0, metavar="S",
-                     help="random seed, a non-negative integer; the result depends on it only")
-    run_group.add_argument("--out", default="npmrf3d-kopf-out", metavar="DIR",
-                     help="output folder for the run files; created if missing")
-    run_group.add_argument("--overwrite", action="store_true",
-                     help="replace the files of a previous run in --out instead of refusing")
-    run_group.add_argument("--quiet", action="store_true",
-                     help="print nothing but errors (no progress bars, no summary)")
-    run_group.add_argument("--dry-run", action="store_true",
-                     help="print the memory (and rough time) the run needs and whether it fits; "
-                          "write nothing")
-    run_group.add_argument("--checkpoint", default=None, metavar="PATH",
-                     help="a .npz file written after each level; if it exists and matches this "
-                          "run, synthesis resumes after its last finished level (default: none = "
-                          "no checkpoint)")
+    add_run_options(kopf, out="npmrf3d-kopf-out")
     kopf.set_defaults(handler=_kopf)
     add_method_parser(
         methods, "chen-wang", chen_wang.METHOD,

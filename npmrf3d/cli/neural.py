@@ -145,7 +145,7 @@ def register(commands, formatter_class) -> None:
     """Add ``neural`` with its sub-commands ``train`` and ``generate``."""
     top = commands.add_parser(
         "neural", help="on-demand volumes from a compact 3D CNN generator (needs npmrf3d[neural])",
-        description="Train the on-demand generator of seed 004 on slices, then make any block of\n"
+        description="Train the on-demand generator (Gutierrez et al. 2020) on slices, then make any block of\n"
                     "its unbounded volume, in memory or block by block into Zarr on Dask.",
         formatter_class=formatter_class)
     sub = top.add_subparsers(dest="neural", metavar="COMMAND", required=True)

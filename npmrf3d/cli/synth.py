@@ -27,6 +27,7 @@ from ..model.relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
 from ._common import (
     PROG,
     add_exemplar_kind,
+    add_run_options,
     choices,
     claim_output,
     default,
@@ -167,7 +168,8 @@ def register(commands, formatter_class) -> None:
              "containing the voxel copy; chosen by measurement, docs/quality.md; uses --window at "
              "every level, --heuristic ML_H2b/ML_H2a, --centre-bandwidth as a factor of the "
              "exemplar's standard deviation and --outlier; the icm/anneal options are not used), "
-             "sharp = the full-Parzen rule of an earlier round (old name: default), literal = the "
+             "sharp = the full-Parzen rule with sharpened bandwidths and a sampled decision (old "
+             "name: default), literal = the "
              "paper word for word (collapses to a flat volume) "
              "(default: none = coherent for icm, sharp for anneal)",
     )
@@ -244,32 +246,7 @@ def register(commands, formatter_class) -> None:
         help="let exemplar patches wrap around the exemplar's borders (for tileable exemplars)",
     )
 
-    run_group = synth.add_argument_group("run")
-    run_group.add_argument(
-        "--seed", type=int, default=0, metavar="S",
-        help="random seed, a non-negative integer; the result depends on it only",
-    )
-    run_group.add_argument(
-        "--out", default="npmrf3d-out", metavar="DIR",
-        help="output folder for the run files; created if missing",
-    )
-    run_group.add_argument(
-        "--overwrite", action="store_true",
-        help="replace the files of a previous run in --out instead of refusing",
-    )
-    run_group.add_argument(
-        "--quiet", action="store_true",
-        help="print nothing but errors (no progress bars, no summary)",
-    )
-    run_group.add_argument(
-        "--dry-run", action="store_true",
-        help="print the memory (and rough time) the run needs and whether it fits; write nothing",
-    )
-    run_group.add_argument(
-        "--checkpoint", default=None, metavar="PATH",
-        help="a .npz file written after each level; if it exists and matches this run, synthesis "
-             "resumes after its last finished level (default: none = no checkpoint)",
-    )
+    add_run_options(synth, out="npmrf3d-out")
 
     synth.set_defaults(handler=run)
 

@@ -25,6 +25,7 @@ from ..model.exemplar import exemplar_source
 from ..model.exemplar3d import load_volume_exemplar
 from ..model.fields import FIELDS, field_input
 from ._common import (
+    add_run_options,
     check_checkpoint,
     claim_output,
     dry_run,
@@ -55,7 +56,7 @@ FIELD_HELP = {
              "pyramid from one voxel: repeats the exemplar at its period) or 'random' (uniform coordinates)",
     "usage": "strength of the position histogram: a candidate copying an over-used part of the "
              "exemplar pays usage x (half the distance of two random neighbourhoods) per excess "
-             "use (0: seed 002's rule, which collapses onto one homogeneous region of a "
+             "use (0: the paper's rule, which collapses onto one homogeneous region of a "
              "non-stationary scan)",
     "balance": "strength of the phase histogram: a candidate whose phase (a segmented scan's "
                "value, or a side of a grey scan's Otsu threshold) the volume already holds more "
@@ -80,7 +81,7 @@ def register(commands, formatter_class) -> None:
     """Add the ``volume`` (``volume-lh``) and ``volume-npmrf`` (``npmrf-3d``) sub-commands."""
     _add(commands, "volume", METHOD, formatter_class,
          help="synthesise a volume from a 3D exemplar (a scan crop), optionally deformed by a "
-              "vector field (seed 002)",
+              "vector field",
          description=(
             "Synthesise a volume from a 3D exemplar: every voxel copies an exemplar voxel\n"
             "(appearance-space coordinate pyramid with k = 3 similarity sets, jitter and\n"
@@ -131,18 +132,7 @@ def _add(commands, name, method, formatter_class, *, help, description) -> None:
     inputs.add_argument("--spacing", default=None, metavar="S[,SY,SX]",
                         help="voxel size of the exemplar, which must be isotropic (default: none = "
                              "what an ImageJ TIFF records, else isotropic)")
-    run = parser.add_argument_group("run")
-    run.add_argument("--seed", type=int, default=0, metavar="S",
-                     help="random seed, a non-negative integer; the result depends on it only")
-    run.add_argument("--out", default=f"npmrf3d-{name}-out", metavar="DIR",
-                     help="output folder for the run files; created if missing")
-    run.add_argument("--overwrite", action="store_true",
-                     help="replace the files of a previous run in --out instead of refusing")
-    run.add_argument("--quiet", action="store_true", help="print nothing but errors")
-    run.add_argument("--dry-run", action="store_true",
-                     help="print the memory the run needs and whether it fits; write nothing")
-    run.add_argument("--checkpoint", default=None, metavar="PATH",
-                     help="a .npz file written after each level; a matching one is resumed from")
+    add_run_options(parser, out=f"npmrf3d-{name}-out")
     parser.set_defaults(handler=lambda args, argv: _handler(args, argv, method))
     parser.epilog = f"Writes {', '.join(RUN_FILES)} into the output folder."
 

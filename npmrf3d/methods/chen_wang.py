@@ -72,14 +72,14 @@ import numpy as np
 from .. import _validation as check
 from .._kernels import _jit
 from .._kernels import kcoherence as _k
-from ..config import SynthesisMethod, SynthesisResult
+from ..config import DEFAULT_SIZE, SynthesisMethod, SynthesisResult
 from ..io.files import load_checkpoint, save_checkpoint
 from ..model import kcoherence as coh
-from ..model.exemplar import resolve_exemplars
 from ..model.neighbourhood import VIEW_AXES, VIEWS
 from ..model.phases import PhaseControl, bin_phase_error, bin_phases, phase_prior_target
 from ..model.pyramid import level_shape
-from ..resources import check_memory, coherent_estimate
+from ..resources import coherent_estimate
+from ._api import prepare
 
 __all__ = ["ChenWangConfig", "chen_wang_synthesize", "make_chen_wang_config", "run"]
 
@@ -97,7 +97,7 @@ _MEDOID_CANDIDATES = 8  # voxels per parallel work item of the solver (any value
 class ChenWangConfig:
     """A validated Chen–Wang run; every default lives here (see :func:`chen_wang_synthesize`)."""
 
-    size: tuple[int, int, int] = (64, 64, 64)
+    size: tuple[int, int, int] = (DEFAULT_SIZE,) * 3
     window: tuple[int, ...] = (8, 6, 4)
     levels: int = 3
     views: tuple[str, ...] = VIEWS
@@ -210,21 +210,9 @@ def _check_exemplar_levels(config: ChenWangConfig, per_view: Mapping[str, np.nda
 # --------------------------------------------------------------------------- public
 
 
-def chen_wang_synthesize(
-    exemplar=None, *, size=DEFAULTS.size, window=DEFAULTS.window, levels: int = DEFAULTS.levels,
-    views=DEFAULTS.views, exemplars: Mapping | None = None, iterations=DEFAULTS.iterations,
-    k: int = DEFAULTS.k, pca_dims: int = DEFAULTS.pca_dims, r: float = DEFAULTS.r,
-    grid: int = DEFAULTS.grid, index_weight: float = DEFAULTS.index_weight,
-    position_weight: float = DEFAULTS.position_weight,
-    position_boost: float = DEFAULTS.position_boost,
-    coherence_exclude: float = DEFAULTS.coherence_exclude,
-    random_candidates: int = DEFAULTS.random_candidates,
-    global_share: float = DEFAULTS.global_share, coherence_bias: float = DEFAULTS.coherence_bias,
-    value_weight: float = DEFAULTS.value_weight, value_prior: float = DEFAULTS.value_prior,
-    value_bins: int = DEFAULTS.value_bins, phase_weight: float = DEFAULTS.phase_weight,
-    batches: int = DEFAULTS.batches, solver: str = DEFAULTS.solver, balance_views: bool = DEFAULTS.balance_views, rng=None,
-    progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
-) -> SynthesisResult:
+def chen_wang_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress: ProgressCallback | None = None,
+                         checkpoint: str | Path | None = None, exemplars: Mapping | None = None,
+                         **options) -> SynthesisResult:
     """Synthesize a solid texture with Chen & Wang's method (2010; issue 11).
 
     Parameters
@@ -337,20 +325,9 @@ def chen_wang_synthesize(
     ((8, 8, 8, 1), [0.0, 1.0])
     """
     t_start = time.perf_counter()
-    seed = rng if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) else None
-    config = make_chen_wang_config(
-        size=size, window=window, levels=levels, views=views, iterations=iterations, k=k,
-        pca_dims=pca_dims, r=r, grid=grid, index_weight=index_weight,
-        position_weight=position_weight, position_boost=position_boost,
-        coherence_exclude=coherence_exclude, random_candidates=random_candidates,
-        global_share=global_share, coherence_bias=coherence_bias, value_weight=value_weight,
-        value_prior=value_prior, value_bins=value_bins, phase_weight=phase_weight, batches=batches, solver=solver,
-        balance_views=balance_views, seed=seed)
-    generator = check.rng(rng)
-    per_view = resolve_exemplars(exemplar, exemplars, config.views, **_fit(config))
-    _check_exemplar_levels(config, per_view)
-    check_memory(coherent_estimate(config, per_view))
-    return run(config, per_view, generator, progress=progress, checkpoint=checkpoint, t_start=t_start)
+    config, generator, per_view = prepare(METHOD, exemplar, exemplars, size=size, rng=rng, options=options)
+    return chen_wang_method(per_view, config, generator, progress=progress, checkpoint=checkpoint,
+                            t_start=t_start)
 
 
 # --------------------------------------------------------------------------- the method

@@ -67,27 +67,23 @@ import numpy as np
 from .. import _validation as check
 from .._kernels import _jit
 from ..config import DEFAULT_SIZE, SynthesisMethod, SynthesisResult
-from ..model.exemplar import resolve_exemplars
 from ..model.neighbourhood import VIEW_AXES, VIEWS
 from ..model.pyramid import Levels, run_pyramid
-from ..resources import check_memory, kopf_estimate
+from ..resources import kopf_estimate
 
 # The building blocks (search, IRLS optimisation, histograms, up-sampling, constraints) live in
 # _kopf_steps; they are re-exported here, where the tests and docs/kopf.md have always found them.
+from ._api import prepare
 from ._kopf_steps import (
     PatchIndex,
     _coarsen_constraint,
     _constraint_arrays,
     _pack_exemplars,
     _upsample,
-    channel_bins,
     channel_histograms,
     downsample_exemplar,
-    exemplar_patches,
     optimisation_phase,
-    pca_basis,
     search_view,
-    volume_neighbourhoods,
 )
 
 __all__ = ["METHOD", "KopfConfig", "UPSAMPLING", "kopf_method", "kopf_synthesize", "make_kopf_config"]
@@ -185,16 +181,9 @@ def make_kopf_config(
 # --------------------------------------------------------------------------- public
 
 
-def kopf_synthesize(
-    exemplar=None, *, size=DEFAULT_SIZE, window: int = KopfConfig.window,
-    levels: int = KopfConfig.levels, views=KopfConfig.views, exemplars: Mapping | None = None,
-    iterations=DEFAULT_ITERATIONS, r: float = KopfConfig.r, eps: float = KopfConfig.eps,
-    variance: float = KopfConfig.variance, grid: int = KopfConfig.grid,
-    histogram_bins: int = KopfConfig.histogram_bins,
-    histogram_weight: float = KopfConfig.histogram_weight, mean_shift=KopfConfig.mean_shift,
-    upsample: str = KopfConfig.upsample, constraint=None, constraint_weight=None, rng=None,
-    progress: ProgressCallback | None = None, checkpoint=None,
-) -> SynthesisResult:
+def kopf_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress: ProgressCallback | None = None,
+                   checkpoint=None, exemplars: Mapping | None = None, constraint=None,
+                   constraint_weight=None, **options) -> SynthesisResult:
     """Synthesize a solid texture with NP_K (Kopf et al. 2007; SPEC.md section 6).
 
     Parameters
@@ -276,21 +265,10 @@ def kopf_synthesize(
     (8, 8, 8, 1)
     """
     t_start = time.perf_counter()
-    seed = rng if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) else None
-    config = make_kopf_config(
-        size=size, window=window, levels=levels, views=views, iterations=iterations, r=r, eps=eps,
-        variance=variance, grid=grid, histogram_bins=histogram_bins,
-        histogram_weight=histogram_weight, mean_shift=mean_shift, upsample=upsample,
-        constrained=constraint is not None, seed=seed,
-    )
-    generator = check.rng(rng)
-    per_view = resolve_exemplars(exemplar, exemplars, config.views, window=config.window,
-                                 levels=config.levels)
-    check_memory(kopf_estimate(config, per_view))
-    channels = next(iter(per_view.values())).shape[2]
-    target, tau = _constraint_arrays(constraint, constraint_weight, config.size, channels)
-    return run_kopf(config, per_view, generator, constraint=target, constraint_weight=tau,
-                    progress=progress, checkpoint=checkpoint, t_start=t_start)
+    config, generator, per_view = prepare(METHOD, exemplar, exemplars, size=size, rng=rng,
+                                          options={**options, "constrained": constraint is not None})
+    return kopf_method(per_view, config, generator, constraint=constraint, constraint_weight=constraint_weight,
+                       progress=progress, checkpoint=checkpoint, t_start=t_start)
 
 
 class _KopfLevels(Levels):

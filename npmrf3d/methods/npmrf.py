@@ -14,7 +14,7 @@ from .. import _validation as check
 from .._kernels import _jit
 from ..config import (DEFAULT_SIZE, DEFAULT_VARIANT, SEGMENTED_MODES, VARIANT_ALIASES, VARIANTS,
     SynthesisConfig, SynthesisMethod, SynthesisResult)
-from ..model.exemplar import make_labels, resolve_exemplars
+from ..model.exemplar import make_labels
 from ..model.heuristics import DECISIONS, get_heuristic
 from ..model.neighbourhood import VIEWS, colour_classes
 from ..model.parzen import PRUNE, adaptive_floor, build_view_models
@@ -22,10 +22,11 @@ from ..model.pyramid import INHERIT, UPSAMPLING, Levels, LevelState, random_stat
 from ..model.relax import RELAXATIONS
 from ..model.relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
 from ..model.relax.icm import expected_sweeps
-from ..resources import check_memory, coherent_estimate, npmrf_estimate, one_after_another
+from ..resources import coherent_estimate, npmrf_estimate, one_after_another
 from . import npmrf_coherent
+from ._api import prepare
 
-__all__ = ["METHOD", "make_config", "npmrf_method", "run", "synthesize"]
+__all__ = ["METHOD", "make_config", "npmrf_method", "npmrf_synthesize", "run"]
 
 ProgressCallback = Callable[[int, int, int, float], None]
 
@@ -115,17 +116,9 @@ def make_config(
     )
 
 
-def synthesize(
-    exemplar=None, *, size=DEFAULT_SIZE, window=_C.window, levels=_C.levels,
-    heuristic=_C.heuristic, relaxation=_C.relaxation, views=_C.views,
-    exemplars: dict | None = None, upsample=None, inherit=_C.inherit, xi=_C.xi, stop=_C.stop,
-    max_sweeps=_C.max_sweeps, sampler=_C.sampler, schedule=_C.schedule, t0=_C.t0,
-    t_end=_C.t_end, proposals=_C.proposals, proposal=_C.proposal, variant=None,
-    segmented=_C.segmented, bandwidth=None, centre_bandwidth=None,
-    adaptive=None, decision=None, tau=None, histogram_weight=None, outlier=None, grey_levels=None,
-    palette=None, toroidal_exemplar=False, rng=None, progress: ProgressCallback | None = None,
-    checkpoint: str | Path | None = None,
-) -> SynthesisResult:
+def npmrf_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress: ProgressCallback | None = None,
+                     checkpoint: str | Path | None = None, exemplars: dict | None = None,
+                     **options) -> SynthesisResult:
     """Synthesize a solid texture whose constrained slices look like the exemplar.
 
     Parameters
@@ -216,26 +209,12 @@ def synthesize(
     --------
     >>> import numpy as np
     >>> stripes = np.tile(np.array([0, 0, 1, 1], dtype=np.uint8) * 255, (16, 4))
-    >>> res = synthesize(stripes, size=8, window=3, levels=1, views="front", rng=0)
+    >>> res = npmrf_synthesize(stripes, size=8, window=3, levels=1, views="front", rng=0)
     >>> res.volume.shape
     (8, 8, 8, 1)
     """
     t_start = time.perf_counter()
-    seed = rng if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) else None
-    config = make_config(
-        size=size, window=window, levels=levels, heuristic=heuristic, relaxation=relaxation,
-        views=views, upsample=upsample, inherit=inherit, xi=xi, stop=stop, max_sweeps=max_sweeps,
-        sampler=sampler, schedule=schedule, t0=t0, t_end=t_end, proposals=proposals,
-        proposal=proposal, variant=variant, segmented=segmented, bandwidth=bandwidth,
-        centre_bandwidth=centre_bandwidth, adaptive=adaptive,
-        decision=decision, tau=tau, histogram_weight=histogram_weight, outlier=outlier,
-        grey_levels=grey_levels,
-        palette=palette, toroidal_exemplar=toroidal_exemplar, seed=seed,
-    )
-    generator = check.rng(rng)
-    per_view = resolve_exemplars(exemplar, exemplars, config.views, window=config.window,
-                                 levels=config.levels, toroidal=config.toroidal_exemplar)
-    check_memory(npmrf_resources(config, per_view))
+    config, generator, per_view = prepare(METHOD, exemplar, exemplars, size=size, rng=rng, options=options)
     return npmrf_method(per_view, config, generator, progress=progress, checkpoint=checkpoint,
                         t_start=t_start)
 
@@ -413,8 +392,9 @@ def _run_coherent(per_view, config: SynthesisConfig, rng, *, progress, checkpoin
 #: The registry entry of the NP-MRF sampler.
 METHOD = SynthesisMethod(
     name="npmrf", run=npmrf_method, make_config=make_config, config_class=SynthesisConfig,
-    synthesize=synthesize,
+    synthesize=npmrf_synthesize,
     fit=lambda c: {"window": c.window, "levels": c.levels, "toroidal": c.toroidal_exemplar},
     resources=npmrf_resources,
-    description="the NP-MRF sampler (ICM or annealing; SPEC.md sections 2-5)",
+    description="the NP-MRF sampler (Urs, Da Costa and Germain 2014): Parzen LCPDFs of three 2D views, "
+                "four heuristics, ICM or annealing",
 )

@@ -23,16 +23,16 @@ neighbourhood values at level ``l`` are read from the exemplar smoothed for that
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
 
 from .. import _validation as check
-from ..config import SynthesisMethod, SynthesisResult
-from ..model.exemplar3d import load_volume_exemplar
-from ..resources import check_memory
-from .volume_lh import VolumeConfig, make_volume_config, run, volume_estimate
+from ..config import DEFAULT_SIZE, SynthesisMethod, SynthesisResult
+from ._api import prepare
+from .volume_lh import VolumeConfig, make_volume_config, run, volume_estimate, volume_loader
 
 __all__ = ["NpmrfVolumeConfig", "make_npmrf_volume_config", "npmrf_volume_synthesize"]
 
@@ -78,15 +78,9 @@ def make_npmrf_volume_config(*, size=DEFAULTS.size, levels=DEFAULTS.levels, wind
                                                          low=0.0, low_open=True))
 
 
-def npmrf_volume_synthesize(exemplar, *, size=DEFAULTS.size, levels: int = DEFAULTS.levels,
-                            window: int = DEFAULTS.window, pca_dims: int = DEFAULTS.pca_dims,
-                            k: int = DEFAULTS.k, exclude: int = DEFAULTS.exclude,
-                            passes: int = DEFAULTS.passes, neighbourhood: str = DEFAULTS.neighbourhood,
-                            jitter: float = DEFAULTS.jitter, fine_jitter: float = DEFAULTS.fine_jitter,
-                            adaptive: float = DEFAULTS.adaptive,
-                            centre_bandwidth: float = DEFAULTS.centre_bandwidth,
-                            exemplar_kind: str = "auto", spacing=None, rng=None, progress=None,
-                            checkpoint=None) -> SynthesisResult:
+def npmrf_volume_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress=None, checkpoint=None,
+                            exemplars=None, exemplar_kind: str = "auto", spacing=None,
+                            **options) -> SynthesisResult:
     """Synthesise from a 3D exemplar with the NP-MRF of one 3D view (module docstring).
 
     Parameters are those of :func:`npmrf3d.methods.volume_lh.volume_synthesize` (without the
@@ -104,15 +98,11 @@ def npmrf_volume_synthesize(exemplar, *, size=DEFAULTS.size, levels: int = DEFAU
     >>> res.volume.shape, sorted(np.unique(res.volume).tolist())
     ((16, 16, 16, 1), [0.0, 1.0])
     """
-    seed = rng if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) else None
-    config = make_npmrf_volume_config(size=size, levels=levels, window=window, pca_dims=pca_dims, k=k,
-                                      exclude=exclude, passes=passes, neighbourhood=neighbourhood,
-                                      jitter=jitter, fine_jitter=fine_jitter, adaptive=adaptive,
-                                      centre_bandwidth=centre_bandwidth, seed=seed)
-    generator = check.rng(rng)
-    per_view = {"volume": load_volume_exemplar(exemplar, exemplar_kind=exemplar_kind, spacing=spacing)}
-    check_memory(volume_estimate(config, per_view))
-    return npmrf_volume_method(per_view, config, generator, progress=progress, checkpoint=checkpoint)
+    t_start = time.perf_counter()
+    config, generator, per_view = prepare(METHOD, exemplar, exemplars, size=size, rng=rng, options=options,
+                                          load=volume_loader(exemplar_kind, spacing))
+    return npmrf_volume_method(per_view, config, generator, progress=progress, checkpoint=checkpoint,
+                               t_start=t_start)
 
 
 def npmrf_volume_method(per_view, config: NpmrfVolumeConfig, rng: np.random.Generator, *,

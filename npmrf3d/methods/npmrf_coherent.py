@@ -35,12 +35,12 @@ import numpy as np
 
 from .. import _validation as check
 from ..analysis.metrics import two_point_shape_error
-from ..config import SynthesisMethod, SynthesisResult
-from ..model.exemplar import resolve_exemplars
+from ..config import DEFAULT_SIZE, SynthesisMethod, SynthesisResult
 from ..model.neighbourhood import VIEWS
 from ..model.relax.anneal import SCHEDULES
-from ..resources import check_memory, coherent_estimate
+from ..resources import coherent_estimate
 from . import chen_wang
+from ._api import prepare
 
 __all__ = ["METHOD", "SEGMENTED", "SEGMENTED_MAX_VALUES", "CoherentConfig", "HEURISTIC_CODES", "SegmentedPreset",
            "best_of_pyramids", "coherent_synthesize", "is_segmented", "make_coherent_config", "run",
@@ -112,7 +112,7 @@ def is_segmented(exemplars) -> bool:
 class CoherentConfig:
     """A validated coherent NP-MRF run; every default lives here."""
 
-    size: tuple[int, int, int] = (64, 64, 64)
+    size: tuple[int, int, int] = (DEFAULT_SIZE,) * 3
     window: tuple[int, ...] = _CW.window
     levels: int = _CW.levels
     views: tuple[str, ...] = VIEWS
@@ -211,8 +211,9 @@ def run(config: CoherentConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
     return dataclasses.replace(result, config=config)
 
 
-def coherent_synthesize(exemplar=None, *, exemplars: Mapping | None = None, rng=None, progress=None,
-                        checkpoint: str | Path | None = None, **options) -> SynthesisResult:
+def coherent_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress=None,
+                        checkpoint: str | Path | None = None, exemplars: Mapping | None = None,
+                        **options) -> SynthesisResult:
     """Synthesize a solid texture with the coherent NP-MRF sampler.
 
     ``options`` are the fields of :class:`CoherentConfig` (``size``, ``window``, ``levels``,
@@ -229,11 +230,7 @@ def coherent_synthesize(exemplar=None, *, exemplars: Mapping | None = None, rng=
     ((8, 8, 8, 1), [0.0, 1.0])
     """
     t_start = time.perf_counter()
-    seed = rng if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) else None
-    config = make_coherent_config(seed=seed, **options)
-    generator = check.rng(rng)
-    per_view = resolve_exemplars(exemplar, exemplars, config.views, **chen_wang._fit(config))
-    check_memory(coherent_estimate(config, per_view))
+    config, generator, per_view = prepare(METHOD, exemplar, exemplars, size=size, rng=rng, options=options)
     return coherent_method(per_view, config, generator, progress=progress, checkpoint=checkpoint,
                            t_start=t_start)
 
@@ -305,6 +302,6 @@ def best_of_pyramids(per_view, configs, rng: np.random.Generator, *, progress=No
 METHOD = SynthesisMethod(
     name="coherent", run=coherent_method, make_config=make_coherent_config,
     config_class=CoherentConfig, synthesize=coherent_synthesize, fit=chen_wang._fit,
-    description="the coherent NP-MRF sampler: NP-MRF likelihood over coherent candidates (issue 12)",
+    description="the coherent NP-MRF sampler: the NP-MRF likelihood over k-coherent candidates",
     resources=coherent_estimate,
 )

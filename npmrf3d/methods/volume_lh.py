@@ -56,7 +56,7 @@ from .. import _validation as check
 from .._kernels import _jit
 from .._kernels import volume_lh as _k
 from ..analysis.repetition import copy_repetition
-from ..config import SynthesisMethod, SynthesisResult
+from ..config import DEFAULT_SIZE, SynthesisMethod, SynthesisResult
 from ..io.files import load_checkpoint, save_checkpoint
 from ..model.exemplar3d import load_volume_exemplar, volume_fits
 from ..model.fields import FIELDS, field_input, level_frames
@@ -68,7 +68,8 @@ from ..model.phases import (
     phase_footprint,
     phase_membership,
 )
-from ..resources import Estimate, check_memory
+from ..resources import Estimate
+from ._api import prepare
 
 __all__ = ["VolumeConfig", "appearance_space", "make_volume_config", "run", "similarity_sets",
            "volume_synthesize"]
@@ -91,7 +92,7 @@ NEIGHBOURHOODS = {"diagonal": _k.DIAGONALS, "faces": np.concatenate([_k.DIAGONAL
 class VolumeConfig:
     """A validated run of the 3D-exemplar method; every default lives here."""
 
-    size: tuple[int, int, int] = (64, 64, 64)
+    size: tuple[int, int, int] = (DEFAULT_SIZE,) * 3
     levels: int = 4
     window: int = 5
     pca_dims: int = 8
@@ -376,16 +377,9 @@ def parzen_pass(coords, frames, feat, values, kset, h: int, lo, hi, offsets, win
 # --------------------------------------------------------------------------- public
 
 
-def volume_synthesize(exemplar, *, size=DEFAULTS.size, levels: int = DEFAULTS.levels,
-                      window: int = DEFAULTS.window, pca_dims: int = DEFAULTS.pca_dims,
-                      k: int = DEFAULTS.k, exclude: int = DEFAULTS.exclude, passes: int = DEFAULTS.passes,
-                      neighbourhood: str = DEFAULTS.neighbourhood, jitter: float = DEFAULTS.jitter,
-                      fine_jitter: float = DEFAULTS.fine_jitter, usage: float = DEFAULTS.usage,
-                      balance: float = DEFAULTS.balance, start: str = DEFAULTS.start,
-                      vector_field=DEFAULTS.vector_field,
-                      angle: float = DEFAULTS.angle, exemplar_kind: str = "auto", spacing=None,
-                      rng=None, progress: ProgressCallback | None = None,
-                      checkpoint: str | Path | None = None) -> SynthesisResult:
+def volume_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress: ProgressCallback | None = None,
+                      checkpoint: str | Path | None = None, exemplars=None, exemplar_kind: str = "auto",
+                      spacing=None, **options) -> SynthesisResult:
     """Synthesise a volume from a 3D exemplar, optionally deformed by a vector field (seed 002).
 
     Parameters
@@ -468,19 +462,31 @@ def volume_synthesize(exemplar, *, size=DEFAULTS.size, levels: int = DEFAULTS.le
     ((16, 16, 16, 1), [0.0, 1.0])
     """
     t_start = time.perf_counter()
-    seed = rng if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) else None
-    dims = check.size(size, levels=check.integer("levels", levels, low=1, high=6), window=3)
-    field_name, field_array = field_input(vector_field, dims)
-    config = make_volume_config(size=size, levels=levels, window=window, pca_dims=pca_dims, k=k,
-                                exclude=exclude, passes=passes, neighbourhood=neighbourhood,
-                                jitter=jitter, fine_jitter=fine_jitter, usage=usage, balance=balance, start=start,
-                                vector_field=field_name, angle=angle, seed=seed)
-    generator = check.rng(rng)
-    volume = load_volume_exemplar(exemplar, exemplar_kind=exemplar_kind, spacing=spacing)
-    per_view = {"volume": volume}
-    check_memory(volume_estimate(config, per_view))
+    levels = check.integer("levels", options.get("levels", DEFAULTS.levels), low=1, high=6)
+    field_name, field_array = field_input(options.get("vector_field", DEFAULTS.vector_field),
+                                          check.size(size, levels=levels, window=3))
+    config, generator, per_view = prepare(METHOD, exemplar, exemplars, size=size, rng=rng,
+                                          options={**options, "vector_field": field_name},
+                                          load=volume_loader(exemplar_kind, spacing))
     return run(per_view, config, generator, progress=progress, checkpoint=checkpoint,
                t_start=t_start, vector_field=field_array)
+
+
+def volume_loader(exemplar_kind: str, spacing):
+    """The exemplar loader of the 3D-exemplar methods for :func:`npmrf3d.methods._api.prepare`:
+    one 3D exemplar (``exemplar_kind`` and ``spacing`` as
+    :func:`npmrf3d.model.exemplar3d.load_volume_exemplar`), no per-view exemplars."""
+
+    def load(exemplar, exemplars, config) -> dict:
+        if exemplars:
+            check.fail("a 3D exemplar is one volume for every direction: per-view exemplars are "
+                       "for the 2D methods")
+        if exemplar is None:
+            check.fail("this method needs a 3D exemplar (a .npy or .npz volume, a TIFF stack, or "
+                       "a (D, H, W) or (D, H, W, C) array); no 3D exemplar is bundled")
+        return {"volume": load_volume_exemplar(exemplar, exemplar_kind=exemplar_kind, spacing=spacing)}
+
+    return load
 
 
 def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
@@ -635,7 +641,8 @@ def volume_method(per_view, config: VolumeConfig, rng: np.random.Generator, *, p
 METHOD = SynthesisMethod(
     name="volume-lh", run=volume_method, make_config=make_volume_config, config_class=VolumeConfig,
     synthesize=volume_synthesize, fit=_fit,
-    description="3D exemplar (seed 002): appearance-space coordinate pyramid, k = 3 similarity "
+    description="from a 3D exemplar, after the vector-field deformation method (IET Image Processing 2012): "
+                "appearance-space coordinate pyramid, k = 3 similarity "
                 "sets, jitter and correction, vector-field deformation",
     resources=volume_estimate,
 )

@@ -35,9 +35,10 @@ import time
 import numpy as np
 
 from ... import _validation as check
-from ...config import SynthesisMethod, SynthesisResult
+from ...config import DEFAULT_SIZE, SynthesisMethod, SynthesisResult
 from ...model.exemplar import resolve_exemplars
 from ...resources import Estimate, check_memory
+from .._api import prepare, seed_of
 from . import _extra
 from ._extra import MissingExtraError
 from .config import (
@@ -69,7 +70,8 @@ def train(exemplar=None, *, exemplars=None, rng=None, progress=None, checkpoint=
         Used for every view without its own entry in ``exemplars`` (None: the bundled default).
     exemplars : mapping view -> path or array, optional
     rng : None, int or numpy Generator
-        Draws the training slices' positions (``options["seed"]`` seeds weights and noise).
+        Seeds everything: the training slices' positions and, when an integer, the model's
+        weights, filter bank and noise (unless ``options["seed"]`` gives those their own seed).
     progress : callable, optional
         ``progress(step, steps, loss)`` after each optimiser step.
     checkpoint : path, optional
@@ -82,7 +84,7 @@ def train(exemplar=None, *, exemplars=None, rng=None, progress=None, checkpoint=
     NeuralModel
         ``generator``, ``config``, ``history`` (loss per step), ``timings``.
     """
-    config = make_neural_config(**options)
+    config = make_neural_config(**{"seed": seed_of(rng), **options})
     rng = check.rng(rng)
     per_view = resolve_exemplars(exemplar, exemplars, config.views, **_fit(config))
     check_memory(neural_estimate(config, per_view), hint="lower --size (the slice side) or --batch")
@@ -174,20 +176,20 @@ def neural_method(per_view, config: NeuralConfig, rng: np.random.Generator, *, p
                            timings=timings, labels=np.zeros((0, channels), np.float32), stats=stats)
 
 
-def neural_synthesize(exemplar=None, *, exemplars=None, rng=None, progress=None, checkpoint=None,
-                      **options) -> SynthesisResult:
-    """Train and generate in one call (the registry's ``synthesize``): ``options`` as
-    :func:`train`, ``size`` the volume made."""
-    config = make_neural_config(**options)
-    rng = check.rng(rng)
-    per_view = resolve_exemplars(exemplar, exemplars, config.views, **_fit(config))
-    check_memory(neural_estimate(config, per_view))
-    return neural_method(per_view, config, rng, progress=progress, checkpoint=checkpoint)
+def neural_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress=None, checkpoint=None,
+                      exemplars=None, **options) -> SynthesisResult:
+    """Train and generate in one call: ``options`` as :func:`train`, ``size`` the volume made;
+    ``rng`` seeds everything (an integer is also the model's seed: weights, filter bank, noise)."""
+    t_start = time.perf_counter()
+    config, generator, per_view = prepare(METHOD, exemplar, exemplars, size=size, rng=rng, options=options)
+    return neural_method(per_view, config, generator, progress=progress, checkpoint=checkpoint,
+                         t_start=t_start)
 
 
 METHOD = SynthesisMethod(
     name="neural", run=neural_method, make_config=make_neural_config, config_class=NeuralConfig,
     synthesize=neural_synthesize, fit=_fit,
-    description="on-demand 3D CNN generator (seed 004): trained on slices, any block on demand; needs npmrf3d[neural]",
+    description="on-demand 3D CNN generator (Gutierrez et al. 2020): trained on slices, any block on "
+                "demand; needs npmrf3d[neural]",
     resources=neural_estimate, unavailable=_extra.missing,
 )

@@ -1,0 +1,64 @@
+"""The one shape of every method's public function.
+
+Every method's own function has the same leading signature::
+
+    xxx_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress=None, checkpoint=None,
+                   exemplars=None, **options)
+
+where ``options`` are the fields of the method's frozen configuration class, validated by the
+method's ``make_config`` (the single source of the option names and defaults).
+:func:`prepare` does what they share: it refuses an option the method does not have (one line
+naming it and listing the method's options), validates the configuration with the seed taken
+from ``rng``, loads and checks the exemplars, and refuses a run the machine cannot hold.
+"""
+
+from __future__ import annotations
+
+import inspect
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+
+from .. import _validation as check
+from ..config import SynthesisMethod
+from ..model.exemplar import resolve_exemplars
+from ..resources import check_memory, generic_estimate
+
+__all__ = ["option_names", "prepare", "seed_of"]
+
+
+def seed_of(rng) -> int | None:
+    """The integer seed that ``rng`` is (recorded in the configuration), or None for a Generator."""
+    return rng if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) else None
+
+
+def option_names(method: SynthesisMethod) -> tuple[str, ...]:
+    """The keyword options of ``method`` (its ``make_config`` parameters but ``size`` and ``seed``)."""
+    params = inspect.signature(method.make_config).parameters
+    return tuple(name for name in params if name not in ("size", "seed"))
+
+
+def prepare(method: SynthesisMethod, exemplar, exemplars: Mapping | None, *, size, rng,
+            options: Mapping[str, Any],
+            load: Callable[..., dict] | None = None) -> tuple[Any, np.random.Generator, dict]:
+    """``(config, generator, per_view)`` of a call of ``method``'s public function.
+
+    ``load(exemplar, exemplars, config)`` reads the exemplars (default: one 2D exemplar per
+    constrained view, checked against the method's ``fit``).
+    """
+    known = option_names(method)
+    unknown = sorted(set(options) - set(known))
+    if unknown:
+        check.fail(f"method {method.name} has no option {unknown[0]!r}; its options are "
+                   f"{', '.join(known)}")
+    config = method.make_config(size=size, seed=seed_of(rng), **options)
+    generator = check.rng(rng)
+    if load is None:
+        fit = method.fit(config)
+        per_view = resolve_exemplars(exemplar, exemplars, config.views, window=fit["window"],
+                                     levels=fit["levels"], toroidal=fit.get("toroidal", False))
+    else:
+        per_view = load(exemplar, exemplars, config)
+    check_memory((method.resources or generic_estimate)(config, per_view))
+    return config, generator, per_view
