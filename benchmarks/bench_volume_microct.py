@@ -43,10 +43,10 @@ import matplotlib
 matplotlib.use("Agg")
 import numpy as np  # noqa: E402
 
-from npmrf3d.analysis import materials  # noqa: E402
 from npmrf3d.errors import ParameterError  # noqa: E402
 from npmrf3d.methods.volume_lh import STARTS, VolumeConfig, volume_synthesize  # noqa: E402
 from npmrf3d.model.exemplar3d import load_volume_exemplar  # noqa: E402
+from npmrf3d.model.otsu import otsu_threshold  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
 from bench_volume_scan import block_mean, crops_of, inside, print_spread, report, spread_of, statistics  # noqa: E402
@@ -76,7 +76,7 @@ def thresholds_of(spec: list[str], exemplar: np.ndarray) -> dict[str, float]:
     out = {}
     for item in spec:
         if item == "otsu":
-            t = materials.otsu_threshold(exemplar)
+            t = otsu_threshold(exemplar)
             out[f"otsu ({t:.3f})"] = t
         else:
             try:

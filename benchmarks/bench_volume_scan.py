@@ -36,6 +36,7 @@ import numpy as np  # noqa: E402
 
 from npmrf3d.analysis import materials  # noqa: E402
 from npmrf3d.methods.volume_lh import STARTS, VolumeConfig, volume_synthesize  # noqa: E402
+from npmrf3d.model.otsu import otsu_threshold  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
 from scan_volume import CORNER, TEMPLATE  # noqa: E402
@@ -154,8 +155,8 @@ def main(argv=None) -> int:
     a, b, c = corner
     block = normalised(block_mean(data[a:a + 128, b:b + 128, c:c + 128], 2))
     mm = block_mean(data, 2)
-    t_bg = materials.otsu_threshold(block)
-    t_wm = materials.otsu_threshold(block[block > t_bg])
+    t_bg = otsu_threshold(block)
+    t_wm = otsu_threshold(block[block > t_bg])
     thresholds = {"background|tissue": t_bg, "grey|white": t_wm}
     share = float(np.mean(block <= t_bg))
     crops = []

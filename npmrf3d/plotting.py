@@ -46,6 +46,12 @@ def _value_range(*arrays: np.ndarray) -> tuple[float, float]:
     return min(float(a.min()) for a in finite), max(float(a.max()) for a in finite)
 
 
+def _limits(vmin: float | None, vmax: float | None, *arrays: np.ndarray) -> tuple[float, float]:
+    """``vmin`` and ``vmax``, each defaulting to the finite minimum or maximum of ``arrays``."""
+    lo, hi = _value_range(*arrays)
+    return (lo if vmin is None else vmin), (hi if vmax is None else vmax)
+
+
 def to_display(
     image: np.ndarray, *, vmin: float | None = None, vmax: float | None = None
 ) -> np.ndarray:
@@ -70,9 +76,7 @@ def to_display(
         return image
     if image.shape[-1] != 3:
         return image[..., 0]
-    lo, hi = _value_range(image)
-    lo = lo if vmin is None else vmin
-    hi = hi if vmax is None else vmax
+    lo, hi = _limits(vmin, vmax, image)
     span = hi - lo if hi > lo else 1.0
     return np.clip((image.astype(np.float32) - lo) / span, 0.0, 1.0)
 
@@ -142,8 +146,7 @@ def plot_slices(
         axes = _new_axes(3)[1]
     if len(axes) != 3:
         raise ValueError(f"plot_slices needs 3 axes; got {len(axes)}")
-    lo, hi = _value_range(volume)
-    vmin, vmax = (lo if vmin is None else vmin), (hi if vmax is None else vmax)
+    vmin, vmax = _limits(vmin, vmax, volume)
     images = []
     for ax, (title, image, rows, cols) in zip(axes, _centre_slices(volume)):
         images.append(_show(ax, image, vmin, vmax))
@@ -185,8 +188,7 @@ def plot_cube(
     volume = as_volume(volume)
     if ax is None:
         ax = _new_axes(1)[1][0]
-    lo, hi = _value_range(volume)
-    vmin, vmax = (lo if vmin is None else vmin), (hi if vmax is None else vmax)
+    vmin, vmax = _limits(vmin, vmax, volume)
     n1, n2, n3, _ = volume.shape
     scale = max(n1, n2, n3)
     height, width = n1 / scale, n2 / scale  # front face: rows i (down), columns j (right)

@@ -24,8 +24,9 @@ import pathlib
 import sys
 import time
 
+from npmrf3d._cluster import local_cluster, plan_workers
 from npmrf3d.studies.catalog import STUDIES
-from npmrf3d.studies.runner import _start_local_cluster, plan_workers, run_study
+from npmrf3d.studies.runner import run_study
 
 #: The default order: cheapest first (measured wall times on the 2-core machine:
 #: studies/README.md), the two with the longest full-Parzen runs last.
@@ -57,7 +58,7 @@ def main(argv=None) -> int:
     threads = None
     if args.scheduler == "local":
         workers, threads = plan_workers(args.workers, 1)
-        cluster = _start_local_cluster(workers)
+        cluster = local_cluster(workers)
         address = cluster.scheduler_address
         print(f"local cluster: {workers} workers x {threads} numba thread ({address})")
     out = pathlib.Path(args.out)

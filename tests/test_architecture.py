@@ -1,6 +1,9 @@
 """The layering that README's "Architecture" section describes, checked on the source.
 
 * no import cycles among the package's modules (module-level and function-level imports);
+* the layers' arrows run one way: the model reaches neither the analysis, the methods, the
+  command line nor the studies, and the analysis reaches neither the methods, the command line
+  nor the studies (directly or through other modules);
 * the package's own modules are imported at module top, never inside a function;
 * only ``npmrf3d/_kernels/`` imports numba;
 * only the torch modules of ``npmrf3d/methods/neural/`` import torch, and they are reached only through
@@ -93,6 +96,34 @@ def _cycles(graph) -> list[list[str]]:
 
 def test_no_import_cycles():
     assert _cycles(_graph()) == []
+
+
+#: Layer -> the layers above it, which it must never reach through its imports.
+LAYERS_ABOVE = {
+    "npmrf3d.model": ("npmrf3d.analysis", "npmrf3d.methods", "npmrf3d.cli", "npmrf3d.studies"),
+    "npmrf3d.analysis": ("npmrf3d.methods", "npmrf3d.cli", "npmrf3d.studies"),
+}
+
+
+def _inside(module: str, package: str) -> bool:
+    return module == package or module.startswith(package + ".")
+
+
+def test_the_model_and_the_analysis_never_import_a_layer_above_them():
+    graph = _graph()
+    found = []
+    for name in graph:
+        for layer, above in LAYERS_ABOVE.items():
+            if not _inside(name, layer):
+                continue
+            reached, stack = set(), [name]
+            while stack:  # everything the module imports, directly or through other modules
+                for target in graph[stack.pop()]:
+                    if target not in reached:
+                        reached.add(target)
+                        stack.append(target)
+            found += [f"{name} -> {t}" for t in sorted(reached) if any(_inside(t, a) for a in above)]
+    assert found == []
 
 
 def test_own_modules_are_imported_at_module_top():

@@ -190,10 +190,10 @@ def test_full_disk_is_one_line(where, place, capsys, monkeypatch):
 
 
 def test_study_with_failed_runs_exits_non_zero_and_says_how_many(place, capsys, monkeypatch):
-    from npmrf3d.studies import runner
+    from npmrf3d.studies import execute, runner
 
     def fail(spec, study_dir, threads=None):
-        return runner.record_failure(spec, pathlib.Path(study_dir), RuntimeError("boom"))
+        return execute.record_failure(spec, pathlib.Path(study_dir), RuntimeError("boom"))
 
     monkeypatch.setattr(runner, "execute_run", fail)
     code = cli.main(["study", "heuristics", "--quick", "--scheduler", "serial", "--out", "s", "--quiet"])
@@ -205,7 +205,7 @@ def test_study_with_failed_runs_exits_non_zero_and_says_how_many(place, capsys, 
         calls.append(spec)
         if len(calls) == 1:
             return fail(spec, study_dir)
-        return runner.record_failure(spec, pathlib.Path(study_dir), RuntimeError("boom")) | {"status": "done"}
+        return execute.record_failure(spec, pathlib.Path(study_dir), RuntimeError("boom")) | {"status": "done"}
 
     monkeypatch.setattr(runner, "execute_run", some)
     code = cli.main(["study", "heuristics", "--quick", "--scheduler", "serial", "--out", "s2", "--quiet"])

@@ -11,6 +11,7 @@ from scipy import ndimage
 
 from npmrf3d.analysis import materials
 from npmrf3d.errors import ParameterError
+from npmrf3d.model.otsu import otsu_threshold
 
 
 @pytest.fixture
@@ -23,7 +24,7 @@ def test_phase_and_fraction_follow_otsu_or_a_given_threshold(porous):
     from skimage.filters import threshold_otsu
 
     t = threshold_otsu(porous)
-    assert materials.otsu_threshold(porous) == pytest.approx(t, abs=1e-12)
+    assert otsu_threshold(porous) == pytest.approx(t, abs=1e-12)
     assert materials.volume_fraction(porous) == pytest.approx(float((porous > t).mean()))
     assert materials.volume_fraction(porous, threshold=float(np.median(porous))) == pytest.approx(0.5, abs=0.01)
     colour = np.stack([porous] * 3, axis=-1)

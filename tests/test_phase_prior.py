@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from skimage.filters import threshold_otsu
 
-from npmrf3d.analysis.materials import otsu_split
 from npmrf3d.errors import ParameterError
 from npmrf3d.methods.chen_wang import chen_wang_synthesize
 from npmrf3d.methods.npmrf_coherent import coherent_synthesize
+from npmrf3d.model.otsu import otsu_split
 from npmrf3d.model.phases import PhaseControl, bin_phase_error, bin_phases, phase_prior_target
 
 

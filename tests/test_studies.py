@@ -13,7 +13,7 @@ import pytest
 
 import npmrf3d.methods
 import npmrf3d.model.exemplar
-from npmrf3d import cli
+from npmrf3d import _cluster, cli
 from npmrf3d.errors import ParameterError
 from npmrf3d.studies import (
     STUDIES,
@@ -21,11 +21,12 @@ from npmrf3d.studies import (
     Scale,
     Study,
     catalog,
+    execute,
     get_study,
     groundtruth,
     report,
     run_study,
-    runner,
+    table,
 )
 
 TINY = Scale(exemplars=("gravel64",), seeds=(0,), sizes=(8,), levels=1, crop=24,
@@ -65,7 +66,7 @@ def quick_results(tmp_path_factory, blobs):
 
 @pytest.fixture(scope="module")
 def cluster():
-    with runner._start_local_cluster(2) as local:
+    with _cluster.local_cluster(2) as local:
         yield local.scheduler_address
 
 
@@ -143,7 +144,7 @@ def test_a_method_without_its_extra_is_left_out_and_said(tmp_path, monkeypatch):
     assert 'pip install "npmrf3d[neural]"' in note["reason"]
     assert [r["method"] for r in info["runs"]] == ["control"]
     assert any(m.startswith("left out: method neural (1 runs): the neural method needs torch") for m in messages)
-    assert [r["method"] for r in runner.read_results(tmp_path / "extra" / "results.csv")] == ["control"]
+    assert [r["method"] for r in table.read_results(tmp_path / "extra" / "results.csv")] == ["control"]
     page = report.build_report(tmp_path / "extra")
     assert "left out: neural" in page and "npmrf3d[neural]" in page
     with pytest.raises(ParameterError, match="no method can run here: the neural method needs torch"):
@@ -192,12 +193,12 @@ def test_etr_terrains_only_at_run_time(monkeypatch, tmp_path):
 
 
 def test_plan_workers_never_oversubscribes():
-    assert runner.plan_workers(None, None, 2) == (2, 1)
-    assert runner.plan_workers(1, None, 2) == (1, 2)
+    assert _cluster.plan_workers(None, None, 2) == (2, 1)
+    assert _cluster.plan_workers(1, None, 2) == (1, 2)
     with pytest.raises(ParameterError, match="exceed the 2 cores"):
-        runner.plan_workers(3, None, 2)
+        _cluster.plan_workers(3, None, 2)
     with pytest.raises(ParameterError, match="exceed"):
-        runner.plan_workers(2, 2, 2)
+        _cluster.plan_workers(2, 2, 2)
 
 
 # --------------------------------------------------------------------------- running
@@ -210,7 +211,7 @@ def test_every_study_runs_in_quick_mode(quick_results, name):
     study_dir = out / name
     failed = [(r["run_id"], r["error"]) for r in outcome.rows if r["status"] == "failed"]
     assert not failed
-    assert outcome.counts["done"] == len(outcome.rows) == len(runner.read_results(
+    assert outcome.counts["done"] == len(outcome.rows) == len(table.read_results(
         study_dir / "results.csv"))
     for row in outcome.rows:
         run_dir = study_dir / row["run_id"]
@@ -249,7 +250,7 @@ def test_failed_run_is_recorded_and_others_go_on(tmp_path):
     assert "ParameterError" in broken["error"] and "window" in broken["error"]
     error = json.loads((tmp_path / "failing" / broken["run_id"] / "error.json").read_text())
     assert "Traceback" in error["traceback"] and error["spec"]["method"] == "broken"
-    rows = runner.read_results(tmp_path / "failing" / "results.csv")
+    rows = table.read_results(tmp_path / "failing" / "results.csv")
     assert [r["status"] for r in rows] == ["failed", "done"] and rows[0]["error"]
     again = run_study(study, out=tmp_path, scheduler="serial", progress=False, echo=None)
     assert [r["status"] for r in again.rows] == ["failed", "skipped"]  # failures are retried
@@ -378,7 +379,7 @@ def test_cli_study_and_errors(tmp_path, capsys, blobs):
 
 _FRESH_COMPILE_SCRIPT = """
 import numba  # a study script imports numba before a spawned worker gets the Nanny's environment
-from npmrf3d.studies import runner
+from npmrf3d._cluster import local_cluster
 
 
 def compile_fresh(x):
@@ -401,7 +402,7 @@ def allocator_setting():
 if __name__ == "__main__":
     from distributed import Client
 
-    with runner._start_local_cluster(1) as cluster, Client(cluster) as client:
+    with local_cluster(1) as cluster, Client(cluster) as client:
         print("result", client.submit(compile_fresh, 21).result())
         print("mmap threshold", client.submit(allocator_setting).result())
 """
@@ -433,7 +434,7 @@ def test_study_script_entry_point(tmp_path):
                                 "--quiet"]) == 0
     assert study_main("views", ["--quick", "--out", str(tmp_path), "--scheduler", "serial",
                                 "--quiet", "--exemplars", "nope.png"]) == 1  # failed run: recorded, exit 1
-    rows = runner.read_results(tmp_path / "views" / "results.csv")
+    rows = table.read_results(tmp_path / "views" / "results.csv")
     assert {r["status"] for r in rows} == {"failed"} and "does not exist" in rows[0]["error"]
 
 
@@ -481,7 +482,7 @@ def test_fraction_free_two_point_against_brute_force():
 def test_fraction_free_two_point_does_not_rank_a_structureless_volume_above_structure(blobs):
     real = groundtruth.load_reference(blobs)
     exemplar = groundtruth.exemplar_slice(real, 0)
-    control = runner.structureless(exemplar, 32, 0)  # the right fraction, no structure
+    control = execute.structureless(exemplar, 32, 0)  # the right fraction, no structure
     # a volume with the real structure but a phase fraction drifted (eroded by one voxel)
     from scipy import ndimage
     labels = real[..., 0] > 0.5
@@ -501,7 +502,7 @@ def test_ground_truth_compare_ranks_structure(blobs):
     np.testing.assert_array_equal(exemplar, real[16])
     same = groundtruth.compare(real, real, exemplar)
     assert same["two_point_l2_mean"] == 0 and same["fraction_l1"] == 0
-    control = runner.structureless(exemplar, 32, 0)
+    control = execute.structureless(exemplar, 32, 0)
     noise = groundtruth.compare(control, real, exemplar)
     assert noise["two_point_l2_mean"] > 0.1 and noise["fraction_l1"] < 0.1
     assert set(noise["slice_metrics"]["per_view"]) == {"front", "right", "top"}
@@ -534,21 +535,21 @@ def test_ground_truth_study_with_three_slices_hands_each_method_the_three(tmp_pa
     specs = STUDIES["groundtruth"].runs("quick", reference=str(blobs), slices=3)
     assert {s.exemplar for s in specs} == {"blobs.three_slices"} and {s.slices for s in specs} == {3}
     seen = {}
-    kopf = runner.METHODS["kopf"]
+    kopf = execute.METHODS["kopf"]
 
     def spy(exemplar=None, **kwargs):
         seen.update(kwargs.get("exemplars") or {})
         return kopf.synthesize(exemplar, **kwargs)
 
-    monkeypatch.setitem(runner.METHODS, "kopf", dataclasses.replace(kopf, synthesize=spy))
+    monkeypatch.setitem(execute.METHODS, "kopf", dataclasses.replace(kopf, synthesize=spy))
     spec = next(s for s in specs if s.algorithm == "kopf")
-    row = runner.execute_run(spec, str(tmp_path))
+    row = execute.execute_run(spec, str(tmp_path))
     assert row["status"] == "done", row
     real = groundtruth.load_reference(blobs)
     for view, plane in groundtruth.reference_slices(real).items():
         np.testing.assert_array_equal(seen[view], plane)
     control = next(s for s in specs if s.algorithm == "control")
-    volume, per_view, _ = runner._synthesise(control, groundtruth.pooled_exemplar(seen), real, seen)
+    volume, per_view, _ = execute._synthesise(control, groundtruth.pooled_exemplar(seen), real, seen)
     assert per_view["right"] is seen["right"] and volume.shape == (16, 16, 16, 1)
     outcome = run_study(STUDIES["groundtruth"], mode="quick", out=tmp_path / "three", scheduler="serial",
                         volume=blobs, slices=3, progress=False, echo=None)

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from npmrf3d._kernels import volume_lh as _k
-from npmrf3d.analysis.materials import otsu_threshold
 from npmrf3d.errors import ParameterError
 from npmrf3d.methods import get_method
 from npmrf3d.methods.volume_lh import (
@@ -24,6 +23,7 @@ from npmrf3d.methods.volume_lh import (
     volume_synthesize,
 )
 from npmrf3d.model import fields
+from npmrf3d.model.otsu import otsu_threshold
 from npmrf3d.model.phases import (
     PRICE_STEPS,
     PhaseControl,

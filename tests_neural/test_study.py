@@ -7,7 +7,7 @@ import json
 
 import numpy as np
 
-from npmrf3d.studies import STUDIES, catalog, run_study, runner
+from npmrf3d.studies import STUDIES, catalog, run_study, table
 
 
 def test_the_npk_study_runs_the_neural_method(tmp_path):
@@ -25,7 +25,7 @@ def test_the_npk_study_runs_the_neural_method(tmp_path):
     assert info["left_out"] == []
     assert [r["method"] for r in info["runs"]] == ["neural", "control"]
 
-    rows = runner.read_results(study_dir / "results.csv")
+    rows = table.read_results(study_dir / "results.csv")
     columns = list(rows[0])
     assert columns[columns.index("seconds") + 1:columns.index("seconds") + 3] == ["train_seconds",
                                                                                    "generate_seconds"]

@@ -2,8 +2,8 @@
 synthesised volume by, against a real scan.
 
 Every function takes a volume ``(N1, N2, N3)`` or ``(N1, N2, N3, C)`` (grey = mean of the
-channels) and works on a *phase*: the voxels above a threshold (Otsu's by default, from
-``skimage.filters.threshold_otsu``, or a number), or an indicator given directly (a bool volume).
+channels) and works on a *phase*: the voxels above a threshold (Otsu's by default,
+:func:`npmrf3d.model.otsu.otsu_threshold`, or a number), or an indicator given directly (a bool volume).
 
 * :func:`volume_fraction` -- share of the phase;
 * :func:`two_point_correlation` along each axis is :func:`npmrf3d.analysis.metrics.two_point_correlation`;
@@ -19,10 +19,10 @@ channels) and works on a *phase*: the voxels above a threshold (Otsu's by defaul
   ``taufactor`` package.
 
 scikit-image (marching cubes) and taufactor are optional: ``pip install 'npmrf3d[materials]'``;
-without them the two functions that need them say so. :func:`otsu_threshold` is this module's own
-(256-bin histogram), tested against ``skimage.filters.threshold_otsu``.
+without them the two functions that need them say so. Otsu's threshold (256-bin histogram) is
+the model's, the one the methods' phase histograms split by.
 
-Lives apart from :mod:`npmrf3d.analysis.metrics` (already ~900 lines) and imports it, never the reverse.
+Imports :mod:`npmrf3d.analysis.metrics`, never the reverse.
 """
 
 from __future__ import annotations
@@ -32,9 +32,10 @@ import importlib
 import numpy as np
 
 from .. import _validation as check
+from ..model.otsu import otsu_threshold
 from .metrics import two_point_correlation
 
-__all__ = ["chord_length_distribution", "chord_lengths", "octant_fractions", "otsu_split", "otsu_threshold", "phase",
+__all__ = ["chord_length_distribution", "chord_lengths", "octant_fractions", "phase",
            "radial_two_point", "specific_surface_area", "stationarity_warning", "structure_summary",
            "tortuosity", "two_point_correlation", "volume_fraction"]
 
@@ -52,37 +53,6 @@ def _optional(module: str, what: str):
         package = module.split(".")[0].replace("skimage", "scikit-image")
         check.fail(f"{what} needs the optional package {package}, which is not installed: "
                    f"pip install 'npmrf3d[materials]' (or pip install {package})")
-
-
-def otsu_threshold(values, *, bins: int = 256) -> float:
-    """Otsu's threshold: the bin edge maximising the between-class variance of a ``bins``-bin
-    histogram (the centre of the bin below the split, as scikit-image returns it).
-
-    >>> otsu_threshold(np.r_[np.zeros(50), np.ones(50)]) < 1
-    True
-    """
-    v = np.asarray(values, dtype=np.float64).ravel()
-    counts, edges = np.histogram(v, bins=bins)
-    centres = (edges[:-1] + edges[1:]) / 2
-    return float(centres[otsu_split(counts)])
-
-
-def otsu_split(counts) -> int:
-    """Otsu's split of a histogram of evenly spaced bins: the last bin of the lower class (the
-    bins ``<=`` it against those above), maximising the between-class variance.
-
-    >>> otsu_split([5, 4, 0, 0, 1, 6])
-    1
-    """
-    counts = np.asarray(counts, dtype=np.float64).ravel()
-    if counts.size < 2:
-        check.fail(f"Otsu's split needs at least two bins; got {counts.size}")
-    centres = np.arange(counts.size, dtype=np.float64)
-    w0 = np.cumsum(counts)[:-1]
-    w1 = np.cumsum(counts[::-1])[::-1][1:]
-    m0 = np.cumsum(counts * centres)[:-1] / np.maximum(w0, 1e-300)
-    m1 = (np.cumsum((counts * centres)[::-1])[::-1][1:]) / np.maximum(w1, 1e-300)
-    return int(np.argmax(w0 * w1 * (m0 - m1) ** 2))
 
 
 def phase(volume, *, threshold="otsu") -> np.ndarray:

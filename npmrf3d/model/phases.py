@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from ..analysis.materials import otsu_split, otsu_threshold
 from .kcoherence import pca_project
+from .otsu import otsu_split, otsu_threshold
 
 __all__ = ["MAX_PHASES", "PRICE_STEPS", "SOFT_WIDTH", "PhaseControl", "bin_phase_error", "bin_phases",
            "class_balance", "next_prices", "phase_classes", "phase_error", "phase_footprint", "phase_membership",
@@ -229,7 +229,7 @@ class PhaseControl:
 
 def bin_phases(target: np.ndarray) -> np.ndarray:
     """The phase of every value bin, ``(C, B)`` int64 (0 below, 1 above each channel's Otsu
-    split of the exemplars' histogram ``target`` ``(C, B)``; :func:`npmrf3d.analysis.materials.otsu_split`),
+    split of the exemplars' histogram ``target`` ``(C, B)``; :func:`npmrf3d.model.otsu.otsu_split`),
     all 0 for a channel whose values fill one bin (nothing to split)."""
     target = np.asarray(target, dtype=np.float64)
     phases = np.zeros(target.shape, dtype=np.int64)

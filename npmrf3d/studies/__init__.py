@@ -4,10 +4,11 @@
   :class:`RunSpec` (a study is declared as data);
 * :mod:`~npmrf3d.studies.catalog`: the seven studies, the ground-truth study and the study
   exemplars (:data:`STUDIES`);
-* :mod:`~npmrf3d.studies.runner`: :func:`run_study` on a Dask cluster or serially;
+* :mod:`~npmrf3d.studies.runner`: :func:`run_study` on a Dask cluster
+  (:mod:`npmrf3d._cluster`) or serially; :mod:`~npmrf3d.studies.execute`: one run;
 * :mod:`~npmrf3d.studies.groundtruth`: 2D -> 3D comparison with a real volume;
 * :mod:`~npmrf3d.studies.report`: figures and the self-contained HTML report;
-* :mod:`~npmrf3d.studies.cli`: ``npmrf3d study``, ``npmrf3d report``.
+  the ``npmrf3d study`` and ``npmrf3d report`` commands are :mod:`npmrf3d.cli.study`.
 
 Dask is imported only when a study runs on it.
 """

@@ -20,8 +20,9 @@ synthesises volumes with several methods and compares each with the real volume:
 * **phase / grey-level fractions** (:func:`fractions`): share of voxels per phase (each voxel
   assigned to the nearest phase value), or a :data:`GREY_BINS`-bin histogram over the real
   volume's range; ``fraction_l1`` is the L1 distance to the real volume's fractions.
-* **slice metrics along all three axes**: the study metrics (:func:`npmrf3d.studies.runner.
-  evaluate_metrics`) of each view's slices against the real volume's middle slice in that view.
+* **slice metrics along all three axes**: the study metrics
+  (:func:`npmrf3d.studies.execute.evaluate_metrics`) of each view's slices against the real
+  volume's middle slice in that view.
 
 Grey values are the mean over channels. Slices follow :mod:`npmrf3d.model.neighbourhood`:
 across axis 0 ``volume[i]`` (rows j, columns k), across axis 1 ``volume[:, j]`` (rows i,
