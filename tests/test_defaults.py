@@ -163,3 +163,10 @@ def test_one_function_reaches_every_method_and_refuses_an_unknown_option():
         synthesize(image, method="kopf", size=8, xi=-1.0)
     with pytest.raises(ParameterError, match="needs a 3D exemplar"):
         synthesize(method="volume-lh", size=16)
+
+
+def test_every_method_is_a_command_by_its_registry_name():
+    commands = next(a for a in build_parser()._actions if a.__class__.__name__ == "_SubParsersAction")
+    assert set(METHODS) <= set(commands.choices)
+    for name in ("kopf", "chen-wang"):  # also under 'baseline', as before
+        assert _sub_parser("baseline", name)._actions

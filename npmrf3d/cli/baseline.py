@@ -46,7 +46,7 @@ def _d(name: str):
     return default(KopfConfig, name)
 
 def register(commands, formatter_class) -> None:
-    """Add ``baseline`` with its nested sub-command ``kopf`` to the ``npmrf3d`` parser."""
+    """Add ``kopf`` and ``chen-wang``, each by its method's name and under ``baseline``."""
     baseline = commands.add_parser(
         "baseline",
         help="synthesise with a baseline method the NP-MRF sampler is compared with (kopf, chen-wang)",
@@ -54,8 +54,14 @@ def register(commands, formatter_class) -> None:
         formatter_class=formatter_class,
     )
     methods = baseline.add_subparsers(dest="baseline", metavar="METHOD", required=True)
-    kopf = methods.add_parser(
-        "kopf",
+    for add in (_add_kopf, _add_chen_wang):
+        add(methods, formatter_class)  # npmrf3d baseline kopf | chen-wang
+        add(commands, formatter_class)  # npmrf3d kopf | chen-wang, as every method by its name
+
+
+def _add_kopf(commands, formatter_class, name: str = "kopf") -> None:
+    kopf = commands.add_parser(
+        name,
         help="NP_K: texture optimisation with histogram matching (Kopf et al. 2007)",
         description=(
             "NP_K (Kopf et al. 2007): minimise the robust distance between the volume's\n"
@@ -63,9 +69,9 @@ def register(commands, formatter_class) -> None:
             "(PCA + approximate kd-tree search on a sparse grid, IRLS averaging, histogram\n"
             f"matching), coarse to fine. Writes {', '.join(RUN_FILES)} into the output folder.\n\n"
             "examples:\n"
-            "  npmrf3d baseline kopf                                # bundled exemplar, 32^3\n"
-            "  npmrf3d baseline kopf bundled:ihc --size 128 --out ihc-kopf\n"
-            "  npmrf3d baseline kopf wood.png --views front,right    # two constrained views"
+            "  npmrf3d kopf                                         # bundled exemplar, 64^3\n"
+            "  npmrf3d kopf bundled:ihc --size 128 --out ihc-kopf\n"
+            "  npmrf3d kopf wood.png --views front,right    # two constrained views"
         ),
         formatter_class=formatter_class,
     )
@@ -127,8 +133,11 @@ def register(commands, formatter_class) -> None:
                             "(default: none = 1 everywhere when --constraint is given)")
     add_run_options(kopf, out="npmrf3d-kopf-out")
     kopf.set_defaults(handler=_kopf)
+
+
+def _add_chen_wang(commands, formatter_class, name: str = "chen-wang") -> None:
     add_method_parser(
-        methods, "chen-wang", chen_wang.METHOD,
+        commands, name, chen_wang.METHOD,
         help="Chen & Wang 2010: k-coherence search, discrete solver, position and index histograms",
         description=(
             "Chen & Wang (2010): every voxel keeps, per view, the exemplar pixel it was copied\n"
@@ -137,8 +146,8 @@ def register(commands, formatter_class) -> None:
             "copies one texel voted by the neighbourhoods that contain it (IRLS weights with\n"
             "position-histogram re-weighting). Colours are exemplar colours. docs/chen_wang.md\n\n"
             "examples:\n"
-            "  npmrf3d baseline chen-wang bundled:gravel --size 64\n"
-            "  npmrf3d baseline chen-wang bundled:ihc --size 128 --window 8,6,4 --out ihc-cw"
+            "  npmrf3d chen-wang bundled:gravel --size 64\n"
+            "  npmrf3d chen-wang bundled:ihc --size 128 --window 8,6,4 --out ihc-cw"
         ),
         out="npmrf3d-chen-wang-out", field_help=CHEN_WANG_HELP, formatter_class=formatter_class,
     )

@@ -58,13 +58,13 @@ def _rule_help(text: str, field: str) -> str:
 def register(commands, formatter_class) -> None:
     """Add the ``synth`` sub-command."""
     synth = commands.add_parser(
-        "synth",
+        "synth", aliases=["npmrf"],
         help="synthesise a solid texture from an exemplar and write a run folder",
         description=(
             "Synthesise a solid texture whose slices look like the exemplar and write\n"
             f"{', '.join(RUN_FILES)} into the output folder.\n\n"
             "examples:\n"
-            "  npmrf3d synth                                  # bundled exemplar, 32^3\n"
+            "  npmrf3d synth                                  # bundled exemplar, 64^3\n"
             "  npmrf3d synth wood.png --size 64 --out wood    # your own image\n"
             "  npmrf3d synth --size 8 --levels 1 --window 3   # a tiny, quick run"
         ),

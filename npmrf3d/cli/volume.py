@@ -102,7 +102,8 @@ def register(commands, formatter_class) -> None:
 
 
 def _add(commands, name, method, formatter_class, *, help, description) -> None:
-    parser = commands.add_parser(name, help=help, description=description, formatter_class=formatter_class)
+    parser = commands.add_parser(name, aliases=[method.name], help=help, description=description,
+                                 formatter_class=formatter_class)
     config_class = method.config_class
     parser.add_argument("exemplar", metavar="VOLUME",
                         help="3D exemplar: .npy (D, H, W[, C]) or a TIFF stack (ImageJ/Fiji, multi-page)")
