@@ -1,6 +1,6 @@
-"""The paper-scale quality benchmark (``bench_quality.py --suite paper``; issues 11 and 12).
+"""The paper-scale quality benchmark (``bench_quality.py --suite paper``; docs/quality.md).
 
-64^3 volumes from 64 x 64 crops of real photographs, 3 levels, judged as SPEC.md section 7
+64^3 volumes from 64 x 64 crops of real photographs, 3 levels, judged as docs/metrics.md
 says: every figure also as a ratio to the **structureless control** (voxels drawn
 independently from the exemplar: 1.0 = no structure), beside a **blurred control** (that
 control Gaussian-smoothed to the exemplar's grain, rescaled to its mean and spread) and the
@@ -70,12 +70,12 @@ ETR_HINT = ("the etr: exemplars are terrain photographs of Debian's extremetuxra
 # --------------------------------------------------------------------------- methods
 
 def _npmrf_default(ex, size, levels, seed, *, palette=None, **_):
-    """``npmrf3d synth``'s default: since issue 12 the coherent variant (window 7 at every level)."""
+    """``npmrf3d synth``'s default: the coherent variant (window 7 at every level)."""
     return npmrf3d.synthesize(ex, size=size, levels=levels, rng=seed, palette=palette).volume
 
 
 def _npmrf_sharp(ex, size, levels, seed, *, palette=None, **_):
-    """The full-Parzen rule that was the default before issue 12 (variant ``sharp``)."""
+    """The full-Parzen rule of variant ``sharp`` (docs/model.md, section 8)."""
     return npmrf3d.synthesize(ex, size=size, levels=levels, rng=seed, palette=palette,
                               variant="sharp").volume
 
@@ -447,7 +447,7 @@ def _verdict(results, method, rows, floor_ac, size, palette) -> dict[str, str]:
     beats = [r["exemplar"] for r, ref in zip(rows, refs)
              if r["ratio"]["ac"] < ref["blurred"]["ratio"]["ac"]
              and r["ratio"]["sw"] < ref["blurred"]["ratio"]["sw"]]
-    v["beats_blurred_control_on_ac_and_sw (SPEC 7)"] = (
+    v["beats_blurred_control_on_ac_and_sw"] = (
         f"{len(beats)}/{len(rows)}" + (f" ({', '.join(beats)})" if beats else ""))
     sparse = [r for r in rows if BY_NAME[r["exemplar"]].kind == "sparse"]
     if sparse:
@@ -487,7 +487,7 @@ def format_summary(summary: dict) -> str:
                          f"{s['hist_kl_raw_worst']:8.3f} {s['top_raw_worst']:8.3f} "
                          f"{s['spots_raw_min']:8.2f} {s['seconds']:6.1f}")
         for method, s in block["methods"].items():
-            lines.append(f"verdict {method} ({set_name}, issue 12 targets):")
+            lines.append(f"verdict {method} ({set_name}, the targets of docs/quality.md):")
             lines.extend(f"    {k}: {v}" for k, v in s["verdict"].items())
     return "\n".join(lines)
 

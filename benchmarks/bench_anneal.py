@@ -4,7 +4,7 @@
 distinct colours, no palette unless ``--palette`` is given), 11x11 windows, 3 levels, simulated
 annealing, ML_H2b. Two annealers (``--variant``):
 
-* ``coherent`` (default; issue 14, item 2): annealing over the coherent candidates -- each voxel
+* ``coherent`` (default; docs/model.md, section 8): annealing over the coherent candidates -- each voxel
   draws among the texels voted by its neighbourhoods' coherent matches with probability
   proportional to ``exp(score / T)``, ``T`` from ``t0`` to ``t_end`` over each level's iterations.
   Prints the wall time per level and the solver's voxel updates per second.
@@ -17,7 +17,7 @@ Both print the ratio to the paper's ~48 hours and the structure of the result: t
 autocorrelation error, histogram KL and orientation KL as ratios to the structureless control
 (voxels drawn independently from the exemplar; the target is an autocorrelation ratio <= 0.6),
 and the histogram KL itself.
-Targets: under 2 minutes on 2 cores with structure (issue 14).
+Targets: under 2 minutes on 2 cores with structure.
 
 Usage: ``python benchmarks/bench_anneal.py [--variant coherent|sharp] [--size 64]
 [--proposals 10] [--sampler metropolis] [--palette K] [--out DIR]`` (``--out`` writes a preview).

@@ -1,4 +1,4 @@
-"""Speed benchmark: Chen & Wang 2010 on the paper's job size (issue 11).
+"""Speed benchmark: Chen & Wang 2010 on the paper's job size.
 
 128^3 colour volume from the bundled ``ihc`` exemplar (128 x 128 x 3), 3 levels, windows per
 level as given (default the method's), k = 5, PCA to 20 dimensions. Prints, per level, the wall

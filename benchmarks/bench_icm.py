@@ -38,7 +38,7 @@ def main(argv=None) -> int:
     npmrf3d.synthesize(ex, size=8, window=3, levels=1, rng=0)
     print(f"hardware: {hardware()}")
     print(f"job: {args.size}^3 grey, exemplar {ex.shape[0]}x{ex.shape[1]}, 7x7, 3 levels, ICM, "
-          f"ML_H2b, 8/8, resynth, xi=-3, stop 95 %, variant {args.variant}")
+          f"ML_H2b, 8/8, resynth, xi=-3, stop at 95 %, variant {args.variant}")
     t0 = time.perf_counter()
     res = npmrf3d.synthesize(ex, size=args.size, window=7, levels=3, heuristic="ML_H2b",
                              upsample="8/8", inherit="resynth", xi=-3.0, stop=0.95,

@@ -1,11 +1,11 @@
-"""Speed benchmark of the neural method (issue 16): training steps, generation, Zarr writing.
+"""Speed benchmark of the neural method: training steps, generation, Zarr writing.
 
 Trains the paper's generator (6 scales, 3 noise channels, step 4: about 85,000 parameters) for a
 few timed steps on a bundled exemplar with the default descriptor, then generates a
 ``--gen-size``^3 block (default 256^3) and optionally writes a ``--zarr``^3 volume into Zarr on a
 local Dask cluster of 2 single-thread workers. Prints the hardware and torch thread count, the
 seconds per training step (and how many steps fit in 30 minutes), the generation throughput
-(voxels/s) and what 1024^3 would take at that rate; the targets of issue 16 are training in
+(voxels/s) and what 1024^3 would take at that rate; the targets are training in
 under 30 minutes on 2 cores, 256^3 in under 60 s, 1024^3 into Zarr in under 30 minutes.
 
 Usage: ``python benchmarks/bench_neural.py [--exemplar ihc] [--slice 128] [--steps 5]

@@ -1,15 +1,16 @@
-"""Quality of the neural method's value-histogram loss term and calibration map (issue 16).
+"""Quality of the neural method's value-histogram loss term and calibration map.
 
 For each exemplar (top-left ``--crop`` pixels) and each ``--weights`` value of
 ``histogram_weight``, trains the paper's generator for ``--steps`` steps (seed 0, same slice
 positions for every weight), generates a ``--size``^3 volume and measures it with
-:func:`npmrf3d.analysis.metrics.evaluate` (histogram KL, autocorrelation L2, orientation KL, patch sliced
-Wasserstein; lower is better), with NP_K (:func:`npmrf3d.kopf_synthesize`, seed 0, 2 levels,
-window 8) on the same exemplar and size as the reference. Every trained model is measured twice:
-its raw output (``neural w=X``) and through its calibration map (``neural w=X calibrated``, the
-default since stop 21: the same network, values mapped onto the exemplar's quantiles along
-the principal components of its colours, one component of a grey exemplar). Writes ``OUT.json`` (numbers, timings, value ranges) and ``OUT.png`` (each exemplar,
-then the middle front slice of every volume).
+:func:`npmrf3d.analysis.metrics.evaluate` (histogram KL, autocorrelation L2, orientation KL, patch
+sliced Wasserstein; lower is better), with NP_K (:func:`npmrf3d.kopf_synthesize`, seed 0, 2
+levels, window 8) on the same exemplar and size as the reference. Every trained model is measured
+twice: its raw output (``neural w=X``) and through its calibration map (``neural w=X calibrated``,
+the default: the same network, values mapped onto the exemplar's quantiles along the principal
+components of its colours, one component of a grey exemplar). Writes ``OUT.json`` (numbers,
+timings, value ranges) and ``OUT.png`` (each exemplar, then the middle front slice of every
+volume).
 
 Usage: ``OMP_NUM_THREADS=1 python benchmarks/bench_neural_histogram.py [--exemplars gravel64 lawn
 grass] [--weights 0 1] [--steps 100] [--size 32] [--levels 2] [--out figures/neural_histogram]``

@@ -1,4 +1,4 @@
-"""Speed benchmark of the full-Parzen distance stage as matrix products (issue 14, item 1).
+"""Speed benchmark of the full-Parzen distance stage as matrix products.
 
 Part 1, the distance stage alone, on the shapes of the paper's Figure-4 job at level 0 (64^3
 grey volume, the 64x64 gravel crop, 7x7 windows: n = 3,364 patches, d = C (w^2 - 1) = 48, three
@@ -9,7 +9,7 @@ count the floor ``2 n d`` FLOP per voxel-view, whatever a path executes; the rat
 1024^2 matrix multiply measured in the same run with the same number of threads.
 
 Part 2 (skipped with ``--no-job``): the Figure-4 job itself (ICM, ML_H2b, 8/8, resynth,
-xi = -3, stop 95 %, variant ``sharp``), wall and CPU time, with each distance path.
+xi = -3, stop at 95 %, variant ``sharp``), wall and CPU time, with each distance path.
 
 Prints the hardware, the numba and BLAS threads and the load average next to every figure.
 Usage: ``python benchmarks/bench_parzen_blas.py [--size 64] [--no-job] [--paths gemm,direct]

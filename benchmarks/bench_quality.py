@@ -23,8 +23,8 @@ Usage::
 The ``anneal`` suite runs on :data:`ANNEAL_EXEMPLARS` with a 64-colour palette (colour
 exemplars have thousands of distinct colours; the heat-bath sampler evaluates every label).
 
-The ``paper`` suite is the paper-scale benchmark of issues 11 and 12 (``benchmarks/_quality.py``
-describes the measures, the controls, the exemplar set and how to add a method)::
+The ``paper`` suite is the paper-scale benchmark (``benchmarks/_quality.py`` describes the
+measures, the controls, the exemplar set and how to add a method)::
 
     python benchmarks/bench_quality.py --suite paper --quick               # 32^3, 4 exemplars
     python benchmarks/bench_quality.py --suite paper --methods npk,npmrf-default

@@ -1,4 +1,4 @@
-"""Scaling benchmark: time per voxel against volume size and exemplar size (issue 14, item 4).
+"""Scaling benchmark: time per voxel against volume size and exemplar size.
 
 Methods: the full-Parzen NP-MRF sampler (``variant="sharp"``, ICM, ML_H2b, 7x7), the default
 sampler (``npmrf3d.synthesize`` with its defaults: the coherent NP-MRF), and the baselines NP_K

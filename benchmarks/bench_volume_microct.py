@@ -1,4 +1,4 @@
-"""From a real micro-CT scan (issue 15's first target): ``volume-lh`` makes 128^3 from a 64^3 crop,
+"""From a real micro-CT scan: ``volume-lh`` makes 128^3 from a 64^3 crop,
 judged against the spread of the scan's own held-out 64^3 crops.
 
 The scan is any segmented (two-phase) volume as ``.npy`` or a TIFF stack, read as

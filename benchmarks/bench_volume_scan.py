@@ -1,4 +1,4 @@
-"""From a real 3D scan (issue 15's target): ``volume-lh`` makes 128^3 from the 64^3 Colin27 block,
+"""From a real 3D scan: ``volume-lh`` makes 128^3 from the 64^3 Colin27 block,
 judged against the spread of the template's own 64^3 crops.
 
 The exemplar is the block of ``benchmarks/scan_volume.py`` (the Colin27 T1 MRI template, 1 mm,
@@ -130,7 +130,7 @@ def main(argv=None) -> int:
                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--template", default=str(TEMPLATE), help="the Colin27 NIfTI file")
     p.add_argument("--usage", type=float, nargs="+", default=[1.0],
-                   help="position-histogram strengths to run (0: seed 002's rule)")
+                   help="position-histogram strengths to run (0: the paper's rule)")
     p.add_argument("--start", nargs="+", default=[VolumeConfig.start], choices=STARTS,
                    help="coarsest-level starts to run")
     p.add_argument("--seeds", type=int, nargs="+", default=[0])

@@ -1,4 +1,4 @@
-"""Every user-facing check and its message (STYLE.md practice 7).
+"""Every user-facing check and its message, in one module.
 
 Each function checks one parameter and raises :class:`npmrf3d.errors.ParameterError` whose
 message names the parameter, the rule and the value received.

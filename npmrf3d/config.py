@@ -2,9 +2,9 @@
 
 A :class:`SynthesisConfig` is what a run was asked to do, after validation: it is stored in
 ``run.json``, compared by the tests and rebuilt by the CLI. :data:`VARIANTS` holds the named
-presets for how voxels decide (SPEC.md section 4, "What the literal method does"): ``literal``
-is the paper word for word (the ablation baseline), ``default`` is the variant chosen by
-measurement (``benchmarks/bench_quality.py``, ``docs/quality.md``).
+presets for how voxels decide (docs/model.md, section 8): ``literal`` is the paper word for word
+(the ablation baseline), ``coherent`` and ``sharp`` are the variants chosen by measurement
+(``benchmarks/bench_quality.py``, ``docs/quality.md``).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ __all__ = ["DEFAULT_SIZE", "DEFAULT_VARIANT", "VARIANT_ALIASES", "DecisionRule",
 
 @dataclass(frozen=True)
 class DecisionRule:
-    """How a visited voxel picks its value (the quality levers of SPEC.md section 4).
+    """How a visited voxel picks its value (docs/model.md, sections 2 and 8).
 
     Attributes
     ----------
@@ -58,20 +58,20 @@ class DecisionRule:
 
 
 VARIANTS: dict[str, DecisionRule] = {
-    # the coherent NP-MRF sampler (npmrf3d.methods.npmrf_coherent; issue 12): each view's Parzen estimate sums
-    # over coherent candidates; here centre_bandwidth is a factor of the exemplar's standard
+    # the coherent NP-MRF sampler (npmrf3d.methods.npmrf_coherent): each view's Parzen estimate
+    # sums over coherent candidates; here centre_bandwidth is a factor of the exemplar's standard
     # deviation and outlier the uniform share of each view's estimate (the other fields unused)
     "coherent": DecisionRule(centre_bandwidth=0.1, outlier=0.01),
     "literal": DecisionRule(),
-    # the full-Parzen rule chosen by measurement in an earlier round (docs/quality.md); it was
-    # called "default" until the coherent sampler replaced it, and that name still selects it
+    # the full-Parzen rule chosen by measurement (docs/quality.md, "The levers, measured"); the
+    # name "default" selects it too (VARIANT_ALIASES)
     "sharp": DecisionRule(
         bandwidth=0.2, centre_bandwidth=0.1, adaptive=0.0, decision="sample", tau=0.1,
         histogram_weight=8.0, outlier=0.01,
     ),
 }
 
-#: Older names of variants, still accepted.
+#: Other names that select a variant.
 VARIANT_ALIASES: dict[str, str] = {"default": "sharp"}
 
 #: The variant used when none is asked for, per relaxation (annealing needs a full-Parzen rule).

@@ -28,10 +28,10 @@ from .model.parzen import KERNEL_TABLE_BYTES
 __all__ = ["Estimate", "ResourceError", "available_memory", "check_memory", "format_bytes",
            "generic_estimate", "kopf_estimate", "npmrf_estimate", "one_after_another", "patch_count"]
 
-#: Bytes per voxel of the finest level that the NP-MRF sampler keeps or builds (SPEC.md 4-5):
-#: the level state (volume 4C, labels 4, temperatures 4, inherited 1), the parent level (1/8 of
-#: that), the colour classes (three int64 coordinates, 24) and the peak of building them
-#: (sort keys, order and coordinate copies, 64 in all while the parent is alive).
+#: Bytes per voxel of the finest level that the NP-MRF sampler keeps or builds: the level state
+#: (volume 4C, labels 4, temperatures 4, inherited 1), the parent level (1/8 of that), the colour
+#: classes (three int64 coordinates, 24) and the peak of building them (sort keys, order and
+#: coordinate copies, 64 in all while the parent is alive).
 NPMRF_CLASS_BUILD = 64
 NPMRF_CLASSES = 24
 #: Bytes of one float32 value.

@@ -1,4 +1,4 @@
-"""Every study's full variant on one Dask cluster, and the wall time of each (issue 14, item 3).
+"""Every study's full variant on one Dask cluster, and the wall time of each.
 
 The studies run one after the other on the same cluster (started once), cheapest first, so
 that an interrupted suite leaves whole studies behind. Studies are resumable: run the command

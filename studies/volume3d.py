@@ -1,4 +1,4 @@
-"""From a 3D scan (issue 15): the ``volume-lh`` method on synthetic scans, pictures and numbers.
+"""From a 3D scan: the ``volume-lh`` method on synthetic scans, pictures and numbers.
 
 Two parts, each writing a PNG and the JSON of the numbers behind it into ``--out``
 (default ``figures/volume3d``):

@@ -1,8 +1,9 @@
-"""Slow, obviously correct twins of the compiled kernels, written straight from SPEC.md.
+"""Slow, obviously correct twins of the compiled kernels, written straight from the equations
+(docs/model.md and the papers).
 
 Everything here is plain numpy in float64 with explicit loops or broadcasting: no pruning, no
 label-histogram identity, no kernel tables, no scratch buffers. The tests compare the library
-against these functions (STYLE.md practice 2).
+against these functions.
 
 Axis mapping of the views (npmrf3d.model.neighbourhood's documented table, restated independently):
 front = plane (i, j) -> exemplar (row, col); right = plane (j, k); top = plane (i, k).
@@ -135,7 +136,7 @@ def naive_sigma(values) -> float:
 
 
 def naive_h_opt(sigma: float, n: int, d: int) -> float:
-    """SPEC.md section 2: h_opt = sigma * (4 / (n (d + 2)))^(1 / (d + 4))."""
+    """docs/model.md, section 2: h_opt = sigma * (4 / (n (d + 2)))^(1 / (d + 4))."""
     return sigma * (4.0 / (n * (d + 2.0))) ** (1.0 / (d + 4.0))
 
 
@@ -162,10 +163,10 @@ def naive_neighbour_distances(volume, temps, site, view_offsets3d, patches):
 
 def naive_log_lcpdf(volume, temps, site, view_offsets3d, patches, centre_labels, labels, h,
                     h_centre=None, neighbour_two_h2=None):
-    """log L(lam) over all labels for one view (SPEC.md section 2, every patch, float64).
+    """log L(lam) over all labels for one view (docs/model.md, section 2, every patch, float64).
 
     dist2(lam, p) = ||lam - y_p||^2 / (2 h_c^2) + D_p / (2 h^2);  f(lam) = sum_p exp(-dist2);
-    L = f / sum_lam f. ``h_centre=None`` means h_c = h (SPEC's single bandwidth).
+    L = f / sum_lam f. ``h_centre=None`` means h_c = h (the paper's single bandwidth).
     ``neighbour_two_h2`` overrides 2 h^2 of the neighbour term (adaptive bandwidth).
     """
     labels = np.asarray(labels, dtype=np.float64)
@@ -245,7 +246,7 @@ def naive_sample_probabilities(score, tau: float) -> np.ndarray:
     return np.exp(z - logsumexp(z))
 
 
-# --------------------------------------------------------------------------- NP_K (SPEC.md section 6)
+# --------------------------------------------------------------------------- NP_K (Kopf et al. 2007)
 
 
 def naive_kopf_patches(exemplar: np.ndarray, window: int) -> np.ndarray:
@@ -659,7 +660,7 @@ def naive_upsample_sources(src, view, coarse_width, fine_shape):
     return out
 
 
-# --------------------------------------------------------------------------- 3D exemplars (seed 002)
+# --------------------------------------------------------------------------- 3D exemplars (volume-lh)
 
 
 def naive_project(ex: np.ndarray, h: int, radius: int, mean: np.ndarray, basis: np.ndarray) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Simulated annealing (SPEC.md section 4): Metropolis rule, heat-bath draws, the class update
+"""Simulated annealing (docs/model.md, section 5): Metropolis rule, heat-bath draws, the class update
 against a literal per-site loop, schedules, colour and view behaviour, usage errors."""
 
 from __future__ import annotations

@@ -7,7 +7,7 @@
 * the package's own modules are imported at module top, never inside a function;
 * only ``npmrf3d/_kernels/`` imports numba;
 * only the torch modules of ``npmrf3d/methods/neural/`` import torch, and they are reached only through
-  the one documented lazy import, ``npmrf3d/methods/neural/_extra.py`` (issue 16: torch is an optional
+  the one documented lazy import, ``npmrf3d/methods/neural/_extra.py`` (torch is an optional
   extra, so the function-level-import rule above cannot hold for them: ``importlib`` does it);
 * every library module stays under ~400 lines or says at its top why not.
 """

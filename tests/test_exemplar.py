@@ -1,4 +1,4 @@
-"""Exemplar loading, label sets, patches and decimation phases (SPEC.md sections 1, 2 and 5)."""
+"""Exemplar loading, label sets, patches and decimation phases (docs/model.md, sections 1, 2 and 7)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The batched neighbour distances (one matrix product per block of sites, issue 14) against
+"""The batched neighbour distances (one matrix product per block of sites) against
 their naive twins: operands, distances (with a float32 error bound), per-view LCPDFs, the class
 updates (thread-count independence: tests/test_gemm_threads.py)."""
 

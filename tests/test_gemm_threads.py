@@ -1,4 +1,4 @@
-"""Same seed, same volume at one and two threads on the batched-distance path (issue 14).
+"""Same seed, same volume at one and two threads on the batched-distance path.
 
 Not marked ``kernels``: it runs whole syntheses in subprocesses, which the ``NUMBA_DISABLE_JIT``
 pass of .ci/run would run as plain Python.

@@ -1,4 +1,4 @@
-"""The four heuristics and the decision rules against their naive twins (SPEC.md section 3)."""
+"""The four heuristics and the decision rules against their naive twins (docs/model.md, section 3)."""
 
 from __future__ import annotations
 

@@ -19,7 +19,7 @@ from npmrf3d.io.files import CHECKSUM
 
 #: Two levels, the finest long enough to be interrupted in its middle: about 6 s on one thread
 #: of the 2-core EPYC (at 24^3 it took about 2 s, and a resumed run sometimes finished before
-#: the SIGINT half a second after its lock arrived: a flaky failure, stop 25).
+#: the SIGINT half a second after its lock arrived: a flaky failure).
 RUN = ["synth", "--size", "48", "--levels", "2", "--window", "5", "--seed", "3", "--quiet"]
 
 
@@ -63,7 +63,7 @@ def test_sigkill_then_sigint_then_resume_is_bit_identical(tmp_path):
     _, err = second.communicate(timeout=60)
     # on failure, say how long the run went on after the signal: a run that finished seconds
     # later lost the signal; one that ended at once had finished before it (failed once in CI
-    # at stop 26, 48^3, not reproduced in 30 local tries)
+    # at 48^3, not reproduced in 30 local tries)
     assert second.returncode == 130, (err, f"exited {time.monotonic() - sent:.2f} s after SIGINT")
     lines = err.strip().splitlines()
     assert len(lines) == 1 and "c.npz" in lines[0] and "run the same command again" in lines[0]

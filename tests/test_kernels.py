@@ -1,8 +1,8 @@
-"""The compiled Parzen kernels against their naive twins (SPEC.md section 2).
+"""The compiled Parzen kernels against their naive twins (docs/model.md, section 2).
 
 ``npmrf3d.model.parzen.log_lcpdf`` (label-histogram identity, kernel tables, pruning, float32
 distances) is compared with ``tests.naive.naive_log_lcpdf`` (every patch and label in float64,
-straight from the SPEC) on tiny random inputs.
+straight from docs/model.md, section 2) on tiny random inputs.
 """
 
 from __future__ import annotations
@@ -241,7 +241,7 @@ def test_log_lcpdf_matches_naive(compiled, channels, window, temps_mode, views, 
 
 def test_all_hot_neighbourhood_is_smoothed_label_histogram(compiled):
     """With every t_r = 1 the neighbour term vanishes: L is the Gaussian-smoothed histogram of
-    the patch centres (SPEC.md section 2), whatever the neighbour values."""
+    the patch centres (docs/model.md, section 2), whatever the neighbour values."""
     rng = np.random.default_rng(7)
     labels, _, models, _, ref = make_case(rng, channels=1, window=3, views=("front",),
                                           distinct_exemplars=False)

@@ -1,6 +1,6 @@
 """NP_K (npmrf3d.methods.kopf) against literal numpy twins of the paper's formulas.
 
-Kopf et al. 2007 / SPEC.md section 6: the search (PCA + cKDTree with eps, sparse grid), the IRLS
+Kopf et al. 2007 (docs/kopf.md): the search (PCA + cKDTree with eps, sparse grid), the IRLS
 update (eq. 4) with histogram (eq. 5) and constraint (eq. 6) re-weighting, histogram matching,
 periodic exemplars, determinism across thread counts, user errors and the CLI. Everything is
 tiny (exemplars up to 32x32, volumes 8^3 to 24^3).

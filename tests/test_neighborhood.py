@@ -1,4 +1,4 @@
-"""Views, windows and the interaction colouring (SPEC.md sections 1 and 4)."""
+"""Views, windows and the interaction colouring (docs/model.md, sections 1 and 6)."""
 
 from __future__ import annotations
 
@@ -110,7 +110,7 @@ def test_colour_classes_brute_force(shape, window):
 
 
 def test_colour_classes_w9_on_64_cube():
-    """SPEC.md section 4: r + 1 = 5 does not divide 64, so the wrapping blocks need care."""
+    """docs/model.md, section 6: r + 1 = 5 does not divide 64, so the wrapping blocks need care."""
     shape, window = (64, 64, 64), 9
     classes = nb.colour_classes(shape, window)
     code = class_index(classes, shape)

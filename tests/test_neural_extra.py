@@ -1,5 +1,5 @@
 """The neural method without its extra: ``import npmrf3d`` never imports torch, and a neural
-command or call without torch stops with one clear line (issue 16, item 1).
+command or call without torch stops with one clear line.
 
 Torch is hidden with ``sys.modules["torch"] = None`` (an import then fails as if it were not
 installed), so these tests behave the same whether or not the extra is installed. The neural

@@ -2,7 +2,7 @@
 
 These hashes are *not* expected results in the scientific sense (nothing here says the volumes
 are good); they were computed once from the code as it stood before the architecture refactor
-of issue 10 (commit 501c217) and pin its behaviour, so that moving the level loop, the
+(commit 501c217) and pin its behaviour, so that moving the level loop, the
 relaxations, the up-sampling and the method registry around cannot silently change any volume
 for a given seed and configuration. A deliberate change of an algorithm's output updates the
 hash in the same commit and says why in the message.

@@ -102,7 +102,7 @@ def test_catalog_declares_the_seven_studies_and_ground_truth():
 
 
 def test_full_variants_are_at_the_papers_scale_with_three_seeds():
-    """Issue 14, item 3: 64^3, 3 levels, 64 x 64 crops (the ground truth: the volume's slice),
+    """The paper's scale: 64^3, 3 levels, 64 x 64 crops (the ground truth: the volume's slice),
     3 seeds, in every study's full variant."""
     for study in STUDIES.values():
         full = study.scale("full")

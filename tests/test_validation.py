@@ -1,5 +1,5 @@
 """Every user mistake in ``synthesize`` raises ParameterError naming the parameter, before any
-compiled work (STYLE.md practice 7)."""
+compiled work."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""3D exemplars: recognising a volume, loading .npy and TIFF stacks, refusals (issue 15, item 1)."""
+"""3D exemplars: recognising a volume, loading .npy and TIFF stacks, refusals."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The 3D-exemplar method (seed 002, ``volume-lh``): kernels against naive twins, fields, runs."""
+"""The 3D-exemplar method (``volume-lh``): kernels against naive twins, fields, runs."""
 
 from __future__ import annotations
 
@@ -121,7 +121,7 @@ def test_phase_classes_are_the_phases_of_a_segmented_exemplar_and_the_otsu_sides
 
 
 def test_a_grey_exemplars_phases_are_soft_at_the_threshold_and_a_segmented_ones_hard(rng):
-    """Stop 33: a grey voxel's share of the bright side ramps over a quarter of the distance
+    """A grey voxel's share of the bright side ramps over a quarter of the distance
     between the sides' means, centred on Otsu's threshold; a segmented exemplar stays one-hot."""
     lo, hi = np.array([1, 1, 1]), np.array([6, 6, 6])
     seg = (rng.random((8, 8, 8, 1)) < 0.3).astype(np.float32)
@@ -312,7 +312,7 @@ def test_same_seed_same_volume_and_registry_form():
     common = method.run({"volume": ex[..., None]}, config, np.random.default_rng(4))
     np.testing.assert_array_equal(common.volume, a.volume)
     with pytest.raises(ParameterError, match="method must be one of"):
-        get_method("seed002")
+        get_method("volume")
 
 
 _THREADS = """
@@ -414,7 +414,7 @@ def test_npmrf_3d_keeps_the_layers_and_refuses_a_field():
 
 def test_position_histogram_keeps_the_phases_of_a_non_stationary_exemplar():
     """A grain texture (two phases, about half each) beside a homogeneous slab of 3/8 of the
-    exemplar, from random coarsest coordinates: seed 002's rule (``usage = 0``) drifts towards
+    exemplar, from random coarsest coordinates: the paper's rule (``usage = 0``) drifts towards
     the darker phase, whose matches are easier; the position histogram keeps the bright phase's
     share near the exemplar's. (The phase histogram, ``balance``, is off: it alone would keep the
     shares too, ``test_the_phase_histogram_keeps_a_thin_minority_phase``.)"""

@@ -1,4 +1,4 @@
-"""The calibration map of the neural method (issue 16, quality): a monotone per-channel map
+"""The calibration map of the neural method: a monotone per-channel map
 from the raw output's quantiles to the exemplar's, applied pointwise after generation."""
 
 from __future__ import annotations

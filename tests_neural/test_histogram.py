@@ -1,4 +1,4 @@
-"""The value-histogram term of the training loss (issue 16, quality): sorted slice values
+"""The value-histogram term of the training loss: sorted slice values
 against the exemplar's quantiles."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""On demand: any block of the unbounded volume, blocks tiling exactly (issue 16, item 3)."""
+"""On demand: any block of the unbounded volume, blocks tiling exactly."""
 
 from __future__ import annotations
 
@@ -55,7 +55,7 @@ def test_tile_sizes_agree_up_to_rounding():
 
 
 def test_one_voxel_needs_the_papers_noise_support():
-    """Seed 004, section 4.2: one voxel needs 9^3 noise values at the finest scale and 11^3 at
+    """Gutierrez et al. 2020, section 4.2: one voxel needs 9^3 noise values at the finest scale and 11^3 at
     the next; the coarser supports are at most the paper's 13^3 (13, 13, 13, 9)."""
     shapes = plan((0, 0, 0), (1, 1, 1), 6).noise_shape
     assert shapes[0] == (9, 9, 9) and shapes[1] == (11, 11, 11)

@@ -1,4 +1,4 @@
-"""The one place for JIT options (STYLE.md practice 8).
+"""The one place for JIT options.
 
 ``cache=True`` keeps compiled machine code on disk between processes, so the compile cost
 (several seconds per kernel) is paid once per machine. ``fastmath`` is off: the kernels
@@ -29,7 +29,7 @@ def _default_cache_dir() -> str:
 
     Never the installed package: numba's default writes ``__pycache__`` folders beside the
     sources, and a later editable install leaves ``site-packages/npmrf3d/_kernels/__pycache__``
-    behind as a namespace package that shadows the real one (issue 13, item 0).
+    behind as a namespace package that shadows the real one.
     """
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
     return str(Path(base) / "npmrf3d" / "numba")

@@ -1,4 +1,4 @@
-"""Compiled loops of the NP_K baseline (Kopf et al. 2007; SPEC.md section 6).
+"""Compiled loops of the NP_K baseline (Kopf et al. 2007; docs/kopf.md).
 
 Private: called by :mod:`npmrf3d.methods.kopf` with validated arrays only; no user-facing
 errors are raised here. Two kernels:

@@ -1,4 +1,4 @@
-"""Many ``exp`` at once, in loops the compiler vectorises (issue 14, item 1).
+"""Many ``exp`` at once, in loops the compiler vectorises.
 
 The Parzen label stage takes ``exp`` of about a thousand log weights per site and view
 (:func:`npmrf3d._kernels.parzen.label_weights`): called one by one from libm, those calls cost

@@ -1,4 +1,4 @@
-"""Compiled loops of the 3D-exemplar method (:mod:`npmrf3d.methods.volume_lh`, seed 002).
+"""Compiled loops of the 3D-exemplar method (:mod:`npmrf3d.methods.volume_lh`).
 
 Private: called with validated arrays only; nothing here raises a user-facing error.
 
@@ -24,7 +24,8 @@ import numpy as np
 
 from ._jit import jit, jit_parallel, prange
 
-#: The eight diagonal neighbours (+-1, +-1, +-1) of the synthesis neighbourhood (seed 002, eq. 3).
+#: The eight diagonal neighbours (+-1, +-1, +-1) of the synthesis neighbourhood (the
+#: vector-field deformation method, IET Image Processing 2012, eq. 3).
 DIAGONALS = np.array([[a, b, c] for a in (-1, 1) for b in (-1, 1) for c in (-1, 1)], dtype=np.int64)
 #: The six face neighbours, added by the ``faces`` neighbourhood (the diagonals alone split the
 #: grid into four sub-lattices that never see each other).
@@ -150,7 +151,7 @@ BOUND_SLACK = 1e-9
 def correct(coords, out, frames, feat, kset, h, lo, hi, offsets, parity, cost, counts, even,
             weight, bias):
     """One correction sub-pass over the voxels ``(i, j, k)`` with ``(i % 2, j % 2, k % 2) ==
-    parity`` (seed 002, section 3.2.4).
+    parity`` (the vector-field deformation method, IET Image Processing 2012, section 3.2.4).
 
     For voxel ``p`` and every ``D`` of ``offsets`` (the 8 diagonals of the paper, or more): the
     warped neighbours ``I_D = p + floor(R(p) D + 0.5)`` (toroidal), the
@@ -159,9 +160,9 @@ def correct(coords, out, frames, feat, kset, h, lo, hi, offsets, parity, cost, c
     ``sum_D ||feat[u + h D] - feat[coords[I_D]]||^2 + P(u)`` (first on ties) is written to
     ``out[p]`` and that score to ``cost[p]``. ``P`` is the position-histogram penalty
     (:func:`_usage_penalty`: ``counts`` holds how many voxels use each ``h``-cell of the
-    exemplar, ``even`` the count of an even use; ``weight = 0`` gives ``P = 0``, seed 002's rule)
+    exemplar, ``even`` the count of an even use; ``weight = 0`` gives ``P = 0``, the paper's rule)
     plus ``bias[u]``, a non-negative cost of the exemplar voxel itself (the phase-histogram
-    balance, ``phase_histogram.class_balance``); a ``(1, 1, 1)`` ``bias`` means none.
+    balance, :func:`npmrf3d.model.phases.class_balance`); a ``(1, 1, 1)`` ``bias`` means none.
     ``frames`` is ``(N1, N2, N3, 3, 3)`` or ``(1, 1, 1, 3, 3)`` (one frame for all voxels).
 
     A candidate equal to one already scored is skipped: its distance is the same, and only a

@@ -1,4 +1,4 @@
-"""Ground-truth statistics of two-phase volumes (issue 15, item 4): what materials users judge a
+"""Ground-truth statistics of two-phase volumes: what materials users judge a
 synthesised volume by, against a real scan.
 
 Every function takes a volume ``(N1, N2, N3)`` or ``(N1, N2, N3, C)`` (grey = mean of the

@@ -2,7 +2,7 @@
 progress bars, the run folder writer and the one-line error.
 
 The library reports through return values, progress callbacks and exceptions; this package is
-the one place that prints and draws bars (STYLE.md practice 14).
+the one place that prints and draws bars.
 """
 
 from __future__ import annotations

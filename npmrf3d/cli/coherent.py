@@ -1,4 +1,4 @@
-"""``npmrf3d coherent``: the coherent NP-MRF sampler (:mod:`npmrf3d.methods.npmrf_coherent`, issue 12).
+"""``npmrf3d coherent``: the coherent NP-MRF sampler (:mod:`npmrf3d.methods.npmrf_coherent`).
 
 Options, defaults and ``--help`` come from :class:`npmrf3d.methods.npmrf_coherent.CoherentConfig` through
 :func:`npmrf3d.cli._generic.add_method_parser`.

@@ -1,4 +1,4 @@
-"""``npmrf3d metrics EXEMPLAR VOLUME``: compare a volume with its exemplars (SPEC.md section 7).
+"""``npmrf3d metrics EXEMPLAR VOLUME``: compare a volume with its exemplars (docs/metrics.md).
 
 Prints a table (one row per view plus the mean, one column per metric of
 :data:`npmrf3d.analysis.metrics.METRICS`) and writes ``histograms.png`` and ``metrics.json`` (last) into

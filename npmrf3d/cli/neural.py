@@ -1,4 +1,4 @@
-"""``npmrf3d neural train`` and ``npmrf3d neural generate``: the on-demand generator (issue 16).
+"""``npmrf3d neural train`` and ``npmrf3d neural generate``: the on-demand generator.
 
 Options and defaults come from :class:`npmrf3d.methods.neural.NeuralConfig` (its field defaults). The
 commands need the ``[neural]`` extra; without it they stop with one line naming the install

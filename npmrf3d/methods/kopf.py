@@ -4,7 +4,7 @@
 equations and every choice where the paper is silent. The steps are in ``_kopf_steps``.)
 
 The baseline the NP-MRF paper compares with (Kopf et al. 2007, "Solid texture synthesis from
-2D exemplars"; SPEC.md section 6). The volume minimises
+2D exemplars"; docs/kopf.md). The volume minimises
 
     E = sum_v sum_{i in views} ||s_{v,i} - e_{v,i}||^r,        r = 0.8,
 
@@ -184,7 +184,7 @@ def make_kopf_config(
 def kopf_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress: ProgressCallback | None = None,
                    checkpoint=None, exemplars: Mapping | None = None, constraint=None,
                    constraint_weight=None, **options) -> SynthesisResult:
-    """Synthesize a solid texture with NP_K (Kopf et al. 2007; SPEC.md section 6).
+    """Synthesize a solid texture with NP_K (Kopf et al. 2007; docs/kopf.md).
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""``synthesize``: the multi-scale NP-MRF sampler behind one function (SPEC.md sections 1-5)."""
+"""``synthesize``: the multi-scale NP-MRF sampler behind one function (docs/model.md)."""
 
 from __future__ import annotations
 
@@ -141,7 +141,7 @@ def npmrf_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress: Pr
     exemplars : dict view -> exemplar, optional
         A different exemplar for some views.
     upsample : {"1/8", "8/8"} or None
-        How a level initialises the next finer one (SPEC.md section 5); None: the paper's
+        How a level initialises the next finer one (docs/model.md, section 7); None: the paper's
         choice, ``1/8`` for ICM and ``8/8`` for annealing.
     inherit : {"resynth", "fixed"}
         Whether inherited voxels may still change (their temperature stays 0 either way).
@@ -166,15 +166,16 @@ def npmrf_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress: Pr
         Annealing (Metropolis): candidates drawn from the exemplar's values (the paper) or
         uniformly from the label set.
     variant : {"coherent", "sharp", "literal"} or None
-        How a voxel decides (:data:`npmrf3d.config.VARIANTS`). None: ``coherent`` for ICM,
-        ``sharp`` for annealing. ``coherent`` (issue 12, :mod:`npmrf3d.methods.npmrf_coherent`): each view's
-        Parzen estimate sums over the coherent candidates of every neighbourhood containing the
-        voxel, and the voxel copies the best exemplar texel (``window`` at every level; the ICM
-        options are not used; ``history`` holds the mean patch energy per iteration). With
-        ``relaxation="anneal"`` it draws among its candidates with probability proportional to
+        How a voxel decides (:data:`npmrf3d.config.VARIANTS`). None: ``coherent`` for ICM, ``sharp``
+        for annealing. ``coherent`` (:mod:`npmrf3d.methods.npmrf_coherent`; docs/model.md, section
+        8): each view's Parzen estimate sums over the coherent candidates of every neighbourhood
+        containing the voxel, and the voxel copies the best exemplar texel (``window`` at every
+        level; the ICM options are not used; ``history`` holds the mean patch energy per iteration).
+        With ``relaxation="anneal"`` it draws among its candidates with probability proportional to
         ``exp(score / T)``, ``T`` from ``t0`` to ``t_end`` by ``schedule`` over each level's
-        iterations (``sampler``, ``proposals``, ``proposal`` are not used). ``sharp`` (formerly ``default``, still accepted): the full-Parzen rule chosen
-        by an earlier measurement (docs/quality.md). ``literal``: the paper word for word.
+        iterations (``sampler``, ``proposals``, ``proposal`` are not used). ``sharp`` (also selected
+        by ``default``): the full-Parzen rule chosen by measurement (docs/quality.md, "The levers,
+        measured"). ``literal``: the paper word for word.
     segmented : {"auto", "yes", "no"}
         The ``coherent`` variant's preset for segmented exemplars (:data:`npmrf3d.methods.npmrf_coherent.SEGMENTED`:
         window 5 at every level, histogram vote weighting 8, and two pyramids, ``levels`` and
@@ -220,7 +221,8 @@ def npmrf_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress: Pr
 
 
 class _NpmrfLevels(Levels):
-    """The NP-MRF sampler's side of :func:`npmrf3d.model.pyramid.run_pyramid` (SPEC.md sections 2-5)."""
+    """The NP-MRF sampler's side of :func:`npmrf3d.model.pyramid.run_pyramid` (docs/model.md,
+    sections 2-7)."""
 
     def __init__(self, config: SynthesisConfig, label_images: dict, labels: np.ndarray,
                  label_freq: np.ndarray):

@@ -3,12 +3,13 @@
 An exemplar is a float32 ``(H, W, C)`` array: 8-bit images are scaled to ``[0, 1]``, 16-bit to
 ``[0, 1]``, float data keeps its units. Synthesis works on the exemplar's *label image*: every
 pixel replaced by its label (its own value, a re-quantised grey level, or the nearest palette
-colour), so each patch centre is a label and the label histogram identity of SPEC.md section 2
-holds exactly.
+colour), so each patch centre is a label and the label histogram identity of docs/model.md,
+section 2 holds exactly.
 
-Coarse levels (SPEC.md section 5) use **all** ``2^l x 2^l`` decimation phases of the exemplar
-as samples: the level-``l`` exemplar is the set of images ``Y[a::2^l, b::2^l]``, and patches
-are taken from each of them (never across phases). Same statistics, ``4^l`` times more samples.
+Coarse levels (docs/model.md, section 7) use **all** ``2^l x 2^l`` decimation phases of the
+exemplar as samples: the level-``l`` exemplar is the set of images ``Y[a::2^l, b::2^l]``, and
+patches are taken from each of them (never across phases). Same statistics, ``4^l`` times more
+samples.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""3D exemplars: telling a volume from an image, loading it, checking that it fits (issue 15).
+"""3D exemplars: telling a volume from an image, loading it, checking that it fits.
 
 A *volume exemplar* is a float32 ``(D, H, W, C)`` array (a micro-CT crop, a stack of slices),
 scaled as 2D exemplars are (``uint8 / 255``, ``uint16 / 65535``, ``bool`` to 0/1, floats keep
@@ -208,8 +208,8 @@ def load_volume_exemplar(source, *, exemplar_kind: str = "auto", spacing=None,
 
 def volume_fits(volume: np.ndarray, *, window: int, name: str = "exemplar") -> None:
     """Every side of ``volume`` must be at least twice the ``window``: the window's border of
-    ``window // 2`` voxels is not a valid centre (seed 002 discards it), and what is left must
-    still hold more than one window.
+    ``window // 2`` voxels is not a valid centre (the vector-field deformation method discards
+    it), and what is left must still hold more than one window.
 
     >>> volume_fits(np.zeros((8, 12, 12, 1)), window=5)
     Traceback (most recent call last):

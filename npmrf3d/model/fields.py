@@ -1,4 +1,5 @@
-"""Vector and frame fields that deform a volume synthesised from a 3D exemplar (seed 002).
+"""Vector and frame fields that deform a volume synthesised from a 3D exemplar (the
+vector-field deformation method, IET Image Processing 2012).
 
 A *frame* ``R`` at a voxel is a rotation matrix whose columns are where the exemplar's axes
 0, 1, 2 point in the output: an exemplar offset ``D`` appears as the output offset ``R D``. A

@@ -1,4 +1,4 @@
-"""The four heuristics that turn three 2D LCPDFs into one voxel value (SPEC.md section 3).
+"""The four heuristics that turn three 2D LCPDFs into one voxel value (docs/model.md, section 3).
 
 ========  ===================================================  ==========
 name      rule                                                 annealing

@@ -1,4 +1,4 @@
-"""Views, windows and the interaction colouring (SPEC.md sections 1 and 4).
+"""Views, windows and the interaction colouring (docs/model.md, sections 1 and 6).
 
 Axis mapping (fixed, used everywhere, and what makes anisotropic exemplars come out the right
 way round): a volume is indexed ``volume[i, j, k]``; each view is a plane whose two axes map to
@@ -91,10 +91,10 @@ def colour_classes(shape: tuple[int, int, int], window: int) -> list[np.ndarray]
     """Partition the volume's sites into classes whose members never interact.
 
     Two sites interact if one lies in the other's 3D neighbourhood (any view's window). With
-    ``r = window // 2`` and period ``r + 1`` per axis (:func:`axis_colours`), two sites of one
-    class differ by at least ``r + 1`` along every axis on the torus, so neither lies in the
-    other's window: updating a class in parallel equals updating its sites one by one (SPEC.md
-    section 4).
+    ``r = window // 2`` and period ``r + 1`` per axis (:func:`axis_colours`), two distinct sites
+    of one class are at least ``r + 1`` apart on the torus along some axis, so neither lies in
+    the other's window: updating a class in parallel equals updating its sites one by one
+    (docs/model.md, section 6).
 
     Returns
     -------

@@ -1,6 +1,7 @@
-"""The phase histogram of the 3D-exemplar method (``volume-lh``; issue 15): this project's
-addition after the histogram matching of Kopf et al. 2007 (seed 002 has none), which keeps a
-scan's phase fractions where the correction alone lets a thin minority phase erode.
+"""The phase histogram of the 3D-exemplar method (``volume-lh``): this project's addition after
+the histogram matching of Kopf et al. 2007 (the vector-field deformation method, IET Image
+Processing 2012, has none), which keeps a scan's phase fractions where the correction alone
+lets a thin minority phase erode.
 
 The exemplar's phases (:func:`phase_classes`), the phase mix a coarse coordinate stands for
 (:func:`phase_footprint`), the volume's relative error per phase (:func:`phase_error`), and the
@@ -32,10 +33,10 @@ __all__ = ["MAX_PHASES", "PRICE_STEPS", "SOFT_WIDTH", "PhaseControl", "bin_phase
 MAX_PHASES = 8
 
 
-#: A grey exemplar's phases are soft (stop 33): a voxel's share of the bright side ramps from 0
-#: to 1 over this fraction of the distance between the two sides' mean values, centred on the
-#: Otsu threshold, so the voxels at the threshold (a soil's grey matrix) belong to both sides and
-#: are not pushed across it; 0 = hard sides.
+#: A grey exemplar's phases are soft: a voxel's share of the bright side ramps from 0 to 1 over
+#: this fraction of the distance between the two sides' mean values, centred on the Otsu
+#: threshold, so the voxels at the threshold (a soil's grey matrix) belong to both sides and are
+#: not pushed across it (docs/volume.md, "Soft sides of a grey scan's threshold"); 0 = hard sides.
 SOFT_WIDTH = 0.25
 
 
@@ -147,13 +148,13 @@ def class_balance(footprint: np.ndarray, error: np.ndarray, prices: np.ndarray, 
     volume's relative excess of the phase (:func:`phase_error`) and ``lambda_c`` its price, the
     running sum of the errors (:func:`next_prices`).
 
-    This project's addition, after the histogram matching of Kopf et al. 2007 (seed 002 has
-    none): with it the phase fractions of a segmented scan stay those of the exemplar, where the
-    correction alone lets a thin minority phase (a rock's pores) erode level by level
-    (``docs/volume.md``). The excess alone (a proportional rule, stop 25) left a steady deficit
-    of the minority phase; the price, an integral of the error carried across passes and levels,
-    removes it. Counting a coarse coordinate by the phases of its descendants, not by its own
-    voxel, keeps the share through the up-sampling."""
+    This project's addition, after the histogram matching of Kopf et al. 2007 (the vector-field
+    deformation method has none): with it the phase fractions of a segmented scan stay those of the
+    exemplar, where the correction alone lets a thin minority phase (a rock's pores) erode level by
+    level (``docs/volume.md``). The excess alone (a proportional rule) left a steady deficit of the
+    minority phase; the price, an integral of the error carried across passes and levels, removes
+    it. Counting a coarse coordinate by the phases of its descendants, not by its own voxel, keeps
+    the share through the up-sampling."""
     per_phase = np.maximum(0.0, error) + prices
     return np.ascontiguousarray(weight * np.tensordot(per_phase, footprint, axes=1))
 
@@ -171,14 +172,14 @@ class PhaseControl:
     and into the checkpoint: each phase's price (:func:`next_prices`), the last sub-pass's error
     and the gain that scales both the cost and the price's step.
 
-    Why a gain (stop 30): on a noisy grey exemplar (a woven composite's micro-CT) nearly every
-    voxel is indifferent between the two sides of the Otsu threshold, so one sub-pass answers an
-    excess of a phase by swapping most of its eighth of the voxels to the other; the error then
-    flipped sign every sub-pass with a growing amplitude (0.03 up to 0.38), and the parity
-    sub-passes printed it into the volume as a period-2 grid of flat grey. Halving the gain at
-    each flip (both errors above :data:`FLIP_TOLERANCE`) and letting it grow back by
-    :data:`GAIN_RECOVERY` otherwise damps that oscillation and leaves a steady approach (the
-    segmented rocks it was tuned on) at gain 1."""
+    Why a gain (docs/volume.md, "The phase histogram's gain"): on a noisy grey exemplar (a woven
+    composite's micro-CT) nearly every voxel is indifferent between the two sides of the Otsu
+    threshold, so one sub-pass answers an excess of a phase by swapping most of its eighth of the
+    voxels to the other; the error then flipped sign every sub-pass with a growing amplitude (0.03
+    up to 0.38), and the parity sub-passes printed it into the volume as a period-2 grid of flat
+    grey. Halving the gain at each flip (both errors above :data:`FLIP_TOLERANCE`) and letting it
+    grow back by :data:`GAIN_RECOVERY` otherwise damps that oscillation and leaves a steady approach
+    (the segmented rocks it was tuned on) at gain 1."""
 
     prices: np.ndarray
     last_error: np.ndarray
@@ -215,7 +216,8 @@ class PhaseControl:
 
     @classmethod
     def from_array(cls, saved: np.ndarray, phases: int) -> "PhaseControl":
-        """The state :meth:`to_array` saved (a checkpoint of before stop 30 holds the prices only)."""
+        """The state :meth:`to_array` saved; a state of ``phases`` numbers holds the prices alone
+        (no error yet, gain 1)."""
         saved = np.asarray(saved, dtype=np.float64)
         if saved.size == phases:
             return cls(saved.copy(), np.zeros(phases), 1.0)

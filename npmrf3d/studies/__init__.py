@@ -1,4 +1,4 @@
-"""Studies: the paper's comparisons (SPEC.md section 8) as grids of runs on Dask.
+"""Studies: the comparisons of Urs et al. 2014 (sections V-VII) as grids of runs on Dask.
 
 * :mod:`~npmrf3d.studies.grid`: :class:`Study`, :class:`Scale`, :class:`Method`,
   :class:`RunSpec` (a study is declared as data);

@@ -1,16 +1,16 @@
-"""The studies of SPEC.md section 8 (and the 2D->3D ground-truth study), declared as data.
+"""The studies of Urs et al. 2014 (and the 2D->3D ground-truth study), declared as data.
 
 Each entry of :data:`STUDIES` is a :class:`~npmrf3d.studies.grid.Study`: methods crossed with
 the exemplars, seeds and sizes of a ``full`` and a ``quick`` variant. Change a comparison by
 editing its declaration here; the runner, the figures and the report need nothing else.
 
-Full variants run at the paper's scale (issue 14, item 3): 64^3 volumes, 3 pyramid levels, the
-exemplars' top-left 64 x 64 pixels, 3 seeds (so that tables give mean +- standard deviation and
-the report says which differences exceed the spread). A full-Parzen run costs 1.5-3 CPU
-minutes at that scale, so each study's exemplar list is short: one or two exemplars chosen for
-what the study asks (``--exemplars`` runs others; the NP_K study's full list of 14 is
-:data:`STUDY_EXEMPLARS`). Quick variants are tiny (8^3 to 16^3, one level or two, small
-windows, two sweeps) so that the tests run every study.
+Full variants run at the paper's scale: 64^3 volumes, 3 pyramid levels, the exemplars' top-left
+64 x 64 pixels, 3 seeds (so that tables give mean +- standard deviation and the report says
+which differences exceed the spread). A full-Parzen run costs 1.5-3 CPU minutes at that scale,
+so each study's exemplar list is short: one or two exemplars chosen for what the study asks
+(``--exemplars`` runs others; the NP_K study's full list of 14 is :data:`STUDY_EXEMPLARS`).
+Quick variants are tiny (8^3 to 16^3, one level or two, small windows, two sweeps) so that the
+tests run every study.
 
 Exemplars
 ---------
@@ -57,8 +57,7 @@ COLOUR_EXEMPLARS: tuple[str, ...] = ("ihc64", "hubble", "wood", "tabby_fur", "re
 #: Layered / anisotropic exemplars whose layers run along the image rows (two versus three views).
 LAYERED_EXEMPLARS: tuple[str, ...] = ("stripes", "wood", "tabby_fur", "phase_bands", "brick")
 
-#: Study exemplar names resolve in the model layer (:mod:`npmrf3d.model.exemplar`); kept here under
-#: their old names.
+#: A study exemplar by name (:func:`npmrf3d.model.exemplar.named_exemplar`).
 load_exemplar = named_exemplar
 
 
@@ -77,10 +76,11 @@ _QUICK = dict(exemplars=("gravel64",), seeds=(0,), sizes=(8,), levels=1, crop=24
 _ANNEAL = (("relaxation", "anneal"), ("sampler", "metropolis"), ("schedule", "geometric"),
            ("proposals", 8))
 _QUICK_ANNEAL = (("proposals", 2),)
-#: The on-demand neural generator (seed 004) in the NP_K comparison. Full: the paper's network
-#: (85,003 parameters) trained for NEURAL_ITERATIONS steps of one 64^2 slice per view (about
-#: 1.5 s a step on one core for a grey exemplar, so about 4 minutes per exemplar; colour costs
-#: a little more). Quick: a tiny network (3 scales, about 1,000 parameters) for 3 steps.
+#: The on-demand neural generator (Gutierrez et al. 2020) in the NP_K comparison. Full: the
+#: paper's network (85,003 parameters) trained for NEURAL_ITERATIONS steps of one 64^2 slice per
+#: view (about 1.5 s a step on one core for a grey exemplar, so about 4 minutes per exemplar;
+#: colour costs a little more). Quick: a tiny network (3 scales, about 1,000 parameters) for 3
+#: steps.
 NEURAL_ITERATIONS = 150
 _NEURAL = Method("neural", "neural", (("iterations", NEURAL_ITERATIONS),))
 _QUICK_NEURAL = Method("neural", "neural", (
@@ -89,17 +89,17 @@ _QUICK_NEURAL = Method("neural", "neural", (
 
 
 def _m(name: str, algorithm: str = "npmrf", **params) -> Method:
-    # the paper's studies compare full-Parzen NP-MRF settings: they keep the rule they were
-    # defined with ("sharp", the default before the coherent variant) unless they name one
+    # the paper's studies compare full-Parzen NP-MRF settings: they use the full-Parzen rule
+    # "sharp" (docs/model.md, section 8) unless they name one
     if algorithm == "npmrf" and "variant" not in params and params.get("relaxation", "icm") == "icm":
         params = {**params, "variant": "sharp"}
     return Method(name, algorithm, tuple(params.items()))
 
 
 #: synth's default (ICM, the coherent NP-MRF sampler, full colours): the studies that compare the
-#: paper's full-Parzen settings show it beside them (issue 12).
+#: paper's full-Parzen settings show it beside them.
 _DEFAULT = _m("default", relaxation="icm", variant="coherent", palette=None)
-#: The coherent sampler annealed over its candidates (issue 14, item 2), full colours.
+#: The coherent sampler annealed over its candidates (docs/model.md, section 8), full colours.
 _COHERENT_ANNEAL = _m("coherent-anneal", relaxation="anneal", variant="coherent", palette=None)
 
 HEURISTICS = Study(
@@ -189,8 +189,8 @@ ICM_VS_ANNEAL = Study(
 COLOUR = Study(
     name="colour",
     title="Colour exemplars with simulated annealing and ML_H2b",
-    question="Does annealing with ML_H2b reproduce colour textures (SPEC.md section 4 measured "
-             "it close to an exact crop on two of four photographs)?",
+    question="Does annealing with ML_H2b reproduce colour textures, as Urs et al. 2014 "
+             "(section V.E) show it doing?",
     notes="ML_H2b, 7x7, 64-colour palette (k-means), geometric schedule, 8 proposals per voxel "
           "and level; Metropolis and heat-bath sampling, with ICM as the reference. 'default' is "
           "synth's default (the coherent NP-MRF sampler, ICM) on the full colours, no palette.",
@@ -220,8 +220,8 @@ NPK = Study(
           "no better than it made no structure. 'default' is synth's default (the coherent "
           "NP-MRF sampler, ICM, 7x7 at every level); 'coherent-anneal' the same annealed over "
           "its candidates (t0 1 to 0.05 per level); both on the full colours, no palette. "
-          "'neural' is the on-demand 3D CNN generator "
-          "(seed 004; npmrf3d.methods.neural) trained on the same exemplar (150 steps of one 64x64 "
+          "'neural' is the on-demand 3D CNN generator (Gutierrez et al. 2020; "
+          "npmrf3d.methods.neural) trained on the same exemplar (150 steps of one 64x64 "
           "slice per view, Gram and value-histogram loss), its train and generate seconds "
           "apart; it needs the optional extra npmrf3d[neural] (torch) and is left out, with a "
           "note in study.json, where that is not installed.",
@@ -299,7 +299,8 @@ GROUNDTRUTH = Study(
     needs_volume=True,
 )
 
-#: Every study by name, in the order of SPEC.md section 8 (ground truth last).
+#: Every study by name, in the order of the paper's results (Urs et al. 2014, sections V-VII;
+#: ground truth last).
 STUDIES: dict[str, Study] = {s.name: s for s in (
     HEURISTICS, COOLING, NEIGHBOURHOOD, ICM_VS_ANNEAL, COLOUR, NPK, VIEWS, GROUNDTRUTH)}
 

@@ -59,7 +59,7 @@ def make_row(spec: RunSpec, status: str, record: dict | None, measured: dict | N
             for axis, value in truth["two_point_l2"].items():
                 row[f"two_point_l2_{axis}"] = value
             row["two_point_l2"] = truth["two_point_l2_mean"]
-            if "two_point_shape_l2_mean" in truth:  # runs measured before stop 25 lack it
+            if "two_point_shape_l2_mean" in truth:  # absent from older run records
                 row["two_point_shape_l2"] = truth["two_point_shape_l2_mean"]
             row["fraction_l1"] = truth["fraction_l1"]
     row["error"] = error

@@ -1,4 +1,4 @@
-"""Input-versus-output measures (SPEC.md section 7), per constrained view.
+"""Input-versus-output measures (docs/metrics.md), per constrained view.
 
 The exemplar of a view is compared with *all* the volume's slices orthogonal to that view
 (pooled), slices oriented like the exemplar (:func:`view_slices`). One module per family:

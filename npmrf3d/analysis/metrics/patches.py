@@ -105,9 +105,9 @@ def multiscale_sliced_wasserstein(exemplar: np.ndarray, volume: np.ndarray, view
     At each scale ``s`` the exemplar and every slice of the view are reduced by the mean of
     each ``s x s`` block, then compared as in :func:`sliced_wasserstein` (patches of side
     ``min(patch, sides)``, channel means removed when ``settings.centre_patches``); the result
-    is the mean over the scales, in exemplar value units (SPEC.md section 7: 7 x 7 patches at
-    scales 1, 2 and 4 ranked pictures as the eye did). A scale whose reduced exemplar or
-    slices would be smaller than :data:`MIN_SIDE` is skipped (at least scale 1 is kept).
+    is the mean over the scales, in exemplar value units (docs/metrics.md,
+    ``multiscale_sliced_wasserstein``). A scale whose reduced exemplar or slices would be
+    smaller than :data:`MIN_SIDE` is skipped (at least scale 1 is kept).
 
     Examples
     --------

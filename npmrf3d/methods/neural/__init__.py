@@ -1,4 +1,4 @@
-"""On-demand solid textures from a compact 3D convolutional generator (seed 004; issue 16).
+"""On-demand solid textures from a compact 3D convolutional generator (Gutierrez et al. 2020).
 
 A small network (about 85,000 parameters with the paper's settings) turns coordinate-seeded,
 multi-scale noise into a colour volume; trained on single slices against the exemplar of each

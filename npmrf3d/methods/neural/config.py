@@ -26,7 +26,7 @@ DESCRIPTORS = ("random", "vgg19")
 
 @dataclass(frozen=True)
 class NeuralConfig:
-    """A validated training (and generation) run of the on-demand generator (seed 004).
+    """A validated training (and generation) run of the on-demand generator (Gutierrez et al. 2020).
 
     Attributes
     ----------
@@ -35,12 +35,12 @@ class NeuralConfig:
     views : tuple of str
         Constrained views; each view's slices are compared with its exemplar.
     iterations : int
-        Optimiser steps (one step: ``batch`` slices per view). The default, 1,000, was 300 until
-        stop 24: on ``gravel64`` 1,200 steps took the orientation KL from 0.18 (100 steps) to
-        0.042 and on ``lawn`` 1,000 from 0.22 to 0.12, every other metric better too. On 2 CPU
-        cores (AMD EPYC) 1,000 steps take 12-14 min for a 64x64 exemplar and about 45 min for a
-        128x128 one (2.7 s a step); 600 steps keep the latter inside issue 16's 30 minutes
-        (README, "Quality, longer training").
+        Optimiser steps (one step: ``batch`` slices per view). Why 1,000 by default: on
+        ``gravel64`` 1,200 steps took the orientation KL from 0.18 (100 steps) to 0.042 and on
+        ``lawn`` 1,000 from 0.22 to 0.12, every other metric better too. On 2 CPU cores (AMD
+        EPYC) 1,000 steps take 12-14 min for a 64x64 exemplar and about 45 min for a 128x128 one
+        (2.7 s a step); 600 steps keep the latter inside 30 minutes (README, "Quality, longer
+        training").
     slice_size : int or None
         Side of the training slices; None: the exemplar's side, at most 128.
     batch : int

@@ -1,4 +1,5 @@
-"""Texture descriptors for the training loss: Gram matrices of feature maps (seed 004, eq. 2-3).
+"""Texture descriptors for the training loss: Gram matrices of feature maps (Gutierrez et al.
+2020, eq. 2-3).
 
 The paper compares Gram matrices of VGG-19 layers (relu1_1 ... relu5_1) of each slice and the
 exemplar. Pretrained weights cannot be downloaded here, so the default descriptor needs none:

@@ -1,4 +1,4 @@
-"""The on-demand solid texture generator of seed 004 (Gutierrez et al., section 4).
+"""The on-demand solid texture generator of Gutierrez et al. 2020 (section 4).
 
 A multi-scale fully convolutional network: noise at ``scales`` lattice resolutions (scale 0 the
 finest, each coarser one half the resolution), each processed by a *convolution block* (3x3x3,
@@ -136,7 +136,7 @@ def _conv_block(c_in: int, c_out: int, slope: float) -> nn.Sequential:
 
 
 class SolidGenerator(nn.Module):
-    """G(Z | theta) of seed 004, figure 2, evaluated on demand.
+    """G(Z | theta) of Gutierrez et al. 2020 (figure 2), evaluated on demand.
 
     Parameters
     ----------

@@ -1,13 +1,13 @@
 """Coordinate-seeded noise: a pure function of (voxel coordinate, scale, channel, seed).
 
 The generator's input at scale ``k`` is uniform noise on the integer lattice of that scale
-(seed 004, section 4.3: a PRNG seeded by coordinates, channel and scale, so that any block of
-the unbounded volume can be made on its own). Here the PRNG is a counter-based hash rather than
-the paper's xorshift: SplitMix64's finaliser (Steele, Lea & Flood 2014) applied to each axis
-coordinate with a key made of (seed, scale, channel, axis), the three axis hashes combined by
-XOR and mixed once more. Everything is int64 arithmetic in torch (products wrap modulo 2**64,
-right shifts are made logical by masking), so the values do not depend on the device, the block
-or the thread count, and the top 24 bits map exactly to float32 in [0, 1).
+(Gutierrez et al. 2020, section 4.3: a PRNG seeded by coordinates, channel and scale, so that
+any block of the unbounded volume can be made on its own). Here the PRNG is a counter-based hash
+rather than the paper's xorshift: SplitMix64's finaliser (Steele, Lea & Flood 2014) applied to
+each axis coordinate with a key made of (seed, scale, channel, axis), the three axis hashes
+combined by XOR and mixed once more. Everything is int64 arithmetic in torch (products wrap
+modulo 2**64, right shifts are made logical by masking), so the values do not depend on the
+device, the block or the thread count, and the top 24 bits map exactly to float32 in [0, 1).
 """
 
 from __future__ import annotations

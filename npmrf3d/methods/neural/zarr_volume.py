@@ -1,4 +1,4 @@
-"""Big volumes into Zarr, block by block, on a Dask cluster (issue 16, item 4).
+"""Big volumes into Zarr, block by block, on a Dask cluster.
 
 The volume ``[0, size)^3`` is cut into ``block``-sided cubes aligned with the Zarr chunks, so
 every task writes whole chunks of its own and tasks never touch the same file. A task loads
