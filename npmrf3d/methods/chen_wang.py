@@ -73,7 +73,7 @@ from .. import _validation as check
 from .._kernels import _jit
 from .._kernels import kcoherence as _k
 from ..config import SynthesisMethod, SynthesisResult
-from ..io.files import load_checkpoint, save_checkpoint
+from ..io.checkpoints import load_run_state, run_key, save_run_state
 from ..model import kcoherence as coh
 from ..model.exemplar import resolve_exemplars
 from ..model.neighbourhood import VIEW_AXES, VIEWS
@@ -387,7 +387,7 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
     volume = src = None
     prev_widths = None
     first_level = config.levels - 1
-    key = _config_key(config, per_view) + (f"|decision={list(decision)}" if decision[0] else "")
+    key = run_key("chen-wang", config, per_view, **({"decision": list(decision)} if decision[0] else {}))
     resumed = _load_checkpoint(checkpoint, key)
     phases = control = None
     if config.phase_weight > 0.0 and config.value_prior > 0.0:
@@ -562,29 +562,19 @@ def _pack(models):
             np.array(ex_off, dtype=np.int64), np.array(hist_off, dtype=np.int64))
 
 
-def _config_key(config: ChenWangConfig, per_view) -> str:
-    digest = {v: [list(a.shape), float(a.astype(np.float64).sum()), float((a.astype(np.float64) ** 2).sum())]
-              for v, a in per_view.items()}
-    return json.dumps({"method": "chen-wang", "config": config.to_dict(),
-                       "exemplars": digest}, sort_keys=True, default=str)
-
-
 def _save_checkpoint(path, key, volume, src, level, rng, history, timings, stats, widths, control=None) -> None:
     extra = {} if control is None else {"phase_control": control}
-    save_checkpoint(path, config=key, volume=volume, sources=src, level=level, **extra,
-                    widths=np.asarray(widths, dtype=np.int64),
-                    rng_state=json.dumps(rng.bit_generator.state), history=json.dumps(history),
-                    timings=json.dumps(timings), stats=json.dumps(stats, default=str))
+    save_run_state(path, key, volume=volume, sources=src, level=level, **extra,
+                   widths=np.asarray(widths, dtype=np.int64),
+                   rng_state=json.dumps(rng.bit_generator.state), history=json.dumps(history),
+                   timings=json.dumps(timings), stats=json.dumps(stats, default=str))
 
 
 def _load_checkpoint(path, key):
     """State after the last finished level, or None when there is nothing to resume."""
-    if path is None or not Path(path).exists():
+    data = load_run_state(path, key)
+    if data is None:
         return None
-    data = load_checkpoint(path)
-    if str(data.get("config")) != key or "sources" not in data:
-        check.fail(f"checkpoint '{path}' was written by a different configuration or exemplar; "
-                   f"delete it or choose another checkpoint path")
     return (np.ascontiguousarray(data["volume"], dtype=np.float32),
             np.ascontiguousarray(data["sources"], dtype=np.int32), int(data["level"]),
             json.loads(str(data["rng_state"])), json.loads(str(data["history"])),

@@ -57,12 +57,11 @@ from .._kernels import _jit
 from .._kernels import volume_lh as _k
 from ..analysis.repetition import copy_repetition
 from ..config import SynthesisMethod, SynthesisResult
-from ..io.files import load_checkpoint, save_checkpoint
+from ..io.checkpoints import load_run_state, run_key, save_run_state
 from ..model.exemplar3d import load_volume_exemplar, volume_fits
 from ..model.fields import FIELDS, field_input, level_frames
 from ..model.phases import (
     MAX_PHASES,
-    SOFT_WIDTH,
     PhaseControl,
     phase_error,
     phase_footprint,
@@ -504,7 +503,8 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
     lo, hi = _valid_box(exemplar.shape[:3], config.window)
     membership = phase_membership(exemplar, lo, hi) if config.balance else None
     control = None if membership is None else PhaseControl.start(len(membership[1]))
-    key = _key(config, exemplar, vector_field) + (f"|parzen={list(parzen)}" if parzen else "")
+    inputs = {"volume": exemplar, **({} if vector_field is None else {"vector_field": vector_field})}
+    key = run_key("volume-lh", config, inputs, parzen=None if parzen is None else list(parzen))
     sigma = float(exemplar.astype(np.float64).std()) or 1.0
     timings = {"setup": time.perf_counter() - t_start}
     history: list[list[float]] = []
@@ -556,7 +556,7 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
                                              "correction_seconds": time.perf_counter() - t0 - t_model,
                                              "pca_dims": int(feat.shape[3])}
         if checkpoint is not None:
-            save_checkpoint(checkpoint, config=key, coords=coords, level=level,
+            save_run_state(checkpoint, key, coords=coords, level=level,
                             rng_state=json.dumps(rng.bit_generator.state), history=json.dumps(history),
                             timings=json.dumps(timings), stats=json.dumps(stats),
                             prices=np.zeros(0) if control is None else control.to_array())
@@ -580,22 +580,10 @@ def _exemplar(per_view, config: VolumeConfig) -> np.ndarray:
     return np.ascontiguousarray(volume, dtype=np.float32)
 
 
-def _key(config: VolumeConfig, exemplar: np.ndarray, field) -> str:
-    digest = [list(exemplar.shape), float(exemplar.astype(np.float64).sum()),
-              float((exemplar.astype(np.float64) ** 2).sum())]
-    fdigest = None if field is None else float(np.asarray(field, dtype=np.float64).sum())
-    # the soft phases of stop 33 change a grey scan's run: a checkpoint from before is refused
-    return json.dumps({"method": "volume-lh", "config": config.to_dict(), "exemplar": digest,
-                       "field": fdigest, "soft_phases": SOFT_WIDTH}, sort_keys=True, default=str)
-
-
 def _resume(path, key):
-    if path is None or not Path(path).exists():
+    data = load_run_state(path, key)
+    if data is None:
         return None
-    data = load_checkpoint(path)
-    if str(data.get("config")) != key or "coords" not in data:
-        check.fail(f"checkpoint '{path}' was written by a different configuration or exemplar; "
-                   f"delete it or choose another checkpoint path")
     return (np.asarray(data["coords"], dtype=np.int64), int(data["level"]),
             json.loads(str(data["rng_state"])), json.loads(str(data["history"])),
             json.loads(str(data["timings"])), json.loads(str(data["stats"])),

@@ -26,8 +26,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy import ndimage
 
-from .. import _validation as check
-from ..io.files import load_checkpoint, save_checkpoint
+from ..io.checkpoints import load_run_state, save_run_state
 
 __all__ = ["INHERIT", "LABEL_UPSAMPLING", "LevelState", "Levels", "UPSAMPLERS", "UPSAMPLING",
            "level_shape", "random_state", "run_pyramid", "upsample"]
@@ -246,8 +245,8 @@ def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressC
         timings[f"level_{level}"] = time.perf_counter() - t0
         stats["levels"][f"level_{level}"] = level_stats
         if checkpoint is not None:
-            save_checkpoint(
-                checkpoint, config=method.key, **method.fingerprint, **method.to_arrays(state),
+            save_run_state(
+                checkpoint, method.key, **method.fingerprint, **method.to_arrays(state),
                 level=level, rng_state=json.dumps(rng.bit_generator.state),
                 history=json.dumps(history), timings=json.dumps(timings),
                 stats=json.dumps(stats, default=str),
@@ -257,15 +256,10 @@ def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressC
 
 
 def _load(path, method: Levels):
-    """State after the last finished level, or None when there is nothing (matching) to resume."""
-    if path is None or not Path(path).exists():
+    """State after the last finished level, or None when there is nothing to resume."""
+    data = load_run_state(path, method.key, fingerprint=method.fingerprint)
+    if data is None:
         return None
-    data = load_checkpoint(path)
-    same = str(data.get("config")) == method.key and all(
-        name in data and np.array_equal(data[name], value) for name, value in method.fingerprint.items())
-    if not same:
-        check.fail(f"checkpoint '{path}' was written by a different configuration or exemplar; "
-                   f"delete it or choose another checkpoint path")
     return (method.from_arrays(data), int(data["level"]), json.loads(str(data["rng_state"])),
             json.loads(str(data["history"])), json.loads(str(data["timings"])),
             json.loads(str(data["stats"])))
