@@ -1,7 +1,8 @@
 """Chen & Wang 2010: k-coherence search, discrete solver, position and index histograms.
 
-Why one module of ~600 lines: the configuration, its validation, the level loop and the
-checkpoint of one method, most of it the documented public signature.
+Why one module of ~620 lines: the configuration, its validation and the k-coherence engine's
+side of the shared level loop (:class:`KCoherenceLevels`), most of it the documented public
+signature.
 
 "High quality solid texture synthesis using position and index histogram matching" (The Visual
 Computer 26(4), 2010; issue 11). Like NP_K (:mod:`npmrf3d.methods.kopf`) the volume minimises
@@ -60,7 +61,6 @@ Choices where the paper is silent (also in ``docs/chen_wang.md``)
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from collections.abc import Callable, Mapping
@@ -73,12 +73,12 @@ from .. import _validation as check
 from .._kernels import _jit
 from .._kernels import kcoherence as _k
 from ..config import SynthesisMethod, SynthesisResult
-from ..io.checkpoints import load_run_state, run_key, save_run_state
+from ..io.checkpoints import run_key
 from ..model import kcoherence as coh
 from ..model.exemplar import resolve_exemplars
 from ..model.neighbourhood import VIEW_AXES, VIEWS
 from ..model.phases import PhaseControl, bin_phase_error, bin_phases, phase_prior_target
-from ..model.pyramid import level_shape
+from ..model.pyramid import Levels, run_pyramid
 from ..resources import check_memory, coherent_estimate
 
 __all__ = ["ChenWangConfig", "chen_wang_synthesize", "make_chen_wang_config", "run"]
@@ -370,59 +370,92 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
     (a heat-bath draw among the candidates; 0 = the highest score).
     """
     t_start = time.perf_counter() if t_start is None else t_start
-    views = config.views
-    per_view = {v: np.ascontiguousarray(per_view_exemplars[v], dtype=np.float32) for v in views}
-    distinct = list({id(a): a for a in per_view.values()}.values())
-    channels = distinct[0].shape[2]
-    pooled = np.concatenate([a.reshape(-1, channels) for a in distinct])
-    labels = np.unique(pooled, axis=0).astype(np.float32)
-    sigma = float(pooled.astype(np.float64).std()) or 1.0
-    value_lo = pooled.min(axis=0).astype(np.float64)
-    value_span = pooled.max(axis=0).astype(np.float64) - value_lo
-    view_axes = np.array([VIEW_AXES[v] for v in views], dtype=np.int64)
-    n_views = len(views)
-    timings = {"setup": time.perf_counter() - t_start}
-    history: list[list[float]] = []
-    stats: dict = {"threads": _jit.thread_count(), "levels": {}}
-    volume = src = None
-    prev_widths = None
-    first_level = config.levels - 1
-    key = run_key("chen-wang", config, per_view, **({"decision": list(decision)} if decision[0] else {}))
-    resumed = _load_checkpoint(checkpoint, key)
-    phases = control = None
-    if config.phase_weight > 0.0 and config.value_prior > 0.0:
-        phases = bin_phases(coh.value_counts(pooled, value_lo, coh.value_scale(value_span, config.value_bins),
-                                             config.value_bins)[1])
-        control = [PhaseControl.start(2) for _ in range(channels)]
-    if resumed is not None:
-        volume, src, done_level, rng_state, history, timings, stats, prev_widths, saved = resumed
-        if control is not None and saved is not None:
-            control = [PhaseControl.from_array(a, 2) for a in saved]
-        rng.bit_generator.state = rng_state
-        first_level = done_level - 1
-    for level in range(first_level, -1, -1):
-        t0 = time.perf_counter()
+    levels = KCoherenceLevels(config, per_view_exemplars, decision)
+    out = run_pyramid(levels, rng, progress=progress, checkpoint=checkpoint,
+                      timings={"setup": time.perf_counter() - t_start},
+                      stats={"threads": _jit.thread_count()}, t_start=t_start)
+    return SynthesisResult(volume=out.state.volume, history=out.history, config=config,
+                           timings=out.timings, labels=levels.labels, stats=out.stats)
+
+
+@dataclass
+class CoherentState:
+    """A level of the k-coherence engine: every voxel's colour and, per view, its source pixel."""
+
+    volume: np.ndarray  # (N1, N2, N3, C) float32
+    sources: np.ndarray  # (V, N1, N2, N3) int32 flat pixel indices into each view's exemplar
+    widths: list[int]  # each view's exemplar width at this level (the sources' row stride)
+
+
+class KCoherenceLevels(Levels):
+    """The k-coherence engine's side of :func:`npmrf3d.model.pyramid.run_pyramid`: per level the
+    views' exemplar models, random or up-sampled sources, then search + solve iterations.
+
+    The phase control (``phase_weight``) carries over from level to level; its state goes into
+    the checkpoint with the level's.
+    """
+
+    def __init__(self, config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray],
+                 decision: tuple = (0, 0.0, 0.0)):
+        self.config, self.decision = config, decision
+        self.size, self.levels = config.size, config.levels
+        views = self.views = config.views
+        self.per_view = {v: np.ascontiguousarray(per_view_exemplars[v], dtype=np.float32) for v in views}
+        self.distinct = list({id(a): a for a in self.per_view.values()}.values())
+        channels = self.distinct[0].shape[2]
+        pooled = np.concatenate([a.reshape(-1, channels) for a in self.distinct])
+        self.labels = np.unique(pooled, axis=0).astype(np.float32)
+        self.sigma = float(pooled.astype(np.float64).std()) or 1.0
+        self.value_lo = pooled.min(axis=0).astype(np.float64)
+        self.value_span = pooled.max(axis=0).astype(np.float64) - self.value_lo
+        self.view_axes = np.array([VIEW_AXES[v] for v in views], dtype=np.int64)
+        self.key = run_key("chen-wang", config, self.per_view,
+                           **({"decision": list(decision)} if decision[0] else {}))
+        self.phases = self.control = None
+        if config.phase_weight > 0.0 and config.value_prior > 0.0:
+            self.phases = bin_phases(coh.value_counts(
+                pooled, self.value_lo, coh.value_scale(self.value_span, config.value_bins), config.value_bins)[1])
+            self.control = [PhaseControl.start(2) for _ in range(channels)]
+        self.level_ex = self.vmodels = None
+
+    def prepare(self, level, shape):
+        window = self.config.window[self.config.levels - 1 - level]
+        self.level_ex = {id(a): coh.downsample_exemplar(a, level) for a in self.distinct}
+        models = {key: coh.build_level_model(ex, window, dims=self.config.pca_dims, k=self.config.k,
+                                             exclude=self.config.coherence_exclude)
+                  for key, ex in self.level_ex.items()}
+        self.vmodels = [models[id(self.per_view[v])] for v in self.views]
+
+    def initial(self, shape, rng):
+        src = np.empty((len(self.views), *shape), dtype=np.int32)
+        drawn = {key: coh.random_sources(shape, ex.shape, rng) for key, ex in self.level_ex.items()}
+        for vi, v in enumerate(self.views):
+            src[vi] = drawn[id(self.per_view[v])]
+        return self._state(src)
+
+    def upsample(self, state, rng):
+        return self._state(np.stack([coh.upsample_sources(state.sources[vi], v, state.widths[vi],
+                                                          self.vmodels[vi].exemplar.shape)
+                                     for vi, v in enumerate(self.views)]))
+
+    def _state(self, src):
+        return CoherentState(initial_colours(src, [m.exemplar for m in self.vmodels]), src,
+                             [m.exemplar.shape[1] for m in self.vmodels])
+
+    def start(self, level, state):
+        return self.config.iterations[self.config.levels - 1 - level], float("nan")
+
+    def relax(self, level, state, rng, on_step):
+        config, views, vmodels, decision = self.config, self.views, self.vmodels, self.decision
+        control, phases = self.control, self.phases
+        volume, src, widths = state.volume, state.sources, state.widths
         li = config.levels - 1 - level
         window = config.window[li]
-        shape = level_shape(config.size, level)
-        level_ex = {id(a): coh.downsample_exemplar(a, level) for a in distinct}
-        models = {key_: coh.build_level_model(ex, window, dims=config.pca_dims, k=config.k,
-                                              exclude=config.coherence_exclude)
-                  for key_, ex in level_ex.items()}
-        vmodels = [models[id(per_view[v])] for v in views]
-        widths = [m.exemplar.shape[1] for m in vmodels]
-        if volume is None:
-            src = np.empty((n_views, *shape), dtype=np.int32)
-            drawn = {key_: coh.random_sources(shape, ex.shape, rng) for key_, ex in level_ex.items()}
-            for vi, v in enumerate(views):
-                src[vi] = drawn[id(per_view[v])]
-        else:
-            src = np.stack([coh.upsample_sources(src[vi], v, prev_widths[vi], vmodels[vi].exemplar.shape)
-                            for vi, v in enumerate(views)])
-        volume = initial_colours(src, [m.exemplar for m in vmodels])
+        shape = volume.shape[:3]
+        n_views = len(views)
         ex_flat, ex_off, hist_off = _pack(vmodels)
         values = coh.ValueHistogram.build([m.exemplar for m in vmodels], ex_flat, volume,
-                                          bins=config.value_bins, lo=value_lo, span=value_span)
+                                          bins=config.value_bins, lo=self.value_lo, span=self.value_span)
         ewidth = np.array(widths, dtype=np.int64)
         pos_hist = np.concatenate([coh.position_histogram(src[vi], m.pixels) for vi, m in enumerate(vmodels)])
         theta = np.array([volume.shape[0] * volume.shape[1] * volume.shape[2] / m.pixels for m in vmodels])
@@ -430,13 +463,11 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
         fresh = np.empty(shape, dtype=np.int32)
         omega = np.zeros((n_views, *shape), dtype=np.float32)
         index_hist = [np.zeros(m.pixels, dtype=np.float64) for m in vmodels]
-        d = window * window * channels
-        floor = 1e-3 * sigma * math.sqrt(d)
+        d = window * window * volume.shape[3]
+        floor = 1e-3 * self.sigma * math.sqrt(d)
         n_iter = config.iterations[li]
         n_vox = shape[0] * shape[1] * shape[2]
         bounds = np.linspace(0, n_vox, min(config.batches, n_vox) + 1).astype(np.int64)
-        if progress is not None:
-            progress(level, 0, n_iter, float("nan"))
         level_history, changed, global_counts = [], [], []
         t_search = t_solve = 0.0
         sites = 0
@@ -480,12 +511,12 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
                 # within a batch the histograms are frozen and every voxel depends only on them
                 # and the votes, so visiting a batch in memory order gives the same volume faster
                 order[bounds[b]:bounds[b + 1]].sort()
-            changed.append(int(_k.solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth,
+            changed.append(int(_k.solve(volume, src, assign, omega, self.view_axes, ex_flat, ex_off, ewidth,
                                         window, vmodels[0].anchor, config.grid, order, bounds, pos_hist,
                                         hist_off, theta, config.position_weight, config.position_boost,
                                         _MEDOID_CANDIDATES if config.solver == "medoid" or decision[0] else 0,
                                         config.balance_views, _SOLVE_CHUNK, decision[0],
-                                        2.0 * (decision[1] * sigma) ** 2 or 1.0, decision[2],
+                                        2.0 * (decision[1] * self.sigma) ** 2 or 1.0, decision[2],
                                         values.ex_bins, values.hist, target, config.value_weight,
                                         config.value_prior, values.lo, values.scale, values.unit,
                                         temperature, salt)))
@@ -494,13 +525,9 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
                 for c, e in zip(control, bin_phase_error(values.hist, values.target, phases)):
                     c.step(e)
             level_history.append(energy_sum / max(1, sites))
-            if progress is not None:
-                progress(level, it + 1, n_iter, level_history[-1])
-        history.append(level_history)
-        prev_widths = widths
-        timings[f"level_{level}"] = time.perf_counter() - t0
+            on_step(it + 1, level_history[-1])
         used = [float((pos_hist[hist_off[vi]:hist_off[vi] + m.pixels] > 0).mean()) for vi, m in enumerate(vmodels)]
-        stats["levels"][f"level_{level}"] = {
+        stats = {
             "shape": list(shape), "window": window, "iterations": n_iter,
             "candidates_per_site": 9 * (1 + config.k) + config.random_candidates, "sites_per_iteration": sites,
             "pca_dims": {v: int(vmodels[vi].basis.shape[1]) for vi, v in enumerate(views)},
@@ -510,14 +537,22 @@ def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
             "exemplar_pixels_used": {v: used[vi] for vi, v in enumerate(views)},
         }
         if control is not None:
-            stats["levels"][f"level_{level}"]["phase_error"] = [c.last_error.tolist() for c in control]
-            stats["levels"][f"level_{level}"]["phase_gain"] = [c.gain for c in control]
-        if checkpoint is not None:
-            _save_checkpoint(checkpoint, key, volume, src, level, rng, history, timings, stats, widths,
-                             None if control is None else np.stack([c.to_array() for c in control]))
-    timings["total"] = time.perf_counter() - t_start
-    return SynthesisResult(volume=volume, history=history, config=config, timings=timings,
-                           labels=labels, stats=stats)
+            stats["phase_error"] = [c.last_error.tolist() for c in control]
+            stats["phase_gain"] = [c.gain for c in control]
+        return state, level_history, stats
+
+    def to_arrays(self, state):
+        control = {} if self.control is None else {"phase_control": np.stack([c.to_array() for c in self.control])}
+        return {"volume": state.volume, "sources": state.sources,
+                "widths": np.asarray(state.widths, dtype=np.int64), **control}
+
+    def from_arrays(self, arrays):
+        if self.control is not None and "phase_control" in arrays:
+            self.control = [PhaseControl.from_array(a, 2)
+                            for a in np.asarray(arrays["phase_control"], dtype=np.float64)]
+        return CoherentState(np.ascontiguousarray(arrays["volume"], dtype=np.float32),
+                             np.ascontiguousarray(arrays["sources"], dtype=np.int32),
+                             [int(w) for w in np.atleast_1d(arrays["widths"])])
 
 
 def initial_colours(src: np.ndarray, exemplars) -> np.ndarray:
@@ -560,27 +595,6 @@ def _pack(models):
         hstart += m.pixels
     return (np.ascontiguousarray(np.concatenate(flat), dtype=np.float32),
             np.array(ex_off, dtype=np.int64), np.array(hist_off, dtype=np.int64))
-
-
-def _save_checkpoint(path, key, volume, src, level, rng, history, timings, stats, widths, control=None) -> None:
-    extra = {} if control is None else {"phase_control": control}
-    save_run_state(path, key, volume=volume, sources=src, level=level, **extra,
-                   widths=np.asarray(widths, dtype=np.int64),
-                   rng_state=json.dumps(rng.bit_generator.state), history=json.dumps(history),
-                   timings=json.dumps(timings), stats=json.dumps(stats, default=str))
-
-
-def _load_checkpoint(path, key):
-    """State after the last finished level, or None when there is nothing to resume."""
-    data = load_run_state(path, key)
-    if data is None:
-        return None
-    return (np.ascontiguousarray(data["volume"], dtype=np.float32),
-            np.ascontiguousarray(data["sources"], dtype=np.int32), int(data["level"]),
-            json.loads(str(data["rng_state"])), json.loads(str(data["history"])),
-            json.loads(str(data["timings"])), json.loads(str(data["stats"])),
-            [int(w) for w in np.atleast_1d(data["widths"])],
-            np.asarray(data["phase_control"], dtype=np.float64) if "phase_control" in data else None)
 
 
 def _fit(config) -> dict:

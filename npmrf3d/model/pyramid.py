@@ -7,10 +7,11 @@ down to 0. The voxel of level ``l - 1`` at ``2 * (i, j, k)`` is the *inherited* 
 (temperature 1); with ``8/8`` they copy the parent's value (temperature 1); ``trilinear``
 (Kopf et al. 2007, continuous values only) interpolates the parent on the torus.
 
-:func:`run_pyramid` is the level loop every multi-scale method shares (the NP-MRF sampler and
-NP_K): initialise the coarsest level, up-sample into each finer one, relax it, report progress,
-write a checkpoint after each level and resume from one. A method gives it a :class:`Levels`
-object that knows how to do those steps for its own state.
+:func:`run_pyramid` is the level loop every multi-scale method shares (the NP-MRF sampler, NP_K,
+the k-coherence engine of Chen–Wang and the coherent sampler, the coordinate pyramid of
+volume-lh and npmrf-3d): initialise the coarsest level, up-sample into each finer one, relax
+it, report progress, write a checkpoint after each level and resume from one. A method gives
+it a :class:`Levels` object that knows how to do those steps for its own state.
 """
 
 from __future__ import annotations
@@ -142,10 +143,17 @@ class Levels(ABC):
     size : (N1, N2, N3)
     levels : int
     key : str
-        Identity of the configuration; a checkpoint with another key is refused.
+        Identity of the run (:func:`npmrf3d.io.checkpoints.run_key`); a checkpoint with another
+        key is refused.
     fingerprint : dict of arrays
         Further arrays a checkpoint must match (e.g. the label set, which depends on the
         exemplar).
+
+    Random numbers are drawn from the loop's generator in the order the loop calls the
+    methods: per level :meth:`prepare` (draws none), :meth:`initial` or :meth:`upsample`, then
+    :meth:`relax`. State a method keeps across levels besides the level's state (e.g. a phase
+    control) belongs in :meth:`to_arrays` / :meth:`from_arrays`, so that a resumed run goes on
+    exactly as the uninterrupted one.
     """
 
     size: tuple[int, int, int]
@@ -176,11 +184,12 @@ class Levels(ABC):
 
     @abstractmethod
     def to_arrays(self, state: Any) -> dict[str, np.ndarray]:
-        """The state as named arrays (for a checkpoint)."""
+        """The state, and the method's own state carried across levels, as named arrays (for a
+        checkpoint)."""
 
     @abstractmethod
     def from_arrays(self, arrays: dict[str, np.ndarray]) -> Any:
-        """Inverse of :meth:`to_arrays`."""
+        """Inverse of :meth:`to_arrays`: restores the method's own state, returns the level's."""
 
 
 @dataclass
