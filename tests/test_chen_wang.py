@@ -1,4 +1,4 @@
-"""Chen & Wang 2010 (npmrf3d.model.kcoherence, npmrf3d.methods.chen_wang) against literal twins.
+"""Chen & Wang 2010 (npmrf3d.model.kcoherence and its engine, methods.chen_wang) against literal twins.
 
 Kernels against ``tests/naive.py``; k-coherence sets against brute force; the candidate
 set of a site against its definition; discrete copies only; the position histogram spreading a
@@ -23,6 +23,7 @@ from npmrf3d.methods import chen_wang as CW
 from npmrf3d.methods.chen_wang import ChenWangConfig, chen_wang_synthesize
 from npmrf3d.methods.npmrf_coherent import coherent_synthesize
 from npmrf3d.model import kcoherence as coh
+from npmrf3d.model.kcoherence_engine import pack_exemplars
 from npmrf3d.model.neighbourhood import VIEW_AXES
 from tests.naive import (
     naive_candidates,
@@ -328,7 +329,7 @@ def _solve_case(rng, views, window, channels, grid, shared=True):
 
 def _values(exemplars, models, volume, bins=5):
     """The value histograms of a solver case (views' distinct exemplars pooled)."""
-    packed, _, _ = CW._pack(models)
+    packed, _, _ = pack_exemplars(models)
     distinct = list({id(e): e for e in exemplars}.values())
     pooled = np.concatenate([e.reshape(-1, e.shape[2]) for e in distinct]).astype(np.float64)
     return coh.ValueHistogram.build(exemplars, packed, volume, bins=bins, lo=pooled.min(axis=0),
@@ -359,7 +360,7 @@ def test_solve_matches_twin(rng, views, medoid, balance, boost, likelihood, valu
     values = {"hist": vh.hist.tolist(), "target": vh.target.tolist(), "weight": value_weight,
               "prior": 2.0 * (likelihood > 0 and value_weight > 0),
               "lo": vh.lo.tolist(), "scale": vh.scale.tolist(), "unit": vh.unit}
-    packed, ex_off, hist_off = CW._pack(models)
+    packed, ex_off, hist_off = pack_exemplars(models)
     n = volume.shape[0] * volume.shape[1] * volume.shape[2]
     order = rng.permutation(n).astype(np.int64)
     bounds = np.array([0, 50, 120, n], dtype=np.int64)
@@ -387,7 +388,7 @@ def test_solve_matches_twin(rng, views, medoid, balance, boost, likelihood, valu
 def test_solve_copies_only_voted_exemplar_texels(rng):
     views = VIEWS3
     exemplars, models, assign, omega, src, volume = _solve_case(rng, views, 4, 3, 1)
-    packed, ex_off, hist_off = CW._pack(models)
+    packed, ex_off, hist_off = pack_exemplars(models)
     n = volume.shape[0] * volume.shape[1] * volume.shape[2]
     hist = np.concatenate([np.bincount(s.ravel(), minlength=110) for s in src]).astype(np.float64)
     _k.solve(volume, src, assign, omega, np.array([VIEW_AXES[v] for v in views]), packed, ex_off,
@@ -591,7 +592,7 @@ def test_solve_does_not_depend_on_the_order_within_a_batch(rng):
     """The run visits each batch in memory order (faster); only the batches' order matters."""
     views = VIEWS3
     exemplars, models, assign, omega, src, volume = _solve_case(rng, views, 4, 3, 1)
-    packed, ex_off, hist_off = CW._pack(models)
+    packed, ex_off, hist_off = pack_exemplars(models)
     n = volume.shape[0] * volume.shape[1] * volume.shape[2]
     order = rng.permutation(n).astype(np.int64)
     bounds = np.array([0, 60, 130, n], dtype=np.int64)

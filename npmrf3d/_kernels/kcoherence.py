@@ -34,6 +34,11 @@ import numpy as np
 
 from ._jit import jit, jit_parallel, prange
 
+#: The solver's rule among a voxel's heaviest votes (:func:`solve`'s ``likelihood``): the
+#: configuration's own (medoid or mean), or the NP-MRF score with the views' Parzen estimates
+#: combined by the product (ML_H2b) or the minimum (ML_H2a).
+OWN_SOLVER, ML_H2B, ML_H2A = 0, 1, 2
+
 
 @jit
 def mix(x):

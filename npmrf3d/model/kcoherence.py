@@ -437,7 +437,7 @@ class ValueHistogram(NamedTuple):
               lo: np.ndarray, span: np.ndarray) -> "ValueHistogram":
         """Histograms of ``volume`` (N1, N2, N3, C) and of ``exemplars`` (one (H, W, C) array per
         view) over ``bins`` bins spanning ``lo .. lo + span`` per channel; ``ex_flat`` the packed
-        texels (:func:`npmrf3d.methods.chen_wang._pack`)."""
+        texels (:func:`npmrf3d.model.kcoherence_engine.pack_exemplars`)."""
         channels = volume.shape[3]
         lo = np.asarray(lo, dtype=np.float64)
         scale = value_scale(span, bins)

@@ -27,6 +27,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy import ndimage
 
+from .._kernels._jit import thread_count
 from ..io.checkpoints import load_run_state, save_run_state
 
 __all__ = ["INHERIT", "LABEL_UPSAMPLING", "LevelState", "Levels", "UPSAMPLERS", "UPSAMPLING",
@@ -220,13 +221,14 @@ def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressC
         A ``.npz`` file written after each level; if it exists and matches ``method.key`` and
         ``method.fingerprint``, the run resumes after its last finished level.
     timings, stats : dict, optional
-        Start values (e.g. ``setup`` time, thread count); per-level entries are added.
+        Start values; per-level entries are added. Default: the ``setup`` time since
+        ``t_start`` and the ``threads`` numba's loops use.
     t_start : float, optional
         ``time.perf_counter()`` when the run started (for ``timings["total"]``).
     """
     t_start = time.perf_counter() if t_start is None else t_start
-    timings = dict(timings or {})
-    stats = dict(stats or {})
+    timings = {"setup": time.perf_counter() - t_start} if timings is None else dict(timings)
+    stats = {"threads": thread_count()} if stats is None else dict(stats)
     stats.setdefault("levels", {})
     history: list[list[float]] = []
     state = None
