@@ -51,6 +51,7 @@ __all__ = [
     "pca_project",
     "position_histogram",
     "random_sources",
+    "search_exemplar",
     "upsample_sources",
     "valid_centres",
     "value_counts",
@@ -270,6 +271,13 @@ def build_level_model(exemplar: np.ndarray, window: int, *, dims: int = 20, k: i
                       flat.astype(np.int64), tree)
 
 
+def search_exemplar(model: LevelModel) -> _k.SearchExemplar:
+    """The model as the compiled search reads it (:func:`npmrf3d._kernels.kcoherence.search_view`)."""
+    lo_r, hi_r, lo_c, hi_c = (int(b) for b in model.bounds)
+    return _k.SearchExemplar(int(model.window), int(model.anchor), int(model.exemplar.shape[1]),
+                             lo_r, hi_r, lo_c, hi_c, model.mean, model.basis, model.proj, model.kcoh)
+
+
 # --------------------------------------------------------------------------- source maps
 
 
@@ -319,9 +327,8 @@ def candidate_set(src_v: np.ndarray, view: str, site: tuple[int, int, int], mode
     """
     ra, ca = VIEW_AXES[view]
     out = np.empty(9 * (1 + model.kcoh.shape[1]), dtype=np.int64)
-    lo_r, hi_r, lo_c, hi_c = model.bounds
     count = _k.candidates(np.ascontiguousarray(src_v, dtype=np.int32), ra, ca, *map(int, site),
-                          model.exemplar.shape[1], lo_r, hi_r, lo_c, hi_c, model.kcoh, out)
+                          search_exemplar(model), out)
     return np.unique(out[:count])
 
 

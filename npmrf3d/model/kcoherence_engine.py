@@ -5,7 +5,8 @@ methods drive it: Chen–Wang (:mod:`npmrf3d.methods.chen_wang`, its own solver)
 NP-MRF sampler (:mod:`npmrf3d.methods.npmrf_coherent`, which decides among the candidates by
 the NP-MRF likelihood, :class:`CandidateDecision`). The pieces it works with -- per-level
 exemplar models, source maps, histograms -- are in :mod:`npmrf3d.model.kcoherence`; the
-compiled search and solver in :mod:`npmrf3d._kernels.kcoherence`.
+compiled search in :mod:`npmrf3d._kernels.kcoherence`, the solver in
+:mod:`npmrf3d._kernels.kcoherence_solver`.
 
 A level's state (:class:`CoherentState`) is every voxel's colour and, per view, the exemplar
 pixel it was copied from (its *source*). The coarsest level starts from uniformly random
@@ -28,7 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from .._kernels import kcoherence as _k
+from .._kernels import kcoherence as _search
+from .._kernels import kcoherence_solver as _solver
 from ..io.checkpoints import run_key
 from . import kcoherence as coh
 from .neighbourhood import VIEW_AXES
@@ -39,8 +41,8 @@ __all__ = ["CANDIDATE_HEURISTICS", "CandidateDecision", "CoherentState", "KCoher
            "initial_colours", "pack_exemplars"]
 
 #: The NP-MRF heuristics the solver can rank candidates by (SPEC.md section 3), and the
-#: solver kernel's code of each (:mod:`npmrf3d._kernels.kcoherence`).
-CANDIDATE_HEURISTICS = {"ML_H2b": _k.ML_H2B, "ML_H2a": _k.ML_H2A}
+#: solver kernel's code of each (:mod:`npmrf3d._kernels.kcoherence_solver`).
+CANDIDATE_HEURISTICS = {"ML_H2b": _solver.ML_H2B, "ML_H2a": _solver.ML_H2A}
 #: The medoid solver tries the heaviest (merged) votes only; the energy sums over all votes.
 MEDOID_CANDIDATES = 8
 #: Voxels per parallel work item of the solver (any value gives the same result).
@@ -211,9 +213,15 @@ class KCoherenceLevels(Levels):
         ex_flat, ex_off, hist_off = pack_exemplars(vmodels)
         values = coh.ValueHistogram.build([m.exemplar for m in vmodels], ex_flat, volume,
                                           bins=config.value_bins, lo=self.value_lo, span=self.value_span)
-        ewidth = np.array(widths, dtype=np.int64)
+        packed = _solver.PackedViews(self.view_axes, ex_flat, ex_off, np.array(widths, dtype=np.int64), window,
+                                     int(vmodels[0].anchor), config.grid)
         pos_hist = np.concatenate([coh.position_histogram(src[vi], m.pixels) for vi, m in enumerate(vmodels)])
         theta = np.array([volume.shape[0] * volume.shape[1] * volume.shape[2] / m.pixels for m in vmodels])
+        histograms = _solver.SolverHistograms(
+            pos_hist, hist_off, theta, config.position_weight, config.position_boost, values.ex_bins,
+            values.hist, values.target, config.value_weight, config.value_prior, values.lo, values.scale,
+            values.unit)
+        exemplars = [coh.search_exemplar(m) for m in vmodels]
         assign = np.full((n_views, *shape), -1, dtype=np.int32)
         fresh = np.empty(shape, dtype=np.int32)
         omega = np.zeros((n_views, *shape), dtype=np.float32)
@@ -223,8 +231,9 @@ class KCoherenceLevels(Levels):
         n_iter = config.iterations[li]
         n_vox = shape[0] * shape[1] * shape[2]
         bounds = np.linspace(0, n_vox, min(config.batches, n_vox) + 1).astype(np.int64)
-        likelihood = _k.OWN_SOLVER if decision.heuristic is None else CANDIDATE_HEURISTICS[decision.heuristic]
+        likelihood = _solver.OWN_SOLVER if decision.heuristic is None else CANDIDATE_HEURISTICS[decision.heuristic]
         medoid = MEDOID_CANDIDATES if config.solver == "medoid" or decision.heuristic is not None else 0
+        h2c = 2.0 * (decision.centre_bandwidth * self.sigma) ** 2 or 1.0
         level_history, changed, global_counts = [], [], []
         t_search = t_solve = 0.0
         sites = 0
@@ -240,12 +249,10 @@ class KCoherenceLevels(Levels):
                 energy = np.zeros(shape[na], dtype=np.float64)
                 n_sites = shape[na] * (shape[ra] // config.grid) * (shape[ca] // config.grid)
                 phi = n_sites / m.centres
-                lo_r, hi_r, lo_c, hi_c = m.bounds
-                _k.search_view(volume, src[vi], ra, ca, window, m.anchor, config.grid, widths[vi],
-                               lo_r, hi_r, lo_c, hi_c, m.mean, m.basis, m.proj, m.kcoh,
-                               min(config.batches, shape[na]), index_hist[vi], phi,
-                               config.index_weight, config.r, floor, config.random_candidates,
-                               int(rng.integers(0, 2**31)), assign[vi], fresh, omega[vi], energy)
+                rule = _search.SearchRule(config.grid, min(config.batches, shape[na]), phi, config.index_weight,
+                                          config.r, floor, config.random_candidates, int(rng.integers(0, 2**31)))
+                _search.search_view(volume, src[vi], ra, ca, exemplars[vi], rule, index_hist[vi], assign[vi],
+                                    fresh, omega[vi], energy)
                 energy_sum += float(energy.sum())
                 if config.global_share > 0.0:
                     n_global, change = coh.global_matches(
@@ -268,15 +275,11 @@ class KCoherenceLevels(Levels):
                 # within a batch the histograms are frozen and every voxel depends only on them
                 # and the votes, so visiting a batch in memory order gives the same volume faster
                 order[bounds[b]:bounds[b + 1]].sort()
-            changed.append(int(_k.solve(volume, src, assign, omega, self.view_axes, ex_flat, ex_off, ewidth,
-                                        window, vmodels[0].anchor, config.grid, order, bounds, pos_hist,
-                                        hist_off, theta, config.position_weight, config.position_boost,
-                                        medoid, config.balance_views, SOLVE_CHUNK, likelihood,
-                                        2.0 * (decision.centre_bandwidth * self.sigma) ** 2 or 1.0,
-                                        decision.outlier,
-                                        values.ex_bins, values.hist, target, config.value_weight,
-                                        config.value_prior, values.lo, values.scale, values.unit,
-                                        temperature, salt)))
+            rule = _solver.SolverRule(medoid, config.balance_views, likelihood, h2c, decision.outlier,
+                                      temperature, salt)
+            changed.append(int(_solver.solve(volume, src, assign, omega, packed,
+                                             histograms._replace(value_target=target), rule, order, bounds,
+                                             SOLVE_CHUNK)))
             t_solve += time.perf_counter() - ts
             if control is not None:
                 for c, e in zip(control, bin_phase_error(values.hist, values.target, phases)):
