@@ -24,7 +24,7 @@ from npmrf3d.methods import chen_wang as CW
 from npmrf3d.methods.chen_wang import ChenWangConfig, chen_wang_synthesize
 from npmrf3d.methods.npmrf_coherent import coherent_synthesize
 from npmrf3d.model import kcoherence as coh
-from npmrf3d.model.kcoherence_engine import pack_exemplars
+from npmrf3d.model.kcoherence_engine import ValueHistogram, pack_exemplars
 from npmrf3d.model.neighbourhood import VIEW_AXES
 from tests.naive import (
     naive_candidates,
@@ -257,7 +257,7 @@ def test_value_histogram_counts_in_even_bin_units(rng):
     ex = rng.random((10, 12, 2)).astype(np.float32)
     vol = rng.random((4, 5, 6, 2)).astype(np.float32)
     lo, span = ex.reshape(-1, 2).min(axis=0), np.ptp(ex.reshape(-1, 2), axis=0)
-    vh = coh.ValueHistogram.build([ex], ex.reshape(-1, 2), vol, bins=8, lo=lo, span=span)
+    vh = ValueHistogram.build([ex], ex.reshape(-1, 2), vol, bins=8, lo=lo, span=span)
     scale = 8 / span.astype(np.float64)
     for c in range(2):
         want = np.bincount([naive_value_bin(x, float(lo[c]), scale[c], 8) for x in vol[..., c].ravel()],
@@ -287,7 +287,7 @@ def test_value_histogram_pulls_the_solver_towards_the_exemplars_histogram(weight
         vol = np.full((*shape, 1), 0.1, dtype=np.float32)
         src = np.zeros((1, *shape), dtype=np.int32)
         hist = np.bincount(src.ravel(), minlength=144).astype(np.float64)
-        vh = coh.ValueHistogram.build([ex], ex.reshape(-1, 1), vol, bins=4, lo=np.array([0.1]),
+        vh = ValueHistogram.build([ex], ex.reshape(-1, 1), vol, bins=4, lo=np.array([0.1]),
                                       span=np.array([0.8]))
         _s.solve(vol, src, assign, np.ones((1, *shape), dtype=np.float32),
                  _packed([[0, 1]], ex.reshape(-1, 1), [0], [12], 4, m.anchor, 1),
@@ -330,7 +330,7 @@ def _values(exemplars, models, volume, bins=5):
     packed, _, _ = pack_exemplars(models)
     distinct = list({id(e): e for e in exemplars}.values())
     pooled = np.concatenate([e.reshape(-1, e.shape[2]) for e in distinct]).astype(np.float64)
-    return coh.ValueHistogram.build(exemplars, packed, volume, bins=bins, lo=pooled.min(axis=0),
+    return ValueHistogram.build(exemplars, packed, volume, bins=bins, lo=pooled.min(axis=0),
                                     span=pooled.max(axis=0) - pooled.min(axis=0))
 
 

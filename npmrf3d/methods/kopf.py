@@ -83,7 +83,6 @@ from ._kopf_steps import (
     channel_bins,
     channel_histograms,
     downsample_exemplar,
-    exemplar_patches,
     optimisation_phase,
     pca_basis,
     search_view,

@@ -162,7 +162,10 @@ def appearance_space(exemplar: np.ndarray, level: int, window: int, dims: int,
 
     Each voxel's ``window^3`` neighbourhood, sampled every ``h = 2**level`` voxels in the exemplar
     smoothed by a Gaussian of ``sigma = h / 2`` (none at level 0), borders clamped, projected on
-    the ``dims`` leading principal directions of :data:`PCA_SAMPLES` random voxels' vectors.
+    the ``dims`` leading principal directions of :data:`PCA_SAMPLES` random voxels' vectors
+    (the scatter matrix a product of two copies of the centred vectors: not
+    :func:`npmrf3d.model.kcoherence.pca_project`, whose one-array product differs in the last
+    bits).
     """
     h = 2 ** level
     ex = smoothed(exemplar, level)

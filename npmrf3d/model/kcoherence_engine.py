@@ -4,9 +4,10 @@ The level loop of :mod:`npmrf3d.model.pyramid` runs it through :class:`KCoherenc
 methods drive it: Chen–Wang (:mod:`npmrf3d.methods.chen_wang`, its own solver) and the coherent
 NP-MRF sampler (:mod:`npmrf3d.methods.npmrf_coherent`, which decides among the candidates by
 the NP-MRF likelihood, :class:`CandidateDecision`). The pieces it works with -- per-level
-exemplar models, source maps, histograms -- are in :mod:`npmrf3d.model.kcoherence`; the
-compiled search in :mod:`npmrf3d._kernels.kcoherence`, the solver in
-:mod:`npmrf3d._kernels.kcoherence_solver`.
+exemplar models, source maps, candidates -- are in :mod:`npmrf3d.model.kcoherence`, the
+solver's position and value histograms here (:func:`position_histogram`,
+:class:`ValueHistogram`); the compiled search in :mod:`npmrf3d._kernels.kcoherence`, the solver
+in :mod:`npmrf3d._kernels.kcoherence_solver`.
 
 A level's state (:class:`CoherentState`) is every voxel's colour and, per view, the exemplar
 pixel it was copied from (its *source*). The coarsest level starts from uniformly random
@@ -25,7 +26,7 @@ import math
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -33,12 +34,13 @@ from .._kernels import kcoherence as _search
 from .._kernels import kcoherence_solver as _solver
 from ..io.checkpoints import run_key
 from . import kcoherence as coh
+from .exemplar import pack_rows
 from .neighbourhood import VIEW_AXES
 from .phases import PhaseControl, bin_phase_error, bin_phases, phase_prior_target
 from .pyramid import Levels
 
-__all__ = ["CANDIDATE_HEURISTICS", "CandidateDecision", "CoherentState", "KCoherenceLevels",
-           "initial_colours", "pack_exemplars"]
+__all__ = ["CANDIDATE_HEURISTICS", "CandidateDecision", "CoherentState", "KCoherenceLevels", "ValueHistogram",
+           "initial_colours", "pack_exemplars", "position_histogram", "value_counts", "value_scale"]
 
 #: The NP-MRF heuristics the solver can rank candidates by (SPEC.md section 3), and the
 #: solver kernel's code of each (:mod:`npmrf3d._kernels.kcoherence_solver`).
@@ -115,20 +117,83 @@ def initial_colours(src: np.ndarray, exemplars) -> np.ndarray:
 
 
 def pack_exemplars(models) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The views' exemplars packed as rows of one array (an exemplar shared by views once), each
-    view's first row in it, and each view's first entry in the packed position histograms."""
-    flat, ex_off, hist_off, seen = [], [], [], {}
-    start = hstart = 0
-    for m in models:
-        if id(m) not in seen:
-            seen[id(m)] = start
-            flat.append(m.exemplar.reshape(-1, m.exemplar.shape[2]))
-            start += flat[-1].shape[0]
-        ex_off.append(seen[id(m)])
-        hist_off.append(hstart)
-        hstart += m.pixels
-    return (np.ascontiguousarray(np.concatenate(flat), dtype=np.float32),
-            np.array(ex_off, dtype=np.int64), np.array(hist_off, dtype=np.int64))
+    """The views' exemplars packed as rows of one array (an exemplar shared by views once,
+    :func:`npmrf3d.model.exemplar.pack_rows`), each view's first row in it, and each view's first
+    entry in the packed position histograms."""
+    texels, offsets = pack_rows([m.exemplar for m in models])
+    pixels = np.array([m.pixels for m in models], dtype=np.int64)
+    return texels, offsets, np.cumsum(pixels) - pixels
+
+
+# --------------------------------------------------------------------------- histograms
+
+
+def value_scale(span, bins: int) -> np.ndarray:
+    """Bins per unit of value of each channel, ``bins / span`` (0 for a channel of one value)."""
+    span = np.asarray(span, dtype=np.float64)
+    return np.where(span > 0, bins / np.where(span > 0, span, 1.0), 0.0)
+
+
+def value_counts(values: np.ndarray, lo: np.ndarray, scale: np.ndarray, bins: int) -> tuple[np.ndarray, np.ndarray]:
+    """The bin of every value of ``values`` (n, C) (:func:`npmrf3d._kernels.kcoherence.value_bin`),
+    ``(n, C)`` int64, and each channel's counts, ``(C, bins)`` float64."""
+    b = np.empty(values.shape, dtype=np.int64)
+    _search.value_bins(np.ascontiguousarray(values, dtype=np.float32), np.asarray(lo, dtype=np.float64), scale, bins, b)
+    return b, np.stack([np.bincount(b[:, c], minlength=bins) for c in range(values.shape[1])]).astype(np.float64)
+
+
+class ValueHistogram(NamedTuple):
+    """Per-channel value histograms of a level for the solver's histogram matching.
+
+    Attributes
+    ----------
+    lo, scale : (C,) float64
+        Bin of value ``x`` of channel ``c``: ``floor((x - lo[c]) * scale[c])`` clamped to
+        ``0..bins - 1`` (:func:`npmrf3d._kernels.kcoherence.value_bin`).
+    ex_bins : (G, C) int64
+        Bins of every packed exemplar texel.
+    hist : (C, bins) float64
+        The volume's histogram, in units of ``unit`` voxels (an even bin's share); the solver
+        updates it.
+    target : (C, bins) float64
+        The exemplars' histogram (views pooled, each view's exemplar weighted equally), same units.
+    unit : float
+        Voxels per even bin, ``N / bins``.
+    """
+
+    lo: np.ndarray
+    scale: np.ndarray
+    ex_bins: np.ndarray
+    hist: np.ndarray
+    target: np.ndarray
+    unit: float
+
+    @classmethod
+    def build(cls, exemplars, ex_flat: np.ndarray, volume: np.ndarray, *, bins: int,
+              lo: np.ndarray, span: np.ndarray) -> "ValueHistogram":
+        """Histograms of ``volume`` (N1, N2, N3, C) and of ``exemplars`` (one (H, W, C) array per
+        view) over ``bins`` bins spanning ``lo .. lo + span`` per channel; ``ex_flat`` the packed
+        texels (:func:`pack_exemplars`)."""
+        channels = volume.shape[3]
+        lo = np.asarray(lo, dtype=np.float64)
+        scale = value_scale(span, bins)
+        ex_bins, _ = value_counts(ex_flat, lo, scale, bins)
+        n = volume.shape[0] * volume.shape[1] * volume.shape[2]
+        _, hist = value_counts(volume.reshape(n, channels), lo, scale, bins)
+        target = np.zeros((channels, bins), dtype=np.float64)
+        for ex in exemplars:
+            _, h = value_counts(ex.reshape(-1, channels), lo, scale, bins)
+            target += h / h.sum(axis=1, keepdims=True)
+        unit = n / bins
+        return cls(lo, scale, ex_bins, hist / unit, target * bins / len(exemplars), float(unit))
+
+
+def position_histogram(src_v: np.ndarray, pixels: int) -> np.ndarray:
+    """How many voxels copy each exemplar pixel: ``(pixels,)`` float64 counts of ``src_v``."""
+    return np.bincount(np.asarray(src_v).ravel(), minlength=pixels).astype(np.float64)
+
+
+# --------------------------------------------------------------------------- the level loop's side
 
 
 class KCoherenceLevels(Levels):
@@ -170,8 +235,8 @@ class KCoherenceLevels(Levels):
         self.key = run_key(method, config, self.per_view, decision=dataclasses.asdict(decision))
         self.phases = self.control = None
         if config.phase_weight > 0.0 and config.value_prior > 0.0:
-            self.phases = bin_phases(coh.value_counts(
-                pooled, self.value_lo, coh.value_scale(self.value_span, config.value_bins), config.value_bins)[1])
+            self.phases = bin_phases(value_counts(
+                pooled, self.value_lo, value_scale(self.value_span, config.value_bins), config.value_bins)[1])
             self.control = [PhaseControl.start(2) for _ in range(channels)]
         self.level_ex = self.vmodels = None
 
@@ -211,11 +276,11 @@ class KCoherenceLevels(Levels):
         shape = volume.shape[:3]
         n_views = len(views)
         ex_flat, ex_off, hist_off = pack_exemplars(vmodels)
-        values = coh.ValueHistogram.build([m.exemplar for m in vmodels], ex_flat, volume,
+        values = ValueHistogram.build([m.exemplar for m in vmodels], ex_flat, volume,
                                           bins=config.value_bins, lo=self.value_lo, span=self.value_span)
         packed = _solver.PackedViews(self.view_axes, ex_flat, ex_off, np.array(widths, dtype=np.int64), window,
                                      int(vmodels[0].anchor), config.grid)
-        pos_hist = np.concatenate([coh.position_histogram(src[vi], m.pixels) for vi, m in enumerate(vmodels)])
+        pos_hist = np.concatenate([position_histogram(src[vi], m.pixels) for vi, m in enumerate(vmodels)])
         theta = np.array([volume.shape[0] * volume.shape[1] * volume.shape[2] / m.pixels for m in vmodels])
         histograms = _solver.SolverHistograms(
             pos_hist, hist_off, theta, config.position_weight, config.position_boost, values.ex_bins,
