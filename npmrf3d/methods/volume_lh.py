@@ -505,9 +505,7 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
         if vector_field is None:
             check.fail("vector_field 'array' needs the frames array (vector_field=...)")
     levels = CoordinateLevels(config, exemplar, vector_field, parzen)
-    out = run_pyramid(levels, rng, progress=progress, checkpoint=checkpoint,
-                      timings={"setup": time.perf_counter() - t_start},
-                      stats={"threads": _jit.thread_count()}, t_start=t_start)
+    out = run_pyramid(levels, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
     coords, timings, stats = out.state, out.timings, out.stats
     volume = np.ascontiguousarray(exemplar[coords[..., 0], coords[..., 1], coords[..., 2]], dtype=np.float32)
     t0 = time.perf_counter()
