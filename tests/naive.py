@@ -326,8 +326,9 @@ def naive_kopf_update(volume, assign, omega, views, exemplars, window, order, *,
 
 
 # --------------------------------------------------------------------------- k-coherence (Chen & Wang 2010)
-# Literal twins of the k-coherence kernels (:mod:`npmrf3d._kernels.kcoherence`), written from the
-# paper and the docstrings of :mod:`npmrf3d.model.kcoherence`, in float64 loops without scratch buffers.
+# Literal twins of the k-coherence kernels (:mod:`npmrf3d._kernels.kcoherence` and
+# :mod:`npmrf3d._kernels.kcoherence_solver`), written from the paper and the docstrings of
+# :mod:`npmrf3d.model.kcoherence`, in float64 loops without scratch buffers.
 # Geometry: a window of side ``w`` at plane position ``u`` covers ``u - a .. u - a + w - 1``,
 # ``a = (w-1)//2``; the volume wraps around, the exemplar does not; sources and centres are flat
 # ``row * W + col``.

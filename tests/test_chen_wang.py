@@ -1,4 +1,4 @@
-"""Chen & Wang 2010 (npmrf3d.model.kcoherence, npmrf3d.methods.chen_wang) against literal twins.
+"""Chen & Wang 2010 (npmrf3d.model.kcoherence and its engine, methods.chen_wang) against literal twins.
 
 Kernels against ``tests/naive.py``; k-coherence sets against brute force; the candidate
 set of a site against its definition; discrete copies only; the position histogram spreading a
@@ -17,12 +17,14 @@ import numpy as np
 import pytest
 
 from npmrf3d._kernels import kcoherence as _k
+from npmrf3d._kernels import kcoherence_solver as _s
 from npmrf3d.config import SynthesisResult
 from npmrf3d.errors import ParameterError
 from npmrf3d.methods import chen_wang as CW
 from npmrf3d.methods.chen_wang import ChenWangConfig, chen_wang_synthesize
 from npmrf3d.methods.npmrf_coherent import coherent_synthesize
 from npmrf3d.model import kcoherence as coh
+from npmrf3d.model.kcoherence_engine import ValueHistogram, pack_exemplars
 from npmrf3d.model.neighbourhood import VIEW_AXES
 from tests.naive import (
     naive_candidates,
@@ -167,8 +169,8 @@ def test_search_view_matches_twin(rng, view, window, channels, grid, batches, n_
     got_hist = hist.copy()
     omega = np.zeros(vol.shape[:3], dtype=np.float32)
     energy = np.zeros(vol.shape[na])
-    _k.search_view(vol, src, ra, ca, window, m.anchor, grid, 12, lo_r, hi_r, lo_c, hi_c, m.mean,
-                   m.basis, m.proj, m.kcoh, batches, got_hist, phi, 2.0, 0.8, 1e-3, n_random, 123456789, got_assign,
+    _k.search_view(vol, src, ra, ca, coh.search_exemplar(m),
+                   _k.SearchRule(grid, batches, phi, 2.0, 0.8, 1e-3, n_random, 123456789), got_hist, got_assign,
                    np.empty(vol.shape[:3], dtype=np.int32), omega, energy)
     np.testing.assert_array_equal(got_assign, want_assign)
     np.testing.assert_allclose(omega, want_omega, rtol=1e-4)
@@ -191,10 +193,8 @@ def test_volume_patch_projection_is_the_models(rng):
                        naive_exemplar_patch(ex, 6, 7, 4))
     assign = np.full((8, 8, 2), -1, dtype=np.int32)
     omega = np.zeros((8, 8, 2), dtype=np.float32)
-    lo_r, hi_r, lo_c, hi_c = m.bounds
-    _k.search_view(vol, src, 0, 1, 4, m.anchor, 1, 16, lo_r, hi_r, lo_c, hi_c, m.mean, m.basis,
-                   m.proj, m.kcoh, 1, np.zeros(m.pixels), 1.0, 0.0, 0.8, 1e-6, 0, 0, assign,
-                   np.empty_like(assign), omega, np.zeros(2))
+    _k.search_view(vol, src, 0, 1, coh.search_exemplar(m), _k.SearchRule(1, 1, 1.0, 0.0, 0.8, 1e-6, 0, 0),
+                   np.zeros(m.pixels), assign, np.empty_like(assign), omega, np.zeros(2))
     assert assign[3, 3, 0] == 6 * 16 + 7  # interior site: the exact copy
 
 
@@ -257,7 +257,7 @@ def test_value_histogram_counts_in_even_bin_units(rng):
     ex = rng.random((10, 12, 2)).astype(np.float32)
     vol = rng.random((4, 5, 6, 2)).astype(np.float32)
     lo, span = ex.reshape(-1, 2).min(axis=0), np.ptp(ex.reshape(-1, 2), axis=0)
-    vh = coh.ValueHistogram.build([ex], ex.reshape(-1, 2), vol, bins=8, lo=lo, span=span)
+    vh = ValueHistogram.build([ex], ex.reshape(-1, 2), vol, bins=8, lo=lo, span=span)
     scale = 8 / span.astype(np.float64)
     for c in range(2):
         want = np.bincount([naive_value_bin(x, float(lo[c]), scale[c], 8) for x in vol[..., c].ravel()],
@@ -287,14 +287,13 @@ def test_value_histogram_pulls_the_solver_towards_the_exemplars_histogram(weight
         vol = np.full((*shape, 1), 0.1, dtype=np.float32)
         src = np.zeros((1, *shape), dtype=np.int32)
         hist = np.bincount(src.ravel(), minlength=144).astype(np.float64)
-        vh = coh.ValueHistogram.build([ex], ex.reshape(-1, 1), vol, bins=4, lo=np.array([0.1]),
+        vh = ValueHistogram.build([ex], ex.reshape(-1, 1), vol, bins=4, lo=np.array([0.1]),
                                       span=np.array([0.8]))
-        _k.solve(vol, src, assign, np.ones((1, *shape), dtype=np.float32), np.array([[0, 1]]),
-                 ex.reshape(-1, 1), np.zeros(1, np.int64), np.array([12]), 4, m.anchor, 1,
-                 gen.permutation(n).astype(np.int64), np.linspace(0, n, 17).astype(np.int64), hist,
-                 np.zeros(1, np.int64), np.array([n / 144.0]), 0.0, 0.0, 8, False, 16, likelihood, 0.01,
-                 0.01, vh.ex_bins, vh.hist, vh.target, w, prior if w else 0.0, vh.lo, vh.scale, vh.unit,
-                 0.0, 0)
+        _s.solve(vol, src, assign, np.ones((1, *shape), dtype=np.float32),
+                 _packed([[0, 1]], ex.reshape(-1, 1), [0], [12], 4, m.anchor, 1),
+                 _histograms(hist, [0], [n / 144.0], 0.0, 0.0, ex.reshape(-1, 1), vh, w, prior if w else 0.0),
+                 _s.SolverRule(8, False, likelihood, 0.01, 0.01, 0.0, 0),
+                 gen.permutation(n).astype(np.int64), np.linspace(0, n, 17).astype(np.int64), 16)
         share[w] = float((vol > 0.5).mean())
         np.testing.assert_allclose(vh.hist[0] * vh.unit, [np.sum(vol < 0.5), 0, 0, np.sum(vol > 0.5)])
     assert share[0.0] < 0.15
@@ -328,19 +327,29 @@ def _solve_case(rng, views, window, channels, grid, shared=True):
 
 def _values(exemplars, models, volume, bins=5):
     """The value histograms of a solver case (views' distinct exemplars pooled)."""
-    packed, _, _ = CW._pack(models)
+    packed, _, _ = pack_exemplars(models)
     distinct = list({id(e): e for e in exemplars}.values())
     pooled = np.concatenate([e.reshape(-1, e.shape[2]) for e in distinct]).astype(np.float64)
-    return coh.ValueHistogram.build(exemplars, packed, volume, bins=bins, lo=pooled.min(axis=0),
+    return ValueHistogram.build(exemplars, packed, volume, bins=bins, lo=pooled.min(axis=0),
                                     span=pooled.max(axis=0) - pooled.min(axis=0))
 
 
-def _no_values(packed):
-    """The solver's trailing arguments: histogram matching off, no annealing (temperature 0)."""
-    channels = packed.shape[1]
-    zeros = np.zeros((channels, 2))
-    return (np.zeros(packed.shape, np.int64), zeros, zeros, 0.0, 0.0, np.zeros(channels), np.zeros(channels), 1.0,
-            0.0, 0)
+def _packed(axes, texels, offsets, widths, window, anchor, grid):
+    """The solver's view of the packed exemplars (:class:`npmrf3d._kernels.kcoherence_solver.PackedViews`)."""
+    return _s.PackedViews(np.asarray(axes, dtype=np.int64), texels, np.asarray(offsets, dtype=np.int64),
+                          np.asarray(widths, dtype=np.int64), int(window), int(anchor), int(grid))
+
+
+def _histograms(positions, offsets, theta, weight, boost, texels, values=None, value_weight=0.0, value_prior=0.0):
+    """The solver's histograms; without ``values`` (a :class:`ValueHistogram`) histogram matching is off."""
+    offsets, theta = np.asarray(offsets, dtype=np.int64), np.asarray(theta, dtype=np.float64)
+    if values is None:
+        channels = texels.shape[1]
+        zeros = np.zeros((channels, 2))
+        return _s.SolverHistograms(positions, offsets, theta, weight, boost, np.zeros(texels.shape, np.int64),
+                                   zeros, zeros, 0.0, 0.0, np.zeros(channels), np.zeros(channels), 1.0)
+    return _s.SolverHistograms(positions, offsets, theta, weight, boost, values.ex_bins, values.hist,
+                               values.target, value_weight, value_prior, values.lo, values.scale, values.unit)
 
 
 @pytest.mark.parametrize("views", [("front",), ("front", "top"), VIEWS3])
@@ -359,7 +368,7 @@ def test_solve_matches_twin(rng, views, medoid, balance, boost, likelihood, valu
     values = {"hist": vh.hist.tolist(), "target": vh.target.tolist(), "weight": value_weight,
               "prior": 2.0 * (likelihood > 0 and value_weight > 0),
               "lo": vh.lo.tolist(), "scale": vh.scale.tolist(), "unit": vh.unit}
-    packed, ex_off, hist_off = CW._pack(models)
+    packed, ex_off, hist_off = pack_exemplars(models)
     n = volume.shape[0] * volume.shape[1] * volume.shape[2]
     order = rng.permutation(n).astype(np.int64)
     bounds = np.array([0, 50, 120, n], dtype=np.int64)
@@ -372,11 +381,11 @@ def test_solve_matches_twin(rng, views, medoid, balance, boost, likelihood, valu
         temperature=temperature, salt=12345)
     got_vol, got_src = volume.copy(), src.copy()
     got_hist = np.concatenate(pos_hist)
-    changed = _k.solve(got_vol, got_src, assign, omega, np.array([VIEW_AXES[v] for v in views]),
-                       packed, ex_off, np.full(len(views), 10), window, coh.anchor(window), grid,
-                       order, bounds, got_hist, hist_off, theta, 3.0, boost, medoid, balance, 7,
-                       likelihood, 0.05, 0.01, vh.ex_bins, vh.hist, vh.target, value_weight,
-                       values["prior"], vh.lo, vh.scale, vh.unit, temperature, 12345)
+    changed = _s.solve(got_vol, got_src, assign, omega,
+                       _packed([VIEW_AXES[v] for v in views], packed, ex_off, [10] * len(views), window,
+                               coh.anchor(window), grid),
+                       _histograms(got_hist, hist_off, theta, 3.0, boost, packed, vh, value_weight, values["prior"]),
+                       _s.SolverRule(medoid, balance, likelihood, 0.05, 0.01, temperature, 12345), order, bounds, 7)
     np.testing.assert_array_equal(got_vol, want_vol)
     np.testing.assert_allclose(vh.hist, np.array(values["hist"]), atol=1e-12)
     np.testing.assert_array_equal(got_src, want_src)
@@ -387,12 +396,12 @@ def test_solve_matches_twin(rng, views, medoid, balance, boost, likelihood, valu
 def test_solve_copies_only_voted_exemplar_texels(rng):
     views = VIEWS3
     exemplars, models, assign, omega, src, volume = _solve_case(rng, views, 4, 3, 1)
-    packed, ex_off, hist_off = CW._pack(models)
+    packed, ex_off, hist_off = pack_exemplars(models)
     n = volume.shape[0] * volume.shape[1] * volume.shape[2]
     hist = np.concatenate([np.bincount(s.ravel(), minlength=110) for s in src]).astype(np.float64)
-    _k.solve(volume, src, assign, omega, np.array([VIEW_AXES[v] for v in views]), packed, ex_off,
-             np.full(3, 10), 4, 1, 1, np.arange(n, dtype=np.int64), np.array([0, n]), hist,
-             hist_off, np.full(3, n / 110), 1.0, 0.0, 0, False, 64, 0, 1.0, 0.0, *_no_values(packed))
+    _s.solve(volume, src, assign, omega, _packed([VIEW_AXES[v] for v in views], packed, ex_off, [10] * 3, 4, 1, 1),
+             _histograms(hist, hist_off, [n / 110] * 3, 1.0, 0.0, packed), _s.SolverRule(0, False, 0, 1.0, 0.0, 0.0, 0),
+             np.arange(n, dtype=np.int64), np.array([0, n]), 64)
     colours = {tuple(c) for c in exemplars[0].reshape(-1, 3).tolist()}
     assert {tuple(c) for c in volume.reshape(-1, 3).tolist()} <= colours
     # every view's source is a pixel whose colour is a voted texel of that view
@@ -417,11 +426,10 @@ def test_position_histogram_flattens_a_skewed_usage(medoid):
         src = np.zeros((1, *shape), dtype=np.int32)
         vol = np.zeros((*shape, 1), dtype=np.float32)
         hist = np.bincount(src.ravel(), minlength=100).astype(np.float64)
-        _k.solve(vol, src, assign, omega, np.array([[0, 1]]), m.exemplar.reshape(-1, 1),
-                 np.zeros(1, np.int64), np.array([10]), 4, m.anchor, 1, order,
-                 np.linspace(0, n, 65).astype(np.int64), hist, np.zeros(1, np.int64),
-                 np.array([n / 100.0]), weight, 0.0, medoid, False, 16, 0, 1.0, 0.0,
-                 *_no_values(m.exemplar.reshape(-1, 1)))
+        texels = m.exemplar.reshape(-1, 1)
+        _s.solve(vol, src, assign, omega, _packed([[0, 1]], texels, [0], [10], 4, m.anchor, 1),
+                 _histograms(hist, [0], [n / 100.0], weight, 0.0, texels), _s.SolverRule(medoid, False, 0, 1.0, 0.0, 0.0, 0),
+                 order, np.linspace(0, n, 65).astype(np.int64), 16)
         counts = np.bincount(src.ravel(), minlength=100)
         used[weight] = (int((counts > 0).sum()), int(counts.max()))
     assert used[0.0] == (1, n)  # skewed: one texel everywhere
@@ -591,7 +599,7 @@ def test_solve_does_not_depend_on_the_order_within_a_batch(rng):
     """The run visits each batch in memory order (faster); only the batches' order matters."""
     views = VIEWS3
     exemplars, models, assign, omega, src, volume = _solve_case(rng, views, 4, 3, 1)
-    packed, ex_off, hist_off = CW._pack(models)
+    packed, ex_off, hist_off = pack_exemplars(models)
     n = volume.shape[0] * volume.shape[1] * volume.shape[2]
     order = rng.permutation(n).astype(np.int64)
     bounds = np.array([0, 60, 130, n], dtype=np.int64)
@@ -603,9 +611,9 @@ def test_solve_does_not_depend_on_the_order_within_a_batch(rng):
             seg[:] = rng.permutation(seg) if shuffle else np.sort(seg)
         vol, s = volume.copy(), src.copy()
         hist = np.concatenate([np.bincount(x.ravel(), minlength=110) for x in src]).astype(np.float64)
-        _k.solve(vol, s, assign, omega, np.array([VIEW_AXES[v] for v in views]), packed, ex_off,
-                 np.full(3, 10), 4, 1, 1, o, bounds, hist, hist_off, np.full(3, n / 110), 3.0, 4.0, 8,
-                 False, 16, 0, 1.0, 0.0, *_no_values(packed))
+        _s.solve(vol, s, assign, omega, _packed([VIEW_AXES[v] for v in views], packed, ex_off, [10] * 3, 4, 1, 1),
+                 _histograms(hist, hist_off, [n / 110] * 3, 3.0, 4.0, packed), _s.SolverRule(8, False, 0, 1.0, 0.0, 0.0, 0),
+                 o, bounds, 16)
         out.append((vol, s, hist))
     for a, b in zip(*out):
         np.testing.assert_array_equal(a, b)

@@ -183,7 +183,7 @@ def test_full_disk_is_one_line(where, place, capsys, monkeypatch):
         monkeypatch.setattr("npmrf3d.io.runs.np.save", full)
         argv = ["synth", *TINY, "good.png", "--out", "out", "--quiet"]
     else:
-        monkeypatch.setattr("npmrf3d.io.files.np.savez", full)
+        monkeypatch.setattr("npmrf3d.io.checkpoints.np.savez", full)
         argv = ["synth", *TINY, "good.png", "--out", "out", "--quiet", "--checkpoint", "c.npz"]
     line = check_one_line_error(argv, place, capsys)
     assert "No space left on device" in line and "free some space" in line

@@ -15,7 +15,7 @@ import pytest
 
 from npmrf3d import cli, io
 from npmrf3d.errors import ParameterError
-from npmrf3d.io.files import CHECKSUM
+from npmrf3d.io.checkpoints import CHECKSUM
 
 #: Two levels, the finest long enough to be interrupted in its middle: about 6 s on one thread
 #: of the 2-core EPYC (at 24^3 it took about 2 s, and a resumed run sometimes finished before

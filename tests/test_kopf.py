@@ -25,6 +25,7 @@ from npmrf3d.errors import ParameterError
 from npmrf3d.methods import _kopf_steps as steps
 from npmrf3d.methods import kopf as K
 from npmrf3d.methods.kopf import KopfConfig, kopf_synthesize
+from npmrf3d.model.kcoherence import centre_patches
 from tests.naive import (
     NAIVE_VIEW_AXES,
     naive_bin,
@@ -63,7 +64,7 @@ def stripe_error(image: np.ndarray, period: int) -> float:
 @pytest.mark.parametrize("channels", [1, 3])
 def test_patches_and_neighbourhoods_match_naive(rng, channels):
     ex = rng.random((9, 11, channels), dtype=np.float32)
-    np.testing.assert_array_equal(steps.exemplar_patches(ex, 3), naive_kopf_patches(ex, 3).astype(np.float32))
+    np.testing.assert_array_equal(centre_patches(ex, 3), naive_kopf_patches(ex, 3).astype(np.float32))
     vol = rng.random((6, 5, 4, channels), dtype=np.float32)
     for view in VIEWS3:
         got = steps.volume_neighbourhoods(vol, view, 4, 2)
@@ -83,7 +84,7 @@ def test_patches_and_neighbourhoods_match_naive(rng, channels):
 def test_pca_keeps_the_variance_with_the_fewest_components(rng, channels):
     ex = rng.random((20, 20, channels), dtype=np.float32)
     ex = (ex + np.roll(ex, 1, axis=0) + np.roll(ex, 1, axis=1)) / 3  # correlated texels
-    patches = steps.exemplar_patches(ex, 4)
+    patches = centre_patches(ex, 4)
     for variance in (0.5, 0.8, 0.95, 0.99):
         mean, basis, kept = steps.pca_basis(patches, variance)
         centred = patches.astype(np.float64) - patches.mean(axis=0)

@@ -1,6 +1,6 @@
-"""Reading and writing exemplars, volumes, JSON and checkpoints: the bottom of the file layer.
+"""Reading and writing exemplars, volumes and JSON: the bottom of the file layer.
 
-(Why over 400 lines: eight small readers and writers, each with the checks and messages of
+(Why over 400 lines: small readers and writers, each with the checks and messages of
 STYLE.md practice 7 and a numpydoc docstring; they share the atomic-write and error helpers.)
 
 Public through :mod:`npmrf3d.io` (which adds the run folders of :mod:`npmrf3d.io.runs`); the
@@ -23,7 +23,6 @@ Conventions
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import importlib.metadata
 import json
 import os
@@ -44,12 +43,10 @@ __all__ = [
     "TIFF_EXTENSIONS",
     "as_volume",
     "atomic_write",
-    "load_checkpoint",
     "package_versions",
     "read_array",
     "read_stack",
     "read_volume",
-    "save_checkpoint",
     "to_jsonable",
     "write_json",
     "write_volume_tiff",
@@ -402,95 +399,6 @@ def write_json(path: str | os.PathLike[str], obj: Any) -> pathlib.Path:
     """
     text = json_text(obj)
     return atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
-
-
-# --------------------------------------------------------------------------- checkpoints
-
-
-def save_checkpoint(path: str | os.PathLike[str], /, **arrays: Any) -> pathlib.Path:
-    """Save named arrays and scalars to an ``.npz`` file, atomically.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        Output file (conventionally ``*.npz``; no extension is appended).
-    **arrays : array_like
-        Arrays and scalars (numbers, strings, bools) to store; no Python objects.
-
-    Returns
-    -------
-    pathlib.Path
-        ``path``.
-
-    Raises
-    ------
-    TypeError
-        If a value is not numeric, boolean or string data (e.g. ``None`` or a dict), which
-        :func:`load_checkpoint` could not read back without pickle; nothing is written then.
-    """
-    arrays = {name: np.asarray(value) for name, value in arrays.items()}
-    for name, value in arrays.items():
-        if value.dtype.hasobject:
-            raise TypeError(
-                f"checkpoint value {name!r} must be numeric, boolean or string data; "
-                f"got {type(value.item() if value.ndim == 0 else value).__name__}"
-            )
-
-    if CHECKSUM in arrays:
-        raise TypeError(f"checkpoint value name {CHECKSUM!r} is reserved")
-    arrays[CHECKSUM] = np.asarray(_checksum(arrays))
-
-    def write(tmp: pathlib.Path) -> None:
-        with open(tmp, "wb") as handle:  # a handle keeps np.savez from appending ".npz"
-            np.savez(handle, **arrays)
-            handle.flush()
-            os.fsync(handle.fileno())
-
-    return atomic_write(path, write)
-
-
-#: Name of the member holding the SHA-256 of every other member (names, dtypes, shapes, bytes).
-CHECKSUM = "npmrf3d_checksum"
-
-
-def _checksum(arrays: Mapping[str, np.ndarray]) -> str:
-    digest = hashlib.sha256()
-    for name in sorted(n for n in arrays if n != CHECKSUM):
-        value = np.ascontiguousarray(arrays[name])
-        digest.update(f"{name}|{value.dtype.str}|{value.shape}|".encode())
-        digest.update(value.tobytes())
-    return digest.hexdigest()
-
-
-def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
-    """Load a checkpoint written by :func:`save_checkpoint`.
-
-    Returns
-    -------
-    dict
-        Name -> array; 0-d arrays (saved scalars) come back as Python scalars.
-
-    Raises
-    ------
-    ParameterError
-        If the file is missing or is not a readable checkpoint.
-    """
-    what = "checkpoint file"
-    path = _existing_file(path, what)
-    try:
-        with open(path, "rb") as handle, np.load(handle, allow_pickle=False) as npz:
-            items = {name: npz[name] for name in npz.files}
-    except Exception as exc:
-        raise ParameterError(f"{what} '{path}' cannot be read (damaged or not a checkpoint): "
-                             f"{_reason(exc)}; delete it to start afresh") from exc
-    if CHECKSUM not in items:
-        raise ParameterError(f"{what} '{path}' is not an npmrf3d checkpoint (it has no checksum); "
-                             f"delete it or choose another --checkpoint")
-    stored = str(items.pop(CHECKSUM))
-    if _checksum(items) != stored:
-        raise ParameterError(f"{what} '{path}' is damaged (its checksum does not match its "
-                             f"contents); delete it to start afresh")
-    return {name: value.item() if value.ndim == 0 else value for name, value in items.items()}
 
 
 # --------------------------------------------------------------------------- provenance

@@ -17,6 +17,8 @@ from scipy.spatial import cKDTree
 
 from .. import _validation as check
 from .._kernels import kopf as _k
+from ..model.exemplar import pack_rows
+from ..model.kcoherence import centre_patches
 from ..model.kcoherence import downsample_exemplar  # noqa: F401 (one box-average pyramid for every method; kopf.py re-exports it)
 from ..model.neighbourhood import VIEW_AXES
 from ..model.pyramid import LevelState
@@ -62,20 +64,6 @@ def _constraint_arrays(constraint, constraint_weight, size, channels):
 
 
 # --------------------------------------------------------------------------- building blocks
-
-
-def exemplar_patches(exemplar: np.ndarray, window: int) -> np.ndarray:
-    """All ``window x window`` neighbourhoods that lie fully inside the exemplar.
-
-    Returns
-    -------
-    (n, window * window * C) float32 ndarray
-        Row ``p = pr * (W - window + 1) + pc`` is ``exemplar[pr:pr + window, pc:pc + window]``
-        flattened in (row, column, channel) order; ``n = (H - window + 1)(W - window + 1)``.
-    """
-    view = sliding_window_view(exemplar, (window, window), axis=(0, 1))  # (H', W', C, w, w)
-    view = view.transpose(0, 1, 3, 4, 2)
-    return np.ascontiguousarray(view, dtype=np.float32).reshape(-1, window * window * exemplar.shape[2])
 
 
 def pca_basis(patches: np.ndarray, variance: float = 0.95) -> tuple[np.ndarray, np.ndarray, float]:
@@ -126,7 +114,7 @@ class PatchIndex:
     def __init__(self, exemplar: np.ndarray, window: int, variance: float = 0.95):
         self.exemplar = np.ascontiguousarray(exemplar, dtype=np.float32)
         self.window = window
-        self.patches = exemplar_patches(self.exemplar, window)
+        self.patches = centre_patches(self.exemplar, window)
         self.mean, self.basis, self.kept = pca_basis(self.patches, variance)
         self.projected = self.project(self.patches)
         self.tree = cKDTree(self.projected)
@@ -173,7 +161,8 @@ def volume_neighbourhoods(volume: np.ndarray, view: str, window: int, grid: int,
     (S * ceil(Nr / grid) * ceil(Nc / grid), window * window * C) ndarray
         Site ``(n, a * grid, b * grid)`` (normal, row-axis, column-axis positions) in C order;
         its window covers row-axis positions ``a * grid .. a * grid + window - 1`` (toroidal)
-        and likewise for the column axis, flattened like :func:`exemplar_patches`.
+        and likewise for the column axis, flattened like
+        :func:`npmrf3d.model.kcoherence.centre_patches`.
     """
     ra, ca = VIEW_AXES[view]
     na = 3 - ra - ca
@@ -257,19 +246,11 @@ class _Exemplars(types.SimpleNamespace):
 
 
 def _pack_exemplars(indices: Sequence[PatchIndex], lo, scale, bins) -> _Exemplars:
-    offsets, flat, seen = [], [], {}
-    start = 0
-    for idx in indices:
-        if id(idx) not in seen:
-            seen[id(idx)] = start
-            flat.append(idx.exemplar.reshape(-1, idx.exemplar.shape[2]))
-            start += flat[-1].shape[0]
-        offsets.append(seen[id(idx)])
-    ex_flat = np.ascontiguousarray(np.concatenate(flat), dtype=np.float32)
+    ex_flat, offsets = pack_rows([idx.exemplar for idx in indices])
     return _Exemplars(
         flat=ex_flat,
         bins=np.ascontiguousarray(channel_bins(ex_flat, lo, scale, bins)),
-        offsets=np.array(offsets, dtype=np.int64),
+        offsets=offsets,
         pwidth=np.array([idx.pwidth for idx in indices], dtype=np.int64),
         ewidth=np.array([idx.exemplar.shape[1] for idx in indices], dtype=np.int64),
     )

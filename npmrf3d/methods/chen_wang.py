@@ -1,8 +1,5 @@
 """Chen & Wang 2010: k-coherence search, discrete solver, position and index histograms.
 
-Why one module of ~600 lines: the configuration, its validation, the level loop and the
-checkpoint of one method, most of it the documented public signature.
-
 "High quality solid texture synthesis using position and index histogram matching" (The Visual
 Computer 26(4), 2010; issue 11). Like NP_K (:mod:`npmrf3d.methods.kopf`) the volume minimises
 
@@ -27,6 +24,10 @@ and an optimisation phase; three things differ:
   ``1 + position_weight * max(0, H_p(texel) / theta - 1)`` (eq. 4), ``H_p`` counting the voxels
   that copy each exemplar pixel. The volume's colours are therefore exemplar colours.
 * **windows per level** (section 5): 8, 8, 6 or 8, 6, 4 from coarse to fine.
+
+The engine -- search, solver, histograms, its side of the level loop -- is the model's
+(:mod:`npmrf3d.model.kcoherence_engine`, shared with the coherent NP-MRF sampler); this module
+holds Chen–Wang's configuration and method.
 
 Choices where the paper is silent (also in ``docs/chen_wang.md``)
 -----------------------------------------------------------------
@@ -60,8 +61,6 @@ Choices where the paper is silent (also in ``docs/chen_wang.md``)
 
 from __future__ import annotations
 
-import json
-import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
@@ -70,14 +69,10 @@ from pathlib import Path
 import numpy as np
 
 from .. import _validation as check
-from .._kernels import _jit
-from .._kernels import kcoherence as _k
 from ..config import DEFAULT_SIZE, SynthesisMethod, SynthesisResult
-from ..io.files import load_checkpoint, save_checkpoint
-from ..model import kcoherence as coh
-from ..model.neighbourhood import VIEW_AXES, VIEWS
-from ..model.phases import PhaseControl, bin_phase_error, bin_phases, phase_prior_target
-from ..model.pyramid import level_shape
+from ..model.kcoherence_engine import KCoherenceLevels
+from ..model.neighbourhood import VIEWS
+from ..model.pyramid import run_pyramid
 from ..resources import coherent_estimate
 from ._api import prepare
 
@@ -88,9 +83,6 @@ ProgressCallback = Callable[[int, int, int, float], None]
 #: How a voxel picks among its voted texels: ``mean`` = nearest to their weighted mean (the
 #: paper's practice), ``medoid`` = a weighted medoid (``sum_q w_q ||e_p - e_q||``).
 SOLVERS = ("mean", "medoid")
-_SOLVE_CHUNK = 512
-#: The medoid solver tries the heaviest (merged) votes only; the energy sums over all votes.
-_MEDOID_CANDIDATES = 8  # voxels per parallel work item of the solver (any value gives the same result)
 
 
 @dataclass(frozen=True)
@@ -335,239 +327,15 @@ def chen_wang_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress
 
 def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rng: np.random.Generator, *,
         progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
-        t_start: float | None = None, decision: tuple = (0, 0.0, 0.0)) -> SynthesisResult:
-    """Run a validated configuration on validated float32 ``(H, W, C)`` exemplars (one per view).
-
-    The body of :func:`chen_wang_synthesize`, with the signature of a registered method.
-    ``decision = (likelihood, centre_bandwidth, outlier)`` switches the solver's choice among the
-    heaviest votes to the NP-MRF rule (``likelihood`` 1 = ML_H2b, 2 = ML_H2a; the centre kernel's
-    width is ``centre_bandwidth`` times the exemplar's standard deviation); used by the coherent
-    NP-MRF sampler (:mod:`npmrf3d.methods.npmrf_coherent`), 0 = Chen–Wang's own solver. A fourth entry, one
-    tuple of temperatures per level (coarsest first, one per iteration), anneals that decision
-    (a heat-bath draw among the candidates; 0 = the highest score).
-    """
+        t_start: float | None = None) -> SynthesisResult:
+    """Run a validated configuration on validated float32 ``(H, W, C)`` exemplars (one per view):
+    the k-coherence engine (:class:`npmrf3d.model.kcoherence_engine.KCoherenceLevels`) with its
+    own solver. The body of :func:`chen_wang_synthesize`."""
     t_start = time.perf_counter() if t_start is None else t_start
-    views = config.views
-    per_view = {v: np.ascontiguousarray(per_view_exemplars[v], dtype=np.float32) for v in views}
-    distinct = list({id(a): a for a in per_view.values()}.values())
-    channels = distinct[0].shape[2]
-    pooled = np.concatenate([a.reshape(-1, channels) for a in distinct])
-    labels = np.unique(pooled, axis=0).astype(np.float32)
-    sigma = float(pooled.astype(np.float64).std()) or 1.0
-    value_lo = pooled.min(axis=0).astype(np.float64)
-    value_span = pooled.max(axis=0).astype(np.float64) - value_lo
-    view_axes = np.array([VIEW_AXES[v] for v in views], dtype=np.int64)
-    n_views = len(views)
-    timings = {"setup": time.perf_counter() - t_start}
-    history: list[list[float]] = []
-    stats: dict = {"threads": _jit.thread_count(), "levels": {}}
-    volume = src = None
-    prev_widths = None
-    first_level = config.levels - 1
-    key = _config_key(config, per_view) + (f"|decision={list(decision)}" if decision[0] else "")
-    resumed = _load_checkpoint(checkpoint, key)
-    phases = control = None
-    if config.phase_weight > 0.0 and config.value_prior > 0.0:
-        phases = bin_phases(coh.value_counts(pooled, value_lo, coh.value_scale(value_span, config.value_bins),
-                                             config.value_bins)[1])
-        control = [PhaseControl.start(2) for _ in range(channels)]
-    if resumed is not None:
-        volume, src, done_level, rng_state, history, timings, stats, prev_widths, saved = resumed
-        if control is not None and saved is not None:
-            control = [PhaseControl.from_array(a, 2) for a in saved]
-        rng.bit_generator.state = rng_state
-        first_level = done_level - 1
-    for level in range(first_level, -1, -1):
-        t0 = time.perf_counter()
-        li = config.levels - 1 - level
-        window = config.window[li]
-        shape = level_shape(config.size, level)
-        level_ex = {id(a): coh.downsample_exemplar(a, level) for a in distinct}
-        models = {key_: coh.build_level_model(ex, window, dims=config.pca_dims, k=config.k,
-                                              exclude=config.coherence_exclude)
-                  for key_, ex in level_ex.items()}
-        vmodels = [models[id(per_view[v])] for v in views]
-        widths = [m.exemplar.shape[1] for m in vmodels]
-        if volume is None:
-            src = np.empty((n_views, *shape), dtype=np.int32)
-            drawn = {key_: coh.random_sources(shape, ex.shape, rng) for key_, ex in level_ex.items()}
-            for vi, v in enumerate(views):
-                src[vi] = drawn[id(per_view[v])]
-        else:
-            src = np.stack([coh.upsample_sources(src[vi], v, prev_widths[vi], vmodels[vi].exemplar.shape)
-                            for vi, v in enumerate(views)])
-        volume = initial_colours(src, [m.exemplar for m in vmodels])
-        ex_flat, ex_off, hist_off = _pack(vmodels)
-        values = coh.ValueHistogram.build([m.exemplar for m in vmodels], ex_flat, volume,
-                                          bins=config.value_bins, lo=value_lo, span=value_span)
-        ewidth = np.array(widths, dtype=np.int64)
-        pos_hist = np.concatenate([coh.position_histogram(src[vi], m.pixels) for vi, m in enumerate(vmodels)])
-        theta = np.array([volume.shape[0] * volume.shape[1] * volume.shape[2] / m.pixels for m in vmodels])
-        assign = np.full((n_views, *shape), -1, dtype=np.int32)
-        fresh = np.empty(shape, dtype=np.int32)
-        omega = np.zeros((n_views, *shape), dtype=np.float32)
-        index_hist = [np.zeros(m.pixels, dtype=np.float64) for m in vmodels]
-        d = window * window * channels
-        floor = 1e-3 * sigma * math.sqrt(d)
-        n_iter = config.iterations[li]
-        n_vox = shape[0] * shape[1] * shape[2]
-        bounds = np.linspace(0, n_vox, min(config.batches, n_vox) + 1).astype(np.int64)
-        if progress is not None:
-            progress(level, 0, n_iter, float("nan"))
-        level_history, changed, global_counts = [], [], []
-        t_search = t_solve = 0.0
-        sites = 0
-        for it in range(n_iter):
-            ts = time.perf_counter()
-            energy_sum = 0.0
-            sites = 0
-            global_count = 0
-            for vi, v in enumerate(views):
-                m = vmodels[vi]
-                ra, ca = VIEW_AXES[v]
-                na = 3 - ra - ca
-                energy = np.zeros(shape[na], dtype=np.float64)
-                n_sites = shape[na] * (shape[ra] // config.grid) * (shape[ca] // config.grid)
-                phi = n_sites / m.centres
-                lo_r, hi_r, lo_c, hi_c = m.bounds
-                _k.search_view(volume, src[vi], ra, ca, window, m.anchor, config.grid, widths[vi],
-                               lo_r, hi_r, lo_c, hi_c, m.mean, m.basis, m.proj, m.kcoh,
-                               min(config.batches, shape[na]), index_hist[vi], phi,
-                               config.index_weight, config.r, floor, config.random_candidates,
-                               int(rng.integers(0, 2**31)), assign[vi], fresh, omega[vi], energy)
-                energy_sum += float(energy.sum())
-                if config.global_share > 0.0:
-                    n_global, change = coh.global_matches(
-                        volume, v, m, assign[vi], omega[vi], index_hist[vi], share=config.global_share,
-                        bias=config.coherence_bias, phi=phi, index_weight=config.index_weight,
-                        r=config.r, floor=floor)
-                    energy_sum += change
-                    global_count += n_global
-                sites += n_sites
-            global_counts.append(global_count)
-            t_search += time.perf_counter() - ts
-            ts = time.perf_counter()
-            order = rng.permutation(n_vox).astype(np.int64)
-            temperature = float(decision[3][li][it]) if len(decision) > 3 else 0.0
-            target = values.target if control is None else phase_prior_target(
-                values.target, phases, np.stack([c.phase_costs(config.phase_weight) for c in control]),
-                config.value_prior)
-            salt = int(rng.integers(0, 2**31)) if temperature > 0.0 else 0
-            for b in range(len(bounds) - 1):
-                # within a batch the histograms are frozen and every voxel depends only on them
-                # and the votes, so visiting a batch in memory order gives the same volume faster
-                order[bounds[b]:bounds[b + 1]].sort()
-            changed.append(int(_k.solve(volume, src, assign, omega, view_axes, ex_flat, ex_off, ewidth,
-                                        window, vmodels[0].anchor, config.grid, order, bounds, pos_hist,
-                                        hist_off, theta, config.position_weight, config.position_boost,
-                                        _MEDOID_CANDIDATES if config.solver == "medoid" or decision[0] else 0,
-                                        config.balance_views, _SOLVE_CHUNK, decision[0],
-                                        2.0 * (decision[1] * sigma) ** 2 or 1.0, decision[2],
-                                        values.ex_bins, values.hist, target, config.value_weight,
-                                        config.value_prior, values.lo, values.scale, values.unit,
-                                        temperature, salt)))
-            t_solve += time.perf_counter() - ts
-            if control is not None:
-                for c, e in zip(control, bin_phase_error(values.hist, values.target, phases)):
-                    c.step(e)
-            level_history.append(energy_sum / max(1, sites))
-            if progress is not None:
-                progress(level, it + 1, n_iter, level_history[-1])
-        history.append(level_history)
-        prev_widths = widths
-        timings[f"level_{level}"] = time.perf_counter() - t0
-        used = [float((pos_hist[hist_off[vi]:hist_off[vi] + m.pixels] > 0).mean()) for vi, m in enumerate(vmodels)]
-        stats["levels"][f"level_{level}"] = {
-            "shape": list(shape), "window": window, "iterations": n_iter,
-            "candidates_per_site": 9 * (1 + config.k) + config.random_candidates, "sites_per_iteration": sites,
-            "pca_dims": {v: int(vmodels[vi].basis.shape[1]) for vi, v in enumerate(views)},
-            "centres": {v: int(vmodels[vi].centres) for vi, v in enumerate(views)},
-            "search_seconds": t_search, "solve_seconds": t_solve, "changed": changed,
-            "global_matches": global_counts,
-            "exemplar_pixels_used": {v: used[vi] for vi, v in enumerate(views)},
-        }
-        if control is not None:
-            stats["levels"][f"level_{level}"]["phase_error"] = [c.last_error.tolist() for c in control]
-            stats["levels"][f"level_{level}"]["phase_gain"] = [c.gain for c in control]
-        if checkpoint is not None:
-            _save_checkpoint(checkpoint, key, volume, src, level, rng, history, timings, stats, widths,
-                             None if control is None else np.stack([c.to_array() for c in control]))
-    timings["total"] = time.perf_counter() - t_start
-    return SynthesisResult(volume=volume, history=history, config=config, timings=timings,
-                           labels=labels, stats=stats)
-
-
-def initial_colours(src: np.ndarray, exemplars) -> np.ndarray:
-    """Colour of every voxel from its sources: among the views' source texels, the one nearest to
-    their mean (the views' first on ties).
-
-    One view's up-sampled sources repeat along that view's normal axis (``2 * parent + offset``
-    has no offset there), so copying one view's texels would duplicate slices in pairs; taking
-    the most central of the views' texels keeps the colours exemplar colours without that.
-
-    Parameters
-    ----------
-    src : (V, N1, N2, N3) int32 flat sources per view
-    exemplars : V arrays (H, W, C)
-
-    Returns
-    -------
-    (N1, N2, N3, C) float32
-    """
-    texels = np.stack([ex.reshape(-1, ex.shape[2])[s] for ex, s in zip(exemplars, src)])  # (V, ..., C)
-    if len(texels) == 1:
-        return np.ascontiguousarray(texels[0], dtype=np.float32)
-    centre = texels.astype(np.float64).mean(axis=0)
-    dist = ((texels - centre) ** 2).sum(axis=-1)
-    pick = np.argmin(dist, axis=0)
-    return np.ascontiguousarray(np.take_along_axis(texels, pick[None, ..., None], axis=0)[0], dtype=np.float32)
-
-
-def _pack(models):
-    """Views' exemplars packed as rows of one array (shared exemplars once) and histogram offsets."""
-    flat, ex_off, hist_off, seen = [], [], [], {}
-    start = hstart = 0
-    for m in models:
-        if id(m) not in seen:
-            seen[id(m)] = start
-            flat.append(m.exemplar.reshape(-1, m.exemplar.shape[2]))
-            start += flat[-1].shape[0]
-        ex_off.append(seen[id(m)])
-        hist_off.append(hstart)
-        hstart += m.pixels
-    return (np.ascontiguousarray(np.concatenate(flat), dtype=np.float32),
-            np.array(ex_off, dtype=np.int64), np.array(hist_off, dtype=np.int64))
-
-
-def _config_key(config: ChenWangConfig, per_view) -> str:
-    digest = {v: [list(a.shape), float(a.astype(np.float64).sum()), float((a.astype(np.float64) ** 2).sum())]
-              for v, a in per_view.items()}
-    return json.dumps({"method": "chen-wang", "config": config.to_dict(),
-                       "exemplars": digest}, sort_keys=True, default=str)
-
-
-def _save_checkpoint(path, key, volume, src, level, rng, history, timings, stats, widths, control=None) -> None:
-    extra = {} if control is None else {"phase_control": control}
-    save_checkpoint(path, config=key, volume=volume, sources=src, level=level, **extra,
-                    widths=np.asarray(widths, dtype=np.int64),
-                    rng_state=json.dumps(rng.bit_generator.state), history=json.dumps(history),
-                    timings=json.dumps(timings), stats=json.dumps(stats, default=str))
-
-
-def _load_checkpoint(path, key):
-    """State after the last finished level, or None when there is nothing to resume."""
-    if path is None or not Path(path).exists():
-        return None
-    data = load_checkpoint(path)
-    if str(data.get("config")) != key or "sources" not in data:
-        check.fail(f"checkpoint '{path}' was written by a different configuration or exemplar; "
-                   f"delete it or choose another checkpoint path")
-    return (np.ascontiguousarray(data["volume"], dtype=np.float32),
-            np.ascontiguousarray(data["sources"], dtype=np.int32), int(data["level"]),
-            json.loads(str(data["rng_state"])), json.loads(str(data["history"])),
-            json.loads(str(data["timings"])), json.loads(str(data["stats"])),
-            [int(w) for w in np.atleast_1d(data["widths"])],
-            np.asarray(data["phase_control"], dtype=np.float64) if "phase_control" in data else None)
+    levels = KCoherenceLevels("chen-wang", config, per_view_exemplars)
+    out = run_pyramid(levels, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
+    return SynthesisResult(volume=out.state.volume, history=out.history, config=config,
+                           timings=out.timings, labels=levels.labels, stats=out.stats)
 
 
 def _fit(config) -> dict:

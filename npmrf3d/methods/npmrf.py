@@ -78,7 +78,7 @@ def make_config(
     variant = check.choice("variant", variant, VARIANTS)
     segmented = check.choice("segmented", segmented, SEGMENTED_MODES)
     if variant == "coherent":
-        if heuristic not in npmrf_coherent.HEURISTIC_CODES:
+        if heuristic not in npmrf_coherent.CANDIDATE_HEURISTICS:
             check.fail(f"variant 'coherent' ranks candidates by an objective: use heuristic ML_H2b or "
                        f"ML_H2a, or variant 'sharp' or 'literal' for {heuristic}")
         if toroidal_exemplar:

@@ -17,9 +17,10 @@ candidates with probability proportional to ``exp(score / T)`` (a heat-bath step
 candidates; ``score`` the ML_H2b log-score with the histogram prior), ``T`` falling from ``t0``
 to ``t_end`` over each level's iterations; ``T -> 0`` is the highest score again.
 
-The search, votes, histograms and level loop are Chen–Wang's (:mod:`npmrf3d.methods.chen_wang`);
-only the decision differs, so a voxel copies an exemplar texel (colour and source) and the
-volume's colours are exemplar colours. Results depend only on the seed, never on the thread
+The search, votes, histograms and level loop are Chen–Wang's (the k-coherence engine,
+:mod:`npmrf3d.model.kcoherence_engine`); only the decision differs
+(:class:`npmrf3d.model.kcoherence_engine.CandidateDecision`), so a voxel copies an exemplar
+texel (colour and source) and the volume's colours are exemplar colours. Results depend only on the seed, never on the thread
 count.
 """
 
@@ -36,18 +37,17 @@ import numpy as np
 from .. import _validation as check
 from ..analysis.metrics import two_point_shape_error
 from ..config import DEFAULT_SIZE, SynthesisMethod, SynthesisResult
+from ..model.kcoherence_engine import CANDIDATE_HEURISTICS, CandidateDecision, KCoherenceLevels
 from ..model.neighbourhood import VIEWS
+from ..model.pyramid import run_pyramid
 from ..model.relax.anneal import SCHEDULES
 from ..resources import coherent_estimate
 from . import chen_wang
 from ._api import prepare
 
-__all__ = ["METHOD", "SEGMENTED", "SEGMENTED_MAX_VALUES", "CoherentConfig", "HEURISTIC_CODES", "SegmentedPreset",
+__all__ = ["CANDIDATE_HEURISTICS", "METHOD", "SEGMENTED", "SEGMENTED_MAX_VALUES", "CoherentConfig", "SegmentedPreset",
            "best_of_pyramids", "coherent_synthesize", "is_segmented", "make_coherent_config", "run",
            "temperatures", "trial_checkpoint"]
-
-#: Heuristics that have an objective to rank candidates by (kernel codes of the solver).
-HEURISTIC_CODES = {"ML_H2b": 1, "ML_H2a": 2}
 
 _CW = chen_wang.DEFAULTS
 
@@ -168,7 +168,7 @@ def make_coherent_config(
         random_candidates=random_candidates, global_share=global_share,
         coherence_bias=coherence_bias, value_weight=value_weight, value_prior=value_prior,
         value_bins=value_bins, phase_weight=phase_weight, seed=seed)
-    heuristic = check.choice("heuristic", heuristic, tuple(HEURISTIC_CODES))
+    heuristic = check.choice("heuristic", heuristic, tuple(CANDIDATE_HEURISTICS))
     centre_bandwidth = check.real("centre_bandwidth", centre_bandwidth, low=0.0, low_open=True)
     outlier = check.real("outlier", outlier, low=0.0, high=1.0, high_open=True)
     t0 = check.real("t0", t0, low=0.0)
@@ -201,14 +201,16 @@ def temperatures(config: CoherentConfig) -> tuple[tuple[float, ...], ...]:
 
 def run(config: CoherentConfig, per_view_exemplars: Mapping[str, np.ndarray], rng: np.random.Generator, *,
         progress=None, checkpoint: str | Path | None = None, t_start: float | None = None) -> SynthesisResult:
-    """Run a validated configuration on validated float32 ``(H, W, C)`` exemplars (one per view);
-    the signature of a registered method."""
-    decision = (HEURISTIC_CODES[config.heuristic], config.centre_bandwidth, config.outlier)
-    if config.t0 > 0.0:
-        decision += (temperatures(config),)
-    result = chen_wang.run(_chen_wang_config(config), per_view_exemplars, rng, progress=progress,
-                           checkpoint=checkpoint, t_start=t_start, decision=decision)
-    return dataclasses.replace(result, config=config)
+    """Run a validated configuration on validated float32 ``(H, W, C)`` exemplars (one per view):
+    the k-coherence engine (:class:`npmrf3d.model.kcoherence_engine.KCoherenceLevels`) deciding
+    by the NP-MRF rule; the signature of a registered method."""
+    t_start = time.perf_counter() if t_start is None else t_start
+    decision = CandidateDecision(config.heuristic, config.centre_bandwidth, config.outlier,
+                                 temperatures(config))
+    levels = KCoherenceLevels("coherent", _chen_wang_config(config), per_view_exemplars, decision)
+    out = run_pyramid(levels, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
+    return SynthesisResult(volume=out.state.volume, history=out.history, config=config,
+                           timings=out.timings, labels=levels.labels, stats=out.stats)
 
 
 def coherent_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress=None,

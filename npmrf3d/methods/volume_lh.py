@@ -1,7 +1,8 @@
 """Synthesis from a 3D exemplar with a vector-field deformation (seed 002; issue 15, item 3).
 
-Why a module of ~630 lines: configuration, validation, the appearance-space model, the level
-loop, the checkpoint and the registry entry of one method, most of it the documented signature.
+Why a module of ~640 lines: configuration, validation, the appearance-space model, the
+coordinate pyramid's side of the shared level loop (:class:`CoordinateLevels`) and the registry
+entry of one method, most of it the documented signature.
 
 The method (registry name ``volume-lh``: it is Lefebvre & Hoppe's appearance-space, coordinate
 pyramid synthesis carried to 3D, as seed 002 does) makes a volume whose every voxel *copies* a
@@ -42,7 +43,6 @@ colours are the exemplar's full-resolution values at the final coordinates.
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
@@ -57,17 +57,17 @@ from .._kernels import _jit
 from .._kernels import volume_lh as _k
 from ..analysis.repetition import copy_repetition
 from ..config import DEFAULT_SIZE, SynthesisMethod, SynthesisResult
-from ..io.files import load_checkpoint, save_checkpoint
+from ..io.checkpoints import run_key
 from ..model.exemplar3d import load_volume_exemplar, volume_fits
 from ..model.fields import FIELDS, field_input, level_frames
 from ..model.phases import (
     MAX_PHASES,
-    SOFT_WIDTH,
     PhaseControl,
     phase_error,
     phase_footprint,
     phase_membership,
 )
+from ..model.pyramid import Levels, run_pyramid
 from ..resources import Estimate
 from ._api import prepare
 
@@ -163,7 +163,10 @@ def appearance_space(exemplar: np.ndarray, level: int, window: int, dims: int,
 
     Each voxel's ``window^3`` neighbourhood, sampled every ``h = 2**level`` voxels in the exemplar
     smoothed by a Gaussian of ``sigma = h / 2`` (none at level 0), borders clamped, projected on
-    the ``dims`` leading principal directions of :data:`PCA_SAMPLES` random voxels' vectors.
+    the ``dims`` leading principal directions of :data:`PCA_SAMPLES` random voxels' vectors
+    (the scatter matrix a product of two copies of the centred vectors: not
+    :func:`npmrf3d.model.kcoherence.pca_project`, whose one-array product differs in the last
+    bits).
     """
     h = 2 ** level
     ex = smoothed(exemplar, level)
@@ -498,7 +501,7 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
     ``parzen = (adaptive, centre_bandwidth)`` decides every correction by the Parzen LCPDF of
     full ``window^3`` neighbourhoods of the level's smoothed exemplar values
     (:func:`npmrf3d._kernels.volume_lh.correct_parzen`; the ``npmrf-3d`` method,
-    :mod:`npmrf3d.methods.npmrf_3d`); None: seed 002's nearest candidate in appearance space."""
+    :mod:`npmrf3d.methods.npmrf_3d`); None: the nearest candidate in appearance space."""
     t_start = time.perf_counter() if t_start is None else t_start
     exemplar = _exemplar(per_view, config)
     if config.vector_field in ("array",) or config.vector_field.startswith("file:"):
@@ -507,73 +510,96 @@ def run(per_view, config: VolumeConfig, rng: np.random.Generator, *,
                 config.vector_field.startswith("file:") else (None, None)
         if vector_field is None:
             check.fail("vector_field 'array' needs the frames array (vector_field=...)")
-    lo, hi = _valid_box(exemplar.shape[:3], config.window)
-    membership = phase_membership(exemplar, lo, hi) if config.balance else None
-    control = None if membership is None else PhaseControl.start(len(membership[1]))
-    key = _key(config, exemplar, vector_field) + (f"|parzen={list(parzen)}" if parzen else "")
-    sigma = float(exemplar.astype(np.float64).std()) or 1.0
-    timings = {"setup": time.perf_counter() - t_start}
-    history: list[list[float]] = []
-    stats: dict = {"threads": _jit.thread_count(), "levels": {}}
-    coords = None
-    first = config.levels - 1
-    resumed = _resume(checkpoint, key)
-    if resumed is not None:
-        coords, done, state, history, timings, stats, saved_control = resumed
-        rng.bit_generator.state = state
-        if control is not None and saved_control is not None and saved_control.size:
-            control = PhaseControl.from_array(saved_control, len(membership[1]))
-        first = done - 1
-    for level in range(first, -1, -1):
-        t0 = time.perf_counter()
-        h = 2 ** level
-        shape = tuple(n // h for n in config.size)
-        frames = level_frames(config.vector_field, vector_field, config.size, level, config.angle)
-        feat = appearance_space(exemplar, level, config.window, config.pca_dims, rng)
-        kset = similarity_sets(feat, lo, hi, config.k, config.exclude)
-        phases = None if membership is None else (phase_footprint(membership[0], len(membership[1]), h), membership[1])
-        t_model = time.perf_counter() - t0
-        if coords is None:
-            coords = initial_coordinates(shape, h, lo, hi, config.start, config.jitter, rng)
-        else:
-            coords = upsample(coords, frames, h, lo, hi)
-            uniforms = rng.uniform(-1.0, 1.0, size=shape + (3,)).astype(np.float32)
-            coords = jittered(coords, h, config.jitter if level else config.fine_jitter, uniforms, lo, hi)
-        if progress is not None:
-            progress(level, 0, config.passes, float("nan"))
-        level_history = []
-        values = None if parzen is None else smoothed(exemplar, level)
-        for p in range(config.passes):
-            if parzen is None:
-                coords, mean_cost = correction_pass(coords, frames, feat, kset, h, lo, hi,
-                                                    NEIGHBOURHOODS[config.neighbourhood],
-                                                    usage=config.usage, balance=config.balance,
-                                                    phases=phases, control=control)
-            else:
-                coords, mean_cost = parzen_pass(coords, frames, feat, values, kset, h, lo, hi,
-                                                NEIGHBOURHOODS[config.neighbourhood], config.window,
-                                                parzen[0], (parzen[1] * sigma) ** 2)
-            level_history.append(mean_cost)
-            if progress is not None:
-                progress(level, p + 1, config.passes, mean_cost)
-        history.append(level_history)
-        timings[f"level_{level}"] = time.perf_counter() - t0
-        stats["levels"][f"level_{level}"] = {"shape": list(shape), "spacing": h, "model_seconds": t_model,
-                                             "correction_seconds": time.perf_counter() - t0 - t_model,
-                                             "pca_dims": int(feat.shape[3])}
-        if checkpoint is not None:
-            save_checkpoint(checkpoint, config=key, coords=coords, level=level,
-                            rng_state=json.dumps(rng.bit_generator.state), history=json.dumps(history),
-                            timings=json.dumps(timings), stats=json.dumps(stats),
-                            prices=np.zeros(0) if control is None else control.to_array())
-    out = np.ascontiguousarray(exemplar[coords[..., 0], coords[..., 1], coords[..., 2]], dtype=np.float32)
+    levels = CoordinateLevels(config, exemplar, vector_field, parzen)
+    out = run_pyramid(levels, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
+    coords, timings, stats = out.state, out.timings, out.stats
+    volume = np.ascontiguousarray(exemplar[coords[..., 0], coords[..., 1], coords[..., 2]], dtype=np.float32)
     t0 = time.perf_counter()
     stats["repetition"] = copy_repetition(coords)
     timings["repetition"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_start
     labels = np.unique(exemplar.reshape(-1, exemplar.shape[3]), axis=0) if exemplar.size <= 1 << 22 else np.empty((0, exemplar.shape[3]))
-    return SynthesisResult(volume=out, history=history, config=config, timings=timings,
+    return SynthesisResult(volume=volume, history=out.history, config=config, timings=timings,
                            labels=labels.astype(np.float32), stats=stats)
+
+
+class CoordinateLevels(Levels):
+    """The coordinate pyramid's side of :func:`npmrf3d.model.pyramid.run_pyramid`: the state of a
+    level is every voxel's exemplar coordinate ``(*shape, 3)`` int64.
+
+    A level's appearance space samples its PCA voxels from ``rng`` before the level's
+    coordinates are drawn, so it is built at the start of :meth:`initial` and :meth:`upsample`
+    (:meth:`prepare` draws nothing). The phase control (``balance``) carries over from level to
+    level; its prices go into the checkpoint with the coordinates.
+    """
+
+    def __init__(self, config: VolumeConfig, exemplar: np.ndarray, vector_field, parzen):
+        self.config, self.exemplar, self.vector_field, self.parzen = config, exemplar, vector_field, parzen
+        self.size, self.levels = config.size, config.levels
+        self.lo, self.hi = _valid_box(exemplar.shape[:3], config.window)
+        self.membership = phase_membership(exemplar, self.lo, self.hi) if config.balance else None
+        self.control = None if self.membership is None else PhaseControl.start(len(self.membership[1]))
+        self.sigma = float(exemplar.astype(np.float64).std()) or 1.0
+        inputs = {"volume": exemplar, **({} if vector_field is None else {"vector_field": vector_field})}
+        self.key = run_key("volume-lh", config, inputs, parzen=None if parzen is None else list(parzen))
+
+    def prepare(self, level, shape):
+        config, membership = self.config, self.membership
+        self.level, self.shape, self.h = level, shape, 2 ** level
+        self.frames = level_frames(config.vector_field, self.vector_field, config.size, level, config.angle)
+        self.phases = None if membership is None else (
+            phase_footprint(membership[0], len(membership[1]), self.h), membership[1])
+
+    def _model(self, rng):
+        """The level's appearance space and similarity sets (draws the PCA sample from ``rng``)."""
+        t0 = time.perf_counter()
+        self.feat = appearance_space(self.exemplar, self.level, self.config.window, self.config.pca_dims, rng)
+        self.kset = similarity_sets(self.feat, self.lo, self.hi, self.config.k, self.config.exclude)
+        self.model_seconds = time.perf_counter() - t0
+
+    def initial(self, shape, rng):
+        self._model(rng)
+        return initial_coordinates(shape, self.h, self.lo, self.hi, self.config.start, self.config.jitter, rng)
+
+    def upsample(self, coords, rng):
+        self._model(rng)
+        coords = upsample(coords, self.frames, self.h, self.lo, self.hi)
+        uniforms = rng.uniform(-1.0, 1.0, size=self.shape + (3,)).astype(np.float32)
+        jitter = self.config.jitter if self.level else self.config.fine_jitter
+        return jittered(coords, self.h, jitter, uniforms, self.lo, self.hi)
+
+    def start(self, level, coords):
+        return self.config.passes, float("nan")
+
+    def relax(self, level, coords, rng, on_step):
+        config, h, lo, hi = self.config, self.h, self.lo, self.hi
+        t0 = time.perf_counter()
+        history = []
+        values = None if self.parzen is None else smoothed(self.exemplar, level)
+        for p in range(config.passes):
+            if self.parzen is None:
+                coords, mean_cost = correction_pass(coords, self.frames, self.feat, self.kset, h, lo, hi,
+                                                    NEIGHBOURHOODS[config.neighbourhood],
+                                                    usage=config.usage, balance=config.balance,
+                                                    phases=self.phases, control=self.control)
+            else:
+                coords, mean_cost = parzen_pass(coords, self.frames, self.feat, values, self.kset, h, lo, hi,
+                                                NEIGHBOURHOODS[config.neighbourhood], config.window,
+                                                self.parzen[0], (self.parzen[1] * self.sigma) ** 2)
+            history.append(mean_cost)
+            on_step(p + 1, mean_cost)
+        return coords, history, {"shape": list(self.shape), "spacing": h, "model_seconds": self.model_seconds,
+                                 "correction_seconds": time.perf_counter() - t0,
+                                 "pca_dims": int(self.feat.shape[3])}
+
+    def to_arrays(self, coords):
+        return {"coords": coords, "prices": np.zeros(0) if self.control is None else self.control.to_array()}
+
+    def from_arrays(self, arrays):
+        prices = np.asarray(arrays["prices"], dtype=np.float64)
+        if self.control is not None and prices.size:
+            self.control = PhaseControl.from_array(prices, len(self.membership[1]))
+        return np.asarray(arrays["coords"], dtype=np.int64)
 
 
 def _exemplar(per_view, config: VolumeConfig) -> np.ndarray:
@@ -584,28 +610,6 @@ def _exemplar(per_view, config: VolumeConfig) -> np.ndarray:
                    f"give a volume (npmrf3d volume FILE) or use a 2D method")
     volume_fits(volume, window=config.window)
     return np.ascontiguousarray(volume, dtype=np.float32)
-
-
-def _key(config: VolumeConfig, exemplar: np.ndarray, field) -> str:
-    digest = [list(exemplar.shape), float(exemplar.astype(np.float64).sum()),
-              float((exemplar.astype(np.float64) ** 2).sum())]
-    fdigest = None if field is None else float(np.asarray(field, dtype=np.float64).sum())
-    # the soft phases of stop 33 change a grey scan's run: a checkpoint from before is refused
-    return json.dumps({"method": "volume-lh", "config": config.to_dict(), "exemplar": digest,
-                       "field": fdigest, "soft_phases": SOFT_WIDTH}, sort_keys=True, default=str)
-
-
-def _resume(path, key):
-    if path is None or not Path(path).exists():
-        return None
-    data = load_checkpoint(path)
-    if str(data.get("config")) != key or "coords" not in data:
-        check.fail(f"checkpoint '{path}' was written by a different configuration or exemplar; "
-                   f"delete it or choose another checkpoint path")
-    return (np.asarray(data["coords"], dtype=np.int64), int(data["level"]),
-            json.loads(str(data["rng_state"])), json.loads(str(data["history"])),
-            json.loads(str(data["timings"])), json.loads(str(data["stats"])),
-            np.asarray(data["prices"], dtype=np.float64) if "prices" in data else None)
 
 
 def volume_estimate(config: VolumeConfig, exemplars) -> Estimate:

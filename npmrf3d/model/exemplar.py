@@ -37,6 +37,7 @@ __all__ = [
     "load_exemplar",
     "make_labels",
     "named_exemplar",
+    "pack_rows",
     "resolve_exemplars",
 ]
 
@@ -320,3 +321,23 @@ def extract_patches(
     cc = (cols[:, None] + offsets[None, :, 1]) % w
     patches = values[rr, cc].reshape(len(rows), -1)
     return np.ascontiguousarray(patches, dtype=np.float32), label_image[rows, cols].astype(np.int32)
+
+
+def pack_rows(exemplars) -> tuple[np.ndarray, np.ndarray]:
+    """The pixels of ``exemplars`` (``(H, W, C)`` arrays, one per view) as the rows of one
+    float32 array, an array given for several views once, and each view's first row in it.
+
+    >>> a, b = np.zeros((2, 2, 1)), np.ones((1, 3, 1))
+    >>> rows, offsets = pack_rows([a, b, a])
+    >>> rows.shape, offsets.tolist()
+    ((7, 1), [0, 4, 0])
+    """
+    flat, offsets, seen = [], [], {}
+    start = 0
+    for ex in exemplars:
+        if id(ex) not in seen:
+            seen[id(ex)] = start
+            flat.append(ex.reshape(-1, ex.shape[2]))
+            start += flat[-1].shape[0]
+        offsets.append(seen[id(ex)])
+    return np.ascontiguousarray(np.concatenate(flat), dtype=np.float32), np.array(offsets, dtype=np.int64)

@@ -1,11 +1,9 @@
-"""k-coherence machinery: per-level exemplar models, source maps and histograms (issue 11).
-
-Why one module of ~470 lines: these are the model-layer pieces that Chen–Wang and the coherent
-NP-MRF sampler share, each small; the per-level model, the source maps, the matches and the
-histograms all speak in the same flat exemplar indices and window geometry.
+"""k-coherence machinery: per-level exemplar models, source maps, candidates and matches.
 
 The model layer of Chen & Wang 2010 ("High quality solid texture synthesis using position and
-index histogram matching"), kept apart from the method so that other samplers can reuse it:
+index histogram matching"), kept apart from the method so that other samplers can reuse it; the
+engine that runs it level by level, with the solver's histograms, is
+:mod:`npmrf3d.model.kcoherence_engine`:
 
 * :func:`build_level_model` -- one exemplar at one level: its neighbourhoods (one per *valid
   centre*, the pixels whose window lies inside the exemplar), their PCA projection to about 20
@@ -19,8 +17,8 @@ index histogram matching"), kept apart from the method so that other samplers ca
   all exemplar neighbourhoods (``cKDTree``) and take the global match where it is clearly better
   than the coherent one (Hertzmann et al. 2001's coherence rule), so that a structure no
   coherent candidate proposes -- a sparse bright spot -- can still be matched.
-* **position / index histograms** -- :func:`position_histogram`, :func:`histogram_factor`
-  (``1 + strength * max(0, H / even - 1)``, the paper's eq. 4 and 6 in units of the even share).
+* **the histogram factor** -- :func:`histogram_factor` (``1 + strength * max(0, H / even -
+  1)``, the paper's eq. 4 and 6 in units of the even share) of the position and index histograms.
 
 Window geometry: a window of side ``w`` (odd or even) at site/pixel ``u`` covers
 ``u - a .. u - a + w - 1`` along both plane axes, ``a = (w - 1) // 2`` (:func:`anchor`); the
@@ -40,21 +38,19 @@ from .neighbourhood import VIEW_AXES
 
 __all__ = [
     "LevelModel",
-    "ValueHistogram",
     "anchor",
     "build_level_model",
     "candidate_set",
+    "centre_patches",
     "downsample_exemplar",
     "global_matches",
     "histogram_factor",
     "k_coherence_sets",
     "pca_project",
-    "position_histogram",
     "random_sources",
+    "search_exemplar",
     "upsample_sources",
     "valid_centres",
-    "value_counts",
-    "value_scale",
 ]
 
 
@@ -142,8 +138,10 @@ def valid_centres(shape: tuple[int, ...], window: int) -> tuple[int, int, int, i
 
 
 def centre_patches(exemplar: np.ndarray, window: int) -> np.ndarray:
-    """Neighbourhoods of the valid centres, ``(n, window**2 * C)`` float32, row-major over centres,
-    each flattened in (row, column, channel) order."""
+    """Neighbourhoods of the valid centres (every ``window x window`` window that lies inside the
+    exemplar), ``(n, window**2 * C)`` float32, ``n = (H - window + 1)(W - window + 1)``: row
+    ``p = pr * (W - window + 1) + pc`` is ``exemplar[pr:pr + window, pc:pc + window]`` flattened
+    in (row, column, channel) order (NP_K's patches too, :mod:`npmrf3d.methods.kopf`)."""
     view = sliding_window_view(exemplar, (window, window), axis=(0, 1))  # (H', W', C, w, w)
     view = view.transpose(0, 1, 3, 4, 2)
     return np.ascontiguousarray(view, dtype=np.float32).reshape(-1, window * window * exemplar.shape[2])
@@ -161,6 +159,12 @@ def pca_project(patches: np.ndarray, dims: int = 20) -> tuple[np.ndarray, np.nda
 
     float64 because the search kernel computes in float64: float32 tables cost it 1.5x in
     conversions (measured, 64^3 search of one view).
+
+    The two other PCAs are not this one: NP_K's (:func:`npmrf3d.methods._kopf_steps.pca_basis`)
+    keeps a share of the variance by an SVD and a float32 basis, and the 3D appearance space's
+    (:func:`npmrf3d.methods.volume_lh.appearance_space`) multiplies two copies of the centred
+    vectors (a general product, where ``x.T @ x`` of one array is numpy's symmetric one), which
+    differs in the last bits: sharing one would change the volumes.
 
     Examples
     --------
@@ -198,6 +202,10 @@ def k_coherence_sets(points: np.ndarray, k: int = 5, *, exclude: float = 0.0,
     -------
     (n, k) int64 ndarray, nearest first; a point is never in its own set. Ties are broken as
     ``cKDTree.query`` breaks them (exact Euclidean distances).
+
+    The 3D similarity sets (:func:`npmrf3d.methods.volume_lh.similarity_sets`) are another rule
+    of the 3D-exemplar method: the point itself first, each later member away from *every*
+    earlier one, searched on a lattice among a fixed number of neighbours.
     """
     if tree is None:
         tree = cKDTree(np.asarray(points, dtype=np.float64))
@@ -270,6 +278,13 @@ def build_level_model(exemplar: np.ndarray, window: int, *, dims: int = 20, k: i
                       flat.astype(np.int64), tree)
 
 
+def search_exemplar(model: LevelModel) -> _k.SearchExemplar:
+    """The model as the compiled search reads it (:func:`npmrf3d._kernels.kcoherence.search_view`)."""
+    lo_r, hi_r, lo_c, hi_c = (int(b) for b in model.bounds)
+    return _k.SearchExemplar(int(model.window), int(model.anchor), int(model.exemplar.shape[1]),
+                             lo_r, hi_r, lo_c, hi_c, model.mean, model.basis, model.proj, model.kcoh)
+
+
 # --------------------------------------------------------------------------- source maps
 
 
@@ -319,9 +334,8 @@ def candidate_set(src_v: np.ndarray, view: str, site: tuple[int, int, int], mode
     """
     ra, ca = VIEW_AXES[view]
     out = np.empty(9 * (1 + model.kcoh.shape[1]), dtype=np.int64)
-    lo_r, hi_r, lo_c, hi_c = model.bounds
     count = _k.candidates(np.ascontiguousarray(src_v, dtype=np.int32), ra, ca, *map(int, site),
-                          model.exemplar.shape[1], lo_r, hi_r, lo_c, hi_c, model.kcoh, out)
+                          search_exemplar(model), out)
     return np.unique(out[:count])
 
 
@@ -390,72 +404,6 @@ def global_matches(volume: np.ndarray, view: str, model: LevelModel, assign_v: n
 
 
 # --------------------------------------------------------------------------- histograms
-
-
-def value_scale(span, bins: int) -> np.ndarray:
-    """Bins per unit of value of each channel, ``bins / span`` (0 for a channel of one value)."""
-    span = np.asarray(span, dtype=np.float64)
-    return np.where(span > 0, bins / np.where(span > 0, span, 1.0), 0.0)
-
-
-def value_counts(values: np.ndarray, lo: np.ndarray, scale: np.ndarray, bins: int) -> tuple[np.ndarray, np.ndarray]:
-    """The bin of every value of ``values`` (n, C) (:func:`npmrf3d._kernels.kcoherence.value_bin`),
-    ``(n, C)`` int64, and each channel's counts, ``(C, bins)`` float64."""
-    b = np.empty(values.shape, dtype=np.int64)
-    _k.value_bins(np.ascontiguousarray(values, dtype=np.float32), np.asarray(lo, dtype=np.float64), scale, bins, b)
-    return b, np.stack([np.bincount(b[:, c], minlength=bins) for c in range(values.shape[1])]).astype(np.float64)
-
-
-class ValueHistogram(NamedTuple):
-    """Per-channel value histograms of a level for the solver's histogram matching.
-
-    Attributes
-    ----------
-    lo, scale : (C,) float64
-        Bin of value ``x`` of channel ``c``: ``floor((x - lo[c]) * scale[c])`` clamped to
-        ``0..bins - 1`` (:func:`npmrf3d._kernels.kcoherence.value_bin`).
-    ex_bins : (G, C) int64
-        Bins of every packed exemplar texel.
-    hist : (C, bins) float64
-        The volume's histogram, in units of ``unit`` voxels (an even bin's share); the solver
-        updates it.
-    target : (C, bins) float64
-        The exemplars' histogram (views pooled, each view's exemplar weighted equally), same units.
-    unit : float
-        Voxels per even bin, ``N / bins``.
-    """
-
-    lo: np.ndarray
-    scale: np.ndarray
-    ex_bins: np.ndarray
-    hist: np.ndarray
-    target: np.ndarray
-    unit: float
-
-    @classmethod
-    def build(cls, exemplars, ex_flat: np.ndarray, volume: np.ndarray, *, bins: int,
-              lo: np.ndarray, span: np.ndarray) -> "ValueHistogram":
-        """Histograms of ``volume`` (N1, N2, N3, C) and of ``exemplars`` (one (H, W, C) array per
-        view) over ``bins`` bins spanning ``lo .. lo + span`` per channel; ``ex_flat`` the packed
-        texels (:func:`npmrf3d.methods.chen_wang._pack`)."""
-        channels = volume.shape[3]
-        lo = np.asarray(lo, dtype=np.float64)
-        scale = value_scale(span, bins)
-        ex_bins, _ = value_counts(ex_flat, lo, scale, bins)
-        n = volume.shape[0] * volume.shape[1] * volume.shape[2]
-        _, hist = value_counts(volume.reshape(n, channels), lo, scale, bins)
-        target = np.zeros((channels, bins), dtype=np.float64)
-        for ex in exemplars:
-            _, h = value_counts(ex.reshape(-1, channels), lo, scale, bins)
-            target += h / h.sum(axis=1, keepdims=True)
-        unit = n / bins
-        return cls(lo, scale, ex_bins, hist / unit, target * bins / len(exemplars), float(unit))
-
-
-
-def position_histogram(src_v: np.ndarray, pixels: int) -> np.ndarray:
-    """How many voxels copy each exemplar pixel: ``(pixels,)`` float64 counts of ``src_v``."""
-    return np.bincount(np.asarray(src_v).ravel(), minlength=pixels).astype(np.float64)
 
 
 def histogram_factor(counts: np.ndarray, even: float, strength: float = 1.0) -> np.ndarray:

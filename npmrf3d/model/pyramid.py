@@ -7,10 +7,11 @@ down to 0. The voxel of level ``l - 1`` at ``2 * (i, j, k)`` is the *inherited* 
 (temperature 1); with ``8/8`` they copy the parent's value (temperature 1); ``trilinear``
 (Kopf et al. 2007, continuous values only) interpolates the parent on the torus.
 
-:func:`run_pyramid` is the level loop every multi-scale method shares (the NP-MRF sampler and
-NP_K): initialise the coarsest level, up-sample into each finer one, relax it, report progress,
-write a checkpoint after each level and resume from one. A method gives it a :class:`Levels`
-object that knows how to do those steps for its own state.
+:func:`run_pyramid` is the level loop every multi-scale method shares (the NP-MRF sampler, NP_K,
+the k-coherence engine of Chen–Wang and the coherent sampler, the coordinate pyramid of
+volume-lh and npmrf-3d): initialise the coarsest level, up-sample into each finer one, relax
+it, report progress, write a checkpoint after each level and resume from one. A method gives
+it a :class:`Levels` object that knows how to do those steps for its own state.
 """
 
 from __future__ import annotations
@@ -26,8 +27,8 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy import ndimage
 
-from .. import _validation as check
-from ..io.files import load_checkpoint, save_checkpoint
+from .._kernels._jit import thread_count
+from ..io.checkpoints import load_run_state, save_run_state
 
 __all__ = ["INHERIT", "LABEL_UPSAMPLING", "LevelState", "Levels", "UPSAMPLERS", "UPSAMPLING",
            "level_shape", "random_state", "run_pyramid", "upsample"]
@@ -143,10 +144,17 @@ class Levels(ABC):
     size : (N1, N2, N3)
     levels : int
     key : str
-        Identity of the configuration; a checkpoint with another key is refused.
+        Identity of the run (:func:`npmrf3d.io.checkpoints.run_key`); a checkpoint with another
+        key is refused.
     fingerprint : dict of arrays
         Further arrays a checkpoint must match (e.g. the label set, which depends on the
         exemplar).
+
+    Random numbers are drawn from the loop's generator in the order the loop calls the
+    methods: per level :meth:`prepare` (draws none), :meth:`initial` or :meth:`upsample`, then
+    :meth:`relax`. State a method keeps across levels besides the level's state (e.g. a phase
+    control) belongs in :meth:`to_arrays` / :meth:`from_arrays`, so that a resumed run goes on
+    exactly as the uninterrupted one.
     """
 
     size: tuple[int, int, int]
@@ -177,11 +185,12 @@ class Levels(ABC):
 
     @abstractmethod
     def to_arrays(self, state: Any) -> dict[str, np.ndarray]:
-        """The state as named arrays (for a checkpoint)."""
+        """The state, and the method's own state carried across levels, as named arrays (for a
+        checkpoint)."""
 
     @abstractmethod
     def from_arrays(self, arrays: dict[str, np.ndarray]) -> Any:
-        """Inverse of :meth:`to_arrays`."""
+        """Inverse of :meth:`to_arrays`: restores the method's own state, returns the level's."""
 
 
 @dataclass
@@ -212,13 +221,14 @@ def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressC
         A ``.npz`` file written after each level; if it exists and matches ``method.key`` and
         ``method.fingerprint``, the run resumes after its last finished level.
     timings, stats : dict, optional
-        Start values (e.g. ``setup`` time, thread count); per-level entries are added.
+        Start values; per-level entries are added. Default: the ``setup`` time since
+        ``t_start`` and the ``threads`` numba's loops use.
     t_start : float, optional
         ``time.perf_counter()`` when the run started (for ``timings["total"]``).
     """
     t_start = time.perf_counter() if t_start is None else t_start
-    timings = dict(timings or {})
-    stats = dict(stats or {})
+    timings = {"setup": time.perf_counter() - t_start} if timings is None else dict(timings)
+    stats = {"threads": thread_count()} if stats is None else dict(stats)
     stats.setdefault("levels", {})
     history: list[list[float]] = []
     state = None
@@ -246,8 +256,8 @@ def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressC
         timings[f"level_{level}"] = time.perf_counter() - t0
         stats["levels"][f"level_{level}"] = level_stats
         if checkpoint is not None:
-            save_checkpoint(
-                checkpoint, config=method.key, **method.fingerprint, **method.to_arrays(state),
+            save_run_state(
+                checkpoint, method.key, **method.fingerprint, **method.to_arrays(state),
                 level=level, rng_state=json.dumps(rng.bit_generator.state),
                 history=json.dumps(history), timings=json.dumps(timings),
                 stats=json.dumps(stats, default=str),
@@ -257,15 +267,10 @@ def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressC
 
 
 def _load(path, method: Levels):
-    """State after the last finished level, or None when there is nothing (matching) to resume."""
-    if path is None or not Path(path).exists():
+    """State after the last finished level, or None when there is nothing to resume."""
+    data = load_run_state(path, method.key, fingerprint=method.fingerprint)
+    if data is None:
         return None
-    data = load_checkpoint(path)
-    same = str(data.get("config")) == method.key and all(
-        name in data and np.array_equal(data[name], value) for name, value in method.fingerprint.items())
-    if not same:
-        check.fail(f"checkpoint '{path}' was written by a different configuration or exemplar; "
-                   f"delete it or choose another checkpoint path")
     return (method.from_arrays(data), int(data["level"]), json.loads(str(data["rng_state"])),
             json.loads(str(data["history"])), json.loads(str(data["timings"])),
             json.loads(str(data["stats"])))

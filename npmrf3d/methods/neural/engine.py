@@ -17,7 +17,6 @@ state, the loss history) resumes bit for bit.
 
 from __future__ import annotations
 
-import hashlib
 import io
 import itertools
 import json
@@ -30,6 +29,7 @@ import numpy as np
 import torch
 
 from ...errors import ParameterError
+from ...io.checkpoints import as_bytes_array, load_run_state, run_key, save_run_state
 from ...io.files import atomic_write
 from ...model.neighbourhood import VIEW_AXES
 from .config import NeuralConfig, slice_side
@@ -111,43 +111,33 @@ def _as_image(block: torch.Tensor, view: str) -> torch.Tensor:
     return block.squeeze(2 + thin)
 
 
-def _key(config: NeuralConfig, exemplars: dict) -> str:
-    """What a checkpoint must match: the configuration and the exemplars. The volume size, the
-    step count and the checkpoint interval are left out: a step's randomness does not depend on
-    them, so a finished run's checkpoint extends to more ``iterations`` exactly as if it had
-    been asked for from the start."""
-    digest = hashlib.sha256()
+def _run_key(config: NeuralConfig, exemplars: dict) -> str:
+    """What a checkpoint must match (:func:`npmrf3d.io.checkpoints.run_key`): the configuration
+    and the exemplars. The volume size, the step count and the checkpoint interval are left out:
+    a step's randomness does not depend on them, so a finished run's checkpoint extends to more
+    ``iterations`` exactly as if it had been asked for from the start."""
     settings = config.to_dict()
     for name in ("size", "iterations", "checkpoint_every"):
         settings.pop(name)
-    digest.update(json.dumps(settings, sort_keys=True).encode())
-    for view in sorted(exemplars):
-        digest.update(view.encode())
-        digest.update(np.ascontiguousarray(exemplars[view], dtype=np.float32).tobytes())
-    return digest.hexdigest()
+    return run_key("neural", settings, exemplars)
 
 
 def _save_checkpoint(path, key, iteration, generator, optimizer, rng, history, seconds) -> None:
-    state = {"format": FORMAT + "-checkpoint", "key": key, "iteration": iteration,
-             "generator": generator.state_dict(), "optimizer": optimizer.state_dict(),
-             "rng": json.dumps(rng.bit_generator.state), "history": list(history),
-             "seconds": seconds}
-    atomic_write(path, lambda tmp: torch.save(state, tmp))
+    """The torch state (weights, Adam's moments) as the bytes of ``torch.save``, the rest as arrays."""
+    buffer = io.BytesIO()
+    torch.save({"generator": generator.state_dict(), "optimizer": optimizer.state_dict()}, buffer)
+    save_run_state(path, key, iteration=iteration, torch_state=as_bytes_array(buffer.getvalue()),
+                   rng_state=json.dumps(rng.bit_generator.state),
+                   history=np.asarray(history, dtype=np.float64), seconds=float(seconds))
 
 
-def _load_checkpoint(path, key):
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:
-        raise ParameterError(f"checkpoint file '{path}' cannot be read (damaged or not a neural "
-                             f"checkpoint); delete it to start afresh") from exc
-    if not isinstance(state, dict) or state.get("format") != FORMAT + "-checkpoint":
-        raise ParameterError(f"checkpoint file '{path}' is not a neural training checkpoint; "
-                             f"delete it or choose another --checkpoint")
-    if state["key"] != key:
-        raise ParameterError(f"checkpoint file '{path}' was written by a different configuration "
-                             f"(other options or exemplars); delete it or choose another --checkpoint")
-    return state
+def _load_checkpoint(path, key) -> dict | None:
+    """The saved state (``torch_state`` loaded back into tensors), or None when there is none."""
+    data = load_run_state(path, key)
+    if data is not None:
+        data["torch_state"] = torch.load(io.BytesIO(data["torch_state"].tobytes()), map_location="cpu",
+                                         weights_only=True)
+    return data
 
 
 def train_model(per_view: dict, config: NeuralConfig, rng: np.random.Generator, *, progress=None,
@@ -176,14 +166,15 @@ def train_model(per_view: dict, config: NeuralConfig, rng: np.random.Generator, 
             targets[view] = [gram(f) for f in descriptor(image)]
             values[view] = [t.to(device) for t in histogram_target(image[0].cpu(), sides[view] ** 2)]
     optimizer = torch.optim.Adam(generator.parameters(), lr=config.learning_rate)
-    key = _key(config, per_view)
+    key = _run_key(config, per_view)
     start, history, seconds = 0, [], 0.0
-    if checkpoint is not None and checkpoint.exists():
-        state = _load_checkpoint(checkpoint, key)
-        generator.load_state_dict(state["generator"])
-        optimizer.load_state_dict(state["optimizer"])
-        rng.bit_generator.state = json.loads(state["rng"])
-        start, history, seconds = int(state["iteration"]), list(state["history"]), float(state["seconds"])
+    state = _load_checkpoint(checkpoint, key)
+    if state is not None:
+        generator.load_state_dict(state["torch_state"]["generator"])
+        optimizer.load_state_dict(state["torch_state"]["optimizer"])
+        rng.bit_generator.state = json.loads(str(state["rng_state"]))
+        start, seconds = int(state["iteration"]), float(state["seconds"])
+        history = [float(x) for x in state["history"]]
     generator.train()
     if progress is not None:
         progress(start, config.iterations, history[-1] if history else math.nan)

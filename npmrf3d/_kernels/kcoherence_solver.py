@@ -1,0 +1,480 @@
+"""Compiled discrete solver of the k-coherence engine (Chen & Wang 2010, section 4.2).
+
+Why one module of ~480 lines: one kernel, :func:`solve`, whose decision rules (weighted mean,
+weighted medoid, the NP-MRF score, its annealed draw) share the votes and their buffers, with
+its vote helpers and the three bundles of its arguments.
+
+Private: called by :mod:`npmrf3d.model.kcoherence_engine` with validated arrays only; nothing
+here raises a user-facing error. :func:`solve` (parallel over the voxels of a batch): every voxel
+takes, among the texels voted by all overlapping neighbourhoods of all views, one texel, colour
+and source -- the one nearest to the votes' weighted mean (IRLS weights divided by the
+position-histogram factor), a weighted medoid, or the highest NP-MRF score. The histograms are
+frozen within a batch and updated (sequentially) between batches. Its arguments come in three
+bundles: the views' packed exemplars (:class:`PackedViews`), the histograms
+(:class:`SolverHistograms`) and the decision (:class:`SolverRule`).
+
+Geometry as in :mod:`npmrf3d._kernels.kcoherence`. Results depend only on the inputs: parallel
+loops write only their own voxel, and every order-dependent step (histogram updates) runs in
+one thread in a fixed order.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from ._jit import jit, jit_parallel, prange
+from .kcoherence import mix, value_bin
+
+#: The solver's rule among a voxel's heaviest votes (:func:`solve`'s ``likelihood``): the
+#: configuration's own (medoid or mean), or the NP-MRF score with the views' Parzen estimates
+#: combined by the product (ML_H2b) or the minimum (ML_H2a).
+OWN_SOLVER, ML_H2B, ML_H2A = 0, 1, 2
+
+
+class PackedViews(NamedTuple):
+    """The views' exemplars of one level packed for the solver (:func:`solve`).
+
+    axes : (V, 2) int64, each view's volume axes of the exemplar row and column
+    texels : (G, C) float32, the exemplars' pixels as rows (an exemplar shared by views once)
+    offsets : (V,) int64, each view's first row in ``texels``
+    widths : (V,) int64, each view's exemplar width
+    window, anchor, grid : int, the window side, its anchor and the site spacing
+    """
+
+    axes: np.ndarray
+    texels: np.ndarray
+    offsets: np.ndarray
+    widths: np.ndarray
+    window: int
+    anchor: int
+    grid: int
+
+
+class SolverHistograms(NamedTuple):
+    """The histograms the solver weighs votes by; ``positions`` and ``values`` are updated in
+    place (:func:`solve`).
+
+    positions : (sum of the views' pixels,) float64, voxels per source pixel, packed per view
+    position_offsets : (V,) int64, each view's first entry in ``positions``
+    theta : (V,) float64, each view's even count per pixel
+    position_weight, position_boost : float, strengths (:func:`_votes`)
+    texel_bins : (G, C) int64, the value bin of every packed texel per channel
+    values : (C, bins) float64, the volume's value histogram in units of ``value_unit`` voxels
+    value_target : (C, bins) float64, the exemplars' in the same units
+    value_weight, value_prior : float, strengths of the vote weighting and of the prior
+    value_lo, value_scale : (C,) float64, the binning (:func:`value_bin`)
+    value_unit : float, voxels per even bin
+    """
+
+    positions: np.ndarray
+    position_offsets: np.ndarray
+    theta: np.ndarray
+    position_weight: float
+    position_boost: float
+    texel_bins: np.ndarray
+    values: np.ndarray
+    value_target: np.ndarray
+    value_weight: float
+    value_prior: float
+    value_lo: np.ndarray
+    value_scale: np.ndarray
+    value_unit: float
+
+
+class SolverRule(NamedTuple):
+    """How the solver decides (:func:`solve`).
+
+    medoid : int, 0 = the voted texel nearest the weighted mean, else the candidates are the
+        texels of the ``medoid`` heaviest votes
+    balance : bool, every view's votes of a voxel weigh the same in total
+    likelihood : int, :data:`OWN_SOLVER` (a weighted medoid), :data:`ML_H2B` or :data:`ML_H2A`
+    h2c, outlier : float, the NP-MRF rule's centre kernel ``2 h_c^2`` and outlier share
+    temperature, salt : float and int, the annealed draw (temperature 0: the highest score)
+    """
+
+    medoid: int
+    balance: bool
+    likelihood: int
+    h2c: float
+    outlier: float
+    temperature: float
+    salt: int
+
+
+@jit
+def value_prior(ex_bins, g, val_hist, val_target, val_unit, kappa):
+    """Histogram prior of copying texel ``g``: ``kappa * sum_c log((T_c(b) + e) / (H_c(b) + e))`` over its
+    bins ``b = ex_bins[g, c]`` (``H`` the volume's, ``T`` the exemplars' histogram in units of an
+    even bin, ``e = 1 / val_unit``: one voxel). Positive for under-represented values, zero when
+    the histograms agree."""
+    e = 1.0 / val_unit
+    prior = 0.0
+    for ch in range(ex_bins.shape[1]):
+        b = ex_bins[g, ch]
+        prior += kappa * np.log((val_target[ch, b] + e) / (max(val_hist[ch, b], 0.0) + e))
+    return prior
+
+
+@jit
+def _votes(p0, p1, p2, assign, omega, views, hist, out_g, out_v, out_w):
+    """Texels voted for voxel ``(p0, p1, p2)`` by every overlapping neighbourhood of every view.
+
+    A neighbourhood at site ``u`` matched with centre ``e`` votes for the texel ``e + (x - u)``
+    (plane offsets) with weight ``omega[u] / (1 + position_weight * max(0, H(texel) / theta - 1))``
+    (paper eq. 4 with a strength); with ``position_boost > 0`` an under-used texel's weight is
+    multiplied by ``1 + position_boost * (1 - H(texel) / theta)`` (this project's addition).
+    With ``val_weight > 0`` the weight is further divided by the **value-histogram** factor
+    ``1 + val_weight * sum_c max(0, val_hist[c, b_c] - val_target[c, b_c])`` (``b_c`` =
+    ``ex_bins[texel, c]``; histograms in units of an even bin's share, this project's addition
+    after Kopf et al. 2007's histogram matching). Votes are enumerated view by view, then by row offset
+    ``x_r - u_r`` from ``-anchor`` to ``window - 1 - anchor``, then by column offset; texels are
+    written as packed rows ``ex_off[v] + local``. Returns the number of votes.
+
+    ``views`` (:class:`PackedViews`) holds ``view_axes`` (``axes``), ``ex_off`` (``offsets``),
+    ``ewidth`` (``widths``), ``window``, ``anchor`` and ``grid``; ``hist``
+    (:class:`SolverHistograms`) ``pos_hist`` (``positions``), ``hist_off``
+    (``position_offsets``), ``theta``, the strengths, ``ex_bins`` (``texel_bins``), ``val_hist``
+    (``values``) and ``val_target`` (``value_target``).
+    """
+    view_axes, ex_off, ewidth = views.axes, views.offsets, views.widths
+    window, anchor, grid = views.window, views.anchor, views.grid
+    pos_hist, hist_off, theta = hist.positions, hist.position_offsets, hist.theta
+    position_weight, position_boost = hist.position_weight, hist.position_boost
+    ex_bins, val_hist, val_target, val_weight = hist.texel_bins, hist.values, hist.value_target, hist.value_weight
+    shape = assign.shape
+    count = 0
+    for v in range(assign.shape[0]):
+        ra = view_axes[v, 0]
+        ca = view_axes[v, 1]
+        nr = shape[1 + ra]
+        nc = shape[1 + ca]
+        xr = p0 if ra == 0 else (p1 if ra == 1 else p2)
+        xc = p0 if ca == 0 else (p1 if ca == 1 else p2)
+        w = ewidth[v]
+        for orow in range(-anchor, window - anchor):
+            u_r = (xr - orow) % nr
+            if u_r % grid:
+                continue
+            for ocol in range(-anchor, window - anchor):
+                u_c = (xc - ocol) % nc
+                if u_c % grid:
+                    continue
+                q0 = p0
+                q1 = p1
+                q2 = p2
+                if ra == 0:
+                    q0 = u_r
+                elif ra == 1:
+                    q1 = u_r
+                else:
+                    q2 = u_r
+                if ca == 0:
+                    q0 = u_c
+                elif ca == 1:
+                    q1 = u_c
+                else:
+                    q2 = u_c
+                e = assign[v, q0, q1, q2]
+                if e < 0:
+                    continue
+                local = (e // w + orow) * w + (e % w + ocol)
+                excess = pos_hist[hist_off[v] + local] / theta[v] - 1.0
+                weight = omega[v, q0, q1, q2]
+                if excess > 0.0:
+                    weight = weight / (1.0 + position_weight * excess)
+                elif position_boost > 0.0:
+                    weight = weight * (1.0 - position_boost * excess)
+                if val_weight > 0.0:
+                    over = 0.0
+                    for ch in range(ex_bins.shape[1]):
+                        b = ex_bins[ex_off[v] + local, ch]
+                        gap = val_hist[ch, b] - val_target[ch, b]
+                        if gap > 0.0:
+                            over += gap
+                    weight = weight / (1.0 + val_weight * over)
+                out_g[count] = ex_off[v] + local
+                out_v[count] = v
+                out_w[count] = weight
+                count += 1
+    return count
+
+
+@jit
+def _group_votes(vg, vv, vw, count, n_views, slot, ug, uv, uw, umax, uarg):
+    """Merge the ``count`` votes by (texel, view) (views may share an exemplar's rows): group ``i`` (in order of first appearance) has texel
+    ``ug[i]``, view ``uv[i]``, summed weight ``uw[i]``, heaviest single weight ``umax[i]`` and
+    the index ``uarg[i]`` of its first vote of that weight. ``slot`` (one entry per texel and view,
+    all -1) is scratch and is left all -1. Returns the number of groups. A score summed over the
+    groups equals the sum over the votes (up to rounding) at a fraction of the cost: coherent
+    neighbourhoods vote for the same texels."""
+    u = 0
+    for q in range(count):
+        g = vg[q]
+        key = g * n_views + vv[q]
+        i = slot[key]
+        if i < 0:
+            i = u
+            slot[key] = i
+            ug[i] = g
+            uv[i] = vv[q]
+            uw[i] = vw[q]
+            umax[i] = vw[q]
+            uarg[i] = q
+            u += 1
+        else:
+            uw[i] += vw[q]
+            if vw[q] > umax[i]:
+                umax[i] = vw[q]
+                uarg[i] = q
+    for i in range(u):
+        slot[ug[i] * n_views + uv[i]] = -1
+    return u
+
+
+@jit_parallel
+def solve(volume, src, assign, omega, views, hist, rule, order, batch_bounds, chunk):
+    """Discrete solver (paper section 4.2 with eq. 4), one pass over all voxels.
+
+    ``views`` (:class:`PackedViews`) holds the packed texels ``ex_flat`` and each view's offset
+    ``ex_off``; ``hist`` (:class:`SolverHistograms`) the position histograms ``pos_hist`` (at
+    ``hist_off``) and the value histograms ``val_*`` with the texels' bins ``ex_bins``; ``rule``
+    (:class:`SolverRule`) the decision. ``chunk`` voxels form one parallel work item (any value
+    gives the same result).
+
+    Voxels are visited in ``order`` (flat indices), cut into batches at ``batch_bounds``. Within a
+    batch every voxel (in parallel) gathers its votes (:func:`_votes`), computes their weighted
+    mean colour and copies the voted texel nearest to it (first one on ties) -- or, with
+    ``medoid > 0``, among the texels of the ``medoid`` heaviest votes (distinct texel and view),
+    the one ``p`` minimising ``sum_q w_q ||e_p - e_q||`` over all votes (a weighted medoid): ``volume`` gets its
+    colour, and each view's source becomes that view's voted texel nearest to the copied colour
+    (the copied texel itself for its own view). After the batch, in one thread, the position
+    histograms ``pos_hist`` (packed per view at ``hist_off``, counts of voxels per source pixel)
+    move from the old sources to the new ones. Returns the number of voxels whose colour changed.
+
+    With ``likelihood`` :data:`ML_H2B` or :data:`ML_H2A` the candidates of the ``medoid`` heaviest votes
+    are scored instead by the NP-MRF rule (the coherent NP-MRF sampler, :mod:`npmrf3d.methods.npmrf_coherent`):
+    per view, a Parzen estimate of the candidate colour's probability from that view's votes,
+    ``L_v(p) = sum_{q in v} w_q exp(-||e_p - e_q||^2 / h2c) / sum_{q in v} w_q``, mixed with an
+    ``outlier`` share; the views are combined by the product (ML_H2b) or the minimum (ML_H2a) and the
+    highest score wins (first on ties).
+
+    Value histograms (``val_weight > 0``): ``val_hist`` (C, bins) holds the volume's per-channel
+    histogram in units of ``val_unit`` voxels (an even bin's share), ``val_target`` the
+    exemplars' in the same units, ``ex_bins`` (rows of ``ex_flat``, C) every texel's bins (by
+    :func:`value_bins` with ``val_lo``, ``val_scale``); votes are weighted down by the excess of
+    their texel's bins (:func:`_votes`) and ``val_hist`` follows the changed voxels between
+    batches, so the volume's histogram is pulled towards the exemplars'. With the NP-MRF rule the
+    score of a candidate also gets the histogram prior :func:`value_prior` with strength
+    ``val_prior`` (0 = off; added to the ML_H2b
+    log-score, a factor ``exp(prior)`` on the ML_H2a score), which vanishes when the histograms
+    agree.
+
+    Annealing (``temperature > 0``, NP-MRF rule only): instead of the highest score, the voxel
+    draws candidate ``a`` with probability proportional to ``exp(l_a / temperature)`` (a
+    heat-bath step over its candidates; ``l_a`` the ML_H2b log-score, or the log of the ML_H2a
+    score), from the uniform ``(mix(salt * n_voxels + flat) + 0.5) / 2**31`` -- a hash of the
+    voxel, so the draw depends on no thread count (``salt < 2**31``).
+    """
+    ex_flat, ex_off = views.texels, views.offsets
+    pos_hist, hist_off = hist.positions, hist.position_offsets
+    ex_bins, val_hist, val_target, val_unit = hist.texel_bins, hist.values, hist.value_target, hist.value_unit
+    val_prior, val_lo, val_scale = hist.value_prior, hist.value_lo, hist.value_scale
+    medoid, balance, likelihood, h2c = rule.medoid, rule.balance, rule.likelihood, rule.h2c
+    outlier, temperature, salt = rule.outlier, rule.temperature, rule.salt
+    n_views = assign.shape[0]
+    n0, n1, n2, channels = volume.shape
+    n_vox = n0 * n1 * n2
+    cap = n_views * views.window * views.window
+    changed = 0
+    for b in range(batch_bounds.shape[0] - 1):
+        start = batch_bounds[b]
+        m = batch_bounds[b + 1] - start
+        new_src = np.empty((m, n_views), dtype=np.int32)
+        flags = np.zeros(m, dtype=np.int64)
+        old_bins = np.zeros((m, channels), dtype=np.int64)
+        new_bins = np.zeros((m, channels), dtype=np.int64)
+        n_chunks = (m + chunk - 1) // chunk
+        for c in prange(n_chunks):
+            vg = np.empty(cap, dtype=np.int64)
+            vv = np.empty(cap, dtype=np.int64)
+            vw = np.empty(cap, dtype=np.float64)
+            mean = np.empty(channels, dtype=np.float64)
+            vsum = np.empty(n_views, dtype=np.float64)
+            taken = np.zeros(cap, dtype=np.bool_)
+            slot = np.full(ex_flat.shape[0] * n_views, -1, dtype=np.int64)
+            ug = np.empty(cap, dtype=np.int64)
+            uv = np.empty(cap, dtype=np.int64)
+            uw = np.empty(cap, dtype=np.float64)
+            umax = np.empty(cap, dtype=np.float64)
+            uarg = np.empty(cap, dtype=np.int64)
+            tops = np.empty(max(medoid, 1), dtype=np.int64)
+            lik = np.empty(n_views, dtype=np.float64)
+            scores = np.empty(max(medoid, 1), dtype=np.float64)
+            for t in range(c * chunk, min(m, (c + 1) * chunk)):
+                flat = order[start + t]
+                p0 = flat // (n1 * n2)
+                p1 = (flat // n2) % n1
+                p2 = flat % n2
+                count = _votes(p0, p1, p2, assign, omega, views, hist, vg, vv, vw)
+                for v in range(n_views):
+                    new_src[t, v] = src[v, p0, p1, p2]
+                if count == 0:
+                    continue
+                if balance:
+                    # every view gets the same total say: its votes' weights sum to 1
+                    for v in range(n_views):
+                        vsum[v] = 0.0
+                    for q in range(count):
+                        vsum[vv[q]] += vw[q]
+                    for q in range(count):
+                        vw[q] /= vsum[vv[q]]
+                # the votes merged by (texel, view): summed weight, heaviest
+                # single vote and its index; groups in order of first appearance
+                u = _group_votes(vg, vv, vw, count, n_views, slot, ug, uv, uw, umax, uarg)
+                best = 0
+                if medoid:
+                    # candidates: the `medoid` heaviest votes with distinct (texel, view), heaviest
+                    # first (ties: the earlier vote) -- the groups of the heaviest single votes
+                    n_try = 0
+                    for q in range(u):
+                        taken[q] = False
+                    for a in range(medoid):
+                        top = -1
+                        for q in range(u):
+                            if not taken[q] and (top < 0 or umax[q] > umax[top]
+                                                 or (umax[q] == umax[top] and uarg[q] < uarg[top])):
+                                top = q
+                        if top < 0:
+                            break
+                        taken[top] = True
+                        tops[n_try] = top
+                        n_try += 1
+                    best_e = np.inf
+                    if likelihood:
+                        for v in range(n_views):
+                            vsum[v] = 0.0
+                        for q in range(count):
+                            vsum[vv[q]] += vw[q]
+                    for a in range(n_try):
+                        ga = ug[tops[a]]
+                        if likelihood:
+                            for v in range(n_views):
+                                lik[v] = 0.0
+                            for q2 in range(u):
+                                dd = 0.0
+                                for ch in range(channels):
+                                    diff = ex_flat[ga, ch] - ex_flat[ug[q2], ch]
+                                    dd += diff * diff
+                                lik[uv[q2]] += uw[q2] * np.exp(-dd / h2c)
+                            score = 0.0 if likelihood == ML_H2B else np.inf
+                            for v in range(n_views):
+                                lv = (1.0 - outlier) * lik[v] / vsum[v] + outlier if vsum[v] > 0.0 else outlier
+                                if likelihood == ML_H2B:
+                                    score += np.log(lv)
+                                else:
+                                    score = min(score, lv)
+                            if val_prior > 0.0:
+                                prior = value_prior(ex_bins, ga, val_hist, val_target, val_unit, val_prior)
+                                score = score + prior if likelihood == ML_H2B else score * np.exp(prior)
+                            scores[a] = score if likelihood == ML_H2B else np.log(score)
+                            if -score < best_e:
+                                best_e = -score
+                                best = uarg[tops[a]]
+                            continue
+                        e_sum = 0.0
+                        for q2 in range(u):
+                            dd = 0.0
+                            for ch in range(channels):
+                                diff = ex_flat[ga, ch] - ex_flat[ug[q2], ch]
+                                dd += diff * diff
+                            e_sum += uw[q2] * np.sqrt(dd)
+                        if val_prior > 0.0:
+                            e_sum *= np.exp(-value_prior(ex_bins, ga, val_hist, val_target, val_unit, val_prior))
+                        if e_sum < best_e:
+                            best_e = e_sum
+                            best = uarg[tops[a]]
+                    if likelihood and temperature > 0.0 and n_try > 1:
+                        top_l = scores[0]
+                        for a in range(1, n_try):
+                            top_l = max(top_l, scores[a])
+                        if top_l > -np.inf:
+                            total = 0.0
+                            for a in range(n_try):
+                                total += np.exp((scores[a] - top_l) / temperature)
+                            x = (mix(salt * n_vox + flat) + 0.5) / 2147483648.0 * total
+                            acc = 0.0
+                            pick = n_try - 1
+                            for a in range(n_try):
+                                acc += np.exp((scores[a] - top_l) / temperature)
+                                if x < acc:
+                                    pick = a
+                                    break
+                            best = uarg[tops[pick]]
+                else:
+                    total = 0.0
+                    for ch in range(channels):
+                        mean[ch] = 0.0
+                    for q in range(count):
+                        total += vw[q]
+                        for ch in range(channels):
+                            mean[ch] += vw[q] * ex_flat[vg[q], ch]
+                    for ch in range(channels):
+                        mean[ch] /= total
+                    best_d = np.inf
+                    for q in range(u):
+                        dd = 0.0
+                        for ch in range(channels):
+                            diff = ex_flat[ug[q], ch] - mean[ch]
+                            dd += diff * diff
+                        if dd < best_d:
+                            best_d = dd
+                            best = uarg[q]
+                g = vg[best]
+                for ch in range(channels):
+                    if volume[p0, p1, p2, ch] != ex_flat[g, ch]:
+                        flags[t] = 1
+                if flags[t]:
+                    for ch in range(channels):
+                        old_bins[t, ch] = value_bin(volume[p0, p1, p2, ch], val_lo[ch], val_scale[ch],
+                                                    val_hist.shape[1])
+                        new_bins[t, ch] = ex_bins[g, ch]
+                for ch in range(channels):
+                    volume[p0, p1, p2, ch] = ex_flat[g, ch]
+                for v in range(n_views):
+                    if v == vv[best]:
+                        new_src[t, v] = g - ex_off[v]
+                        continue
+                    near = -1
+                    near_d = np.inf
+                    for q in range(u):
+                        if uv[q] != v:
+                            continue
+                        dd = 0.0
+                        for ch in range(channels):
+                            diff = ex_flat[ug[q], ch] - ex_flat[g, ch]
+                            dd += diff * diff
+                        if dd < near_d:
+                            near_d = dd
+                            near = q
+                    if near >= 0:
+                        new_src[t, v] = ug[near] - ex_off[v]
+        # sequential, fixed order: histograms follow the new sources
+        for t in range(m):
+            flat = order[start + t]
+            p0 = flat // (n1 * n2)
+            p1 = (flat // n2) % n1
+            p2 = flat % n2
+            changed += flags[t]
+            if flags[t]:
+                for ch in range(channels):
+                    val_hist[ch, old_bins[t, ch]] -= 1.0 / val_unit
+                    val_hist[ch, new_bins[t, ch]] += 1.0 / val_unit
+            for v in range(n_views):
+                old = src[v, p0, p1, p2]
+                new = new_src[t, v]
+                pos_hist[hist_off[v] + old] -= 1.0
+                pos_hist[hist_off[v] + new] += 1.0
+                src[v, p0, p1, p2] = new
+    return changed

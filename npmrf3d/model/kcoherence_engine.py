@@ -1,0 +1,380 @@
+"""The k-coherence engine: Chen & Wang 2010's search and discrete solver, level by level.
+
+The level loop of :mod:`npmrf3d.model.pyramid` runs it through :class:`KCoherenceLevels`; two
+methods drive it: Chen–Wang (:mod:`npmrf3d.methods.chen_wang`, its own solver) and the coherent
+NP-MRF sampler (:mod:`npmrf3d.methods.npmrf_coherent`, which decides among the candidates by
+the NP-MRF likelihood, :class:`CandidateDecision`). The pieces it works with -- per-level
+exemplar models, source maps, candidates -- are in :mod:`npmrf3d.model.kcoherence`, the
+solver's position and value histograms here (:func:`position_histogram`,
+:class:`ValueHistogram`); the compiled search in :mod:`npmrf3d._kernels.kcoherence`, the solver
+in :mod:`npmrf3d._kernels.kcoherence_solver`.
+
+A level's state (:class:`CoherentState`) is every voxel's colour and, per view, the exemplar
+pixel it was copied from (its *source*). The coarsest level starts from uniformly random
+sources, a finer one from the up-sampled sources (``2 * parent + offset``), the colours read
+from the sources by :func:`initial_colours`. Each iteration of a level searches every view's
+sites (best candidate under the index histogram, then optionally a global search for the worst
+matched) and solves every voxel (copy one voted texel under the position and value
+histograms). The random numbers, per iteration: one salt per view's search, the solver's voxel
+order, and a salt for an annealed decision.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from .._kernels import kcoherence as _search
+from .._kernels import kcoherence_solver as _solver
+from ..io.checkpoints import run_key
+from . import kcoherence as coh
+from .exemplar import pack_rows
+from .neighbourhood import VIEW_AXES
+from .phases import PhaseControl, bin_phase_error, bin_phases, phase_prior_target
+from .pyramid import Levels
+
+__all__ = ["CANDIDATE_HEURISTICS", "CandidateDecision", "CoherentState", "KCoherenceLevels", "ValueHistogram",
+           "initial_colours", "pack_exemplars", "position_histogram", "value_counts", "value_scale"]
+
+#: The NP-MRF heuristics the solver can rank candidates by (SPEC.md section 3), and the
+#: solver kernel's code of each (:mod:`npmrf3d._kernels.kcoherence_solver`).
+CANDIDATE_HEURISTICS = {"ML_H2b": _solver.ML_H2B, "ML_H2a": _solver.ML_H2A}
+#: The medoid solver tries the heaviest (merged) votes only; the energy sums over all votes.
+MEDOID_CANDIDATES = 8
+#: Voxels per parallel work item of the solver (any value gives the same result).
+SOLVE_CHUNK = 512
+
+
+@dataclass(frozen=True)
+class CandidateDecision:
+    """How the solver picks among a voxel's candidates (the texels of its heaviest votes).
+
+    Attributes
+    ----------
+    heuristic : {"ML_H2b", "ML_H2a"} or None
+        None: the configuration's own solver (Chen–Wang's medoid or mean). A heuristic: the
+        candidate with the highest NP-MRF score, per view a Parzen estimate of its colour from
+        the view's votes, combined over views by the product (ML_H2b) or the minimum (ML_H2a).
+    centre_bandwidth : float
+        Width of the Parzen estimate's kernel, times the exemplars' standard deviation.
+    outlier : float
+        Share of the uniform outlier density mixed into each view's estimate.
+    temperatures : tuple of tuples of float, optional
+        Per level (coarsest first), one temperature per iteration: a heat-bath draw among the
+        candidates with probability proportional to ``exp(score / T)``; 0 or None: the highest
+        score.
+    """
+
+    heuristic: str | None = None
+    centre_bandwidth: float = 0.0
+    outlier: float = 0.0
+    temperatures: tuple[tuple[float, ...], ...] | None = None
+
+    def temperature(self, level_index: int, iteration: int) -> float:
+        """The temperature of an iteration of the level ``level_index`` (0 = the coarsest)."""
+        return 0.0 if self.temperatures is None else float(self.temperatures[level_index][iteration])
+
+
+@dataclass
+class CoherentState:
+    """A level of the k-coherence engine: every voxel's colour and, per view, its source pixel."""
+
+    volume: np.ndarray  # (N1, N2, N3, C) float32
+    sources: np.ndarray  # (V, N1, N2, N3) int32 flat pixel indices into each view's exemplar
+    widths: list[int]  # each view's exemplar width at this level (the sources' row stride)
+
+
+def initial_colours(src: np.ndarray, exemplars) -> np.ndarray:
+    """Colour of every voxel from its sources: among the views' source texels, the one nearest to
+    their mean (the views' first on ties).
+
+    One view's up-sampled sources repeat along that view's normal axis (``2 * parent + offset``
+    has no offset there), so copying one view's texels would duplicate slices in pairs; taking
+    the most central of the views' texels keeps the colours exemplar colours without that.
+
+    Parameters
+    ----------
+    src : (V, N1, N2, N3) int32 flat sources per view
+    exemplars : V arrays (H, W, C)
+
+    Returns
+    -------
+    (N1, N2, N3, C) float32
+    """
+    texels = np.stack([ex.reshape(-1, ex.shape[2])[s] for ex, s in zip(exemplars, src)])  # (V, ..., C)
+    if len(texels) == 1:
+        return np.ascontiguousarray(texels[0], dtype=np.float32)
+    centre = texels.astype(np.float64).mean(axis=0)
+    dist = ((texels - centre) ** 2).sum(axis=-1)
+    pick = np.argmin(dist, axis=0)
+    return np.ascontiguousarray(np.take_along_axis(texels, pick[None, ..., None], axis=0)[0], dtype=np.float32)
+
+
+def pack_exemplars(models) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The views' exemplars packed as rows of one array (an exemplar shared by views once,
+    :func:`npmrf3d.model.exemplar.pack_rows`), each view's first row in it, and each view's first
+    entry in the packed position histograms."""
+    texels, offsets = pack_rows([m.exemplar for m in models])
+    pixels = np.array([m.pixels for m in models], dtype=np.int64)
+    return texels, offsets, np.cumsum(pixels) - pixels
+
+
+# --------------------------------------------------------------------------- histograms
+
+
+def value_scale(span, bins: int) -> np.ndarray:
+    """Bins per unit of value of each channel, ``bins / span`` (0 for a channel of one value)."""
+    span = np.asarray(span, dtype=np.float64)
+    return np.where(span > 0, bins / np.where(span > 0, span, 1.0), 0.0)
+
+
+def value_counts(values: np.ndarray, lo: np.ndarray, scale: np.ndarray, bins: int) -> tuple[np.ndarray, np.ndarray]:
+    """The bin of every value of ``values`` (n, C) (:func:`npmrf3d._kernels.kcoherence.value_bin`),
+    ``(n, C)`` int64, and each channel's counts, ``(C, bins)`` float64."""
+    b = np.empty(values.shape, dtype=np.int64)
+    _search.value_bins(np.ascontiguousarray(values, dtype=np.float32), np.asarray(lo, dtype=np.float64), scale, bins, b)
+    return b, np.stack([np.bincount(b[:, c], minlength=bins) for c in range(values.shape[1])]).astype(np.float64)
+
+
+class ValueHistogram(NamedTuple):
+    """Per-channel value histograms of a level for the solver's histogram matching.
+
+    Attributes
+    ----------
+    lo, scale : (C,) float64
+        Bin of value ``x`` of channel ``c``: ``floor((x - lo[c]) * scale[c])`` clamped to
+        ``0..bins - 1`` (:func:`npmrf3d._kernels.kcoherence.value_bin`).
+    ex_bins : (G, C) int64
+        Bins of every packed exemplar texel.
+    hist : (C, bins) float64
+        The volume's histogram, in units of ``unit`` voxels (an even bin's share); the solver
+        updates it.
+    target : (C, bins) float64
+        The exemplars' histogram (views pooled, each view's exemplar weighted equally), same units.
+    unit : float
+        Voxels per even bin, ``N / bins``.
+    """
+
+    lo: np.ndarray
+    scale: np.ndarray
+    ex_bins: np.ndarray
+    hist: np.ndarray
+    target: np.ndarray
+    unit: float
+
+    @classmethod
+    def build(cls, exemplars, ex_flat: np.ndarray, volume: np.ndarray, *, bins: int,
+              lo: np.ndarray, span: np.ndarray) -> "ValueHistogram":
+        """Histograms of ``volume`` (N1, N2, N3, C) and of ``exemplars`` (one (H, W, C) array per
+        view) over ``bins`` bins spanning ``lo .. lo + span`` per channel; ``ex_flat`` the packed
+        texels (:func:`pack_exemplars`)."""
+        channels = volume.shape[3]
+        lo = np.asarray(lo, dtype=np.float64)
+        scale = value_scale(span, bins)
+        ex_bins, _ = value_counts(ex_flat, lo, scale, bins)
+        n = volume.shape[0] * volume.shape[1] * volume.shape[2]
+        _, hist = value_counts(volume.reshape(n, channels), lo, scale, bins)
+        target = np.zeros((channels, bins), dtype=np.float64)
+        for ex in exemplars:
+            _, h = value_counts(ex.reshape(-1, channels), lo, scale, bins)
+            target += h / h.sum(axis=1, keepdims=True)
+        unit = n / bins
+        return cls(lo, scale, ex_bins, hist / unit, target * bins / len(exemplars), float(unit))
+
+
+def position_histogram(src_v: np.ndarray, pixels: int) -> np.ndarray:
+    """How many voxels copy each exemplar pixel: ``(pixels,)`` float64 counts of ``src_v``."""
+    return np.bincount(np.asarray(src_v).ravel(), minlength=pixels).astype(np.float64)
+
+
+# --------------------------------------------------------------------------- the level loop's side
+
+
+class KCoherenceLevels(Levels):
+    """The k-coherence engine's side of :func:`npmrf3d.model.pyramid.run_pyramid`: per level the
+    views' exemplar models, random or up-sampled sources, then search + solve iterations.
+
+    Parameters
+    ----------
+    method : str
+        The method's name (part of the checkpoint's identity).
+    config : the k-coherence settings
+        A :class:`npmrf3d.methods.chen_wang.ChenWangConfig` (the fields it reads: ``size``,
+        ``levels``, ``views``, ``window``, ``iterations``, ``k``, ``pca_dims``, ``r``, ``grid``,
+        the histogram weights, ``coherence_exclude``, ``random_candidates``, ``global_share``,
+        ``coherence_bias``, ``value_*``, ``phase_weight``, ``batches``, ``solver``,
+        ``balance_views``).
+    per_view_exemplars : dict view -> (H, W, C) float32
+    decision : CandidateDecision
+        The solver's rule (default: the configuration's own solver).
+
+    The phase control (``phase_weight``) carries over from level to level; its state goes into
+    the checkpoint with the level's.
+    """
+
+    def __init__(self, method: str, config: Any, per_view_exemplars: Mapping[str, np.ndarray],
+                 decision: CandidateDecision = CandidateDecision()):
+        self.config, self.decision = config, decision
+        self.size, self.levels = config.size, config.levels
+        views = self.views = config.views
+        self.per_view = {v: np.ascontiguousarray(per_view_exemplars[v], dtype=np.float32) for v in views}
+        self.distinct = list({id(a): a for a in self.per_view.values()}.values())
+        channels = self.distinct[0].shape[2]
+        pooled = np.concatenate([a.reshape(-1, channels) for a in self.distinct])
+        self.labels = np.unique(pooled, axis=0).astype(np.float32)
+        self.sigma = float(pooled.astype(np.float64).std()) or 1.0
+        self.value_lo = pooled.min(axis=0).astype(np.float64)
+        self.value_span = pooled.max(axis=0).astype(np.float64) - self.value_lo
+        self.view_axes = np.array([VIEW_AXES[v] for v in views], dtype=np.int64)
+        self.key = run_key(method, config, self.per_view, decision=dataclasses.asdict(decision))
+        self.phases = self.control = None
+        if config.phase_weight > 0.0 and config.value_prior > 0.0:
+            self.phases = bin_phases(value_counts(
+                pooled, self.value_lo, value_scale(self.value_span, config.value_bins), config.value_bins)[1])
+            self.control = [PhaseControl.start(2) for _ in range(channels)]
+        self.level_ex = self.vmodels = None
+
+    def prepare(self, level, shape):
+        window = self.config.window[self.config.levels - 1 - level]
+        self.level_ex = {id(a): coh.downsample_exemplar(a, level) for a in self.distinct}
+        models = {key: coh.build_level_model(ex, window, dims=self.config.pca_dims, k=self.config.k,
+                                             exclude=self.config.coherence_exclude)
+                  for key, ex in self.level_ex.items()}
+        self.vmodels = [models[id(self.per_view[v])] for v in self.views]
+
+    def initial(self, shape, rng):
+        src = np.empty((len(self.views), *shape), dtype=np.int32)
+        drawn = {key: coh.random_sources(shape, ex.shape, rng) for key, ex in self.level_ex.items()}
+        for vi, v in enumerate(self.views):
+            src[vi] = drawn[id(self.per_view[v])]
+        return self._state(src)
+
+    def upsample(self, state, rng):
+        return self._state(np.stack([coh.upsample_sources(state.sources[vi], v, state.widths[vi],
+                                                          self.vmodels[vi].exemplar.shape)
+                                     for vi, v in enumerate(self.views)]))
+
+    def _state(self, src):
+        return CoherentState(initial_colours(src, [m.exemplar for m in self.vmodels]), src,
+                             [m.exemplar.shape[1] for m in self.vmodels])
+
+    def start(self, level, state):
+        return self.config.iterations[self.config.levels - 1 - level], float("nan")
+
+    def relax(self, level, state, rng, on_step):
+        config, views, vmodels, decision = self.config, self.views, self.vmodels, self.decision
+        control, phases = self.control, self.phases
+        volume, src, widths = state.volume, state.sources, state.widths
+        li = config.levels - 1 - level
+        window = config.window[li]
+        shape = volume.shape[:3]
+        n_views = len(views)
+        ex_flat, ex_off, hist_off = pack_exemplars(vmodels)
+        values = ValueHistogram.build([m.exemplar for m in vmodels], ex_flat, volume,
+                                          bins=config.value_bins, lo=self.value_lo, span=self.value_span)
+        packed = _solver.PackedViews(self.view_axes, ex_flat, ex_off, np.array(widths, dtype=np.int64), window,
+                                     int(vmodels[0].anchor), config.grid)
+        pos_hist = np.concatenate([position_histogram(src[vi], m.pixels) for vi, m in enumerate(vmodels)])
+        theta = np.array([volume.shape[0] * volume.shape[1] * volume.shape[2] / m.pixels for m in vmodels])
+        histograms = _solver.SolverHistograms(
+            pos_hist, hist_off, theta, config.position_weight, config.position_boost, values.ex_bins,
+            values.hist, values.target, config.value_weight, config.value_prior, values.lo, values.scale,
+            values.unit)
+        exemplars = [coh.search_exemplar(m) for m in vmodels]
+        assign = np.full((n_views, *shape), -1, dtype=np.int32)
+        fresh = np.empty(shape, dtype=np.int32)
+        omega = np.zeros((n_views, *shape), dtype=np.float32)
+        index_hist = [np.zeros(m.pixels, dtype=np.float64) for m in vmodels]
+        d = window * window * volume.shape[3]
+        floor = 1e-3 * self.sigma * math.sqrt(d)
+        n_iter = config.iterations[li]
+        n_vox = shape[0] * shape[1] * shape[2]
+        bounds = np.linspace(0, n_vox, min(config.batches, n_vox) + 1).astype(np.int64)
+        likelihood = _solver.OWN_SOLVER if decision.heuristic is None else CANDIDATE_HEURISTICS[decision.heuristic]
+        medoid = MEDOID_CANDIDATES if config.solver == "medoid" or decision.heuristic is not None else 0
+        h2c = 2.0 * (decision.centre_bandwidth * self.sigma) ** 2 or 1.0
+        level_history, changed, global_counts = [], [], []
+        t_search = t_solve = 0.0
+        sites = 0
+        for it in range(n_iter):
+            ts = time.perf_counter()
+            energy_sum = 0.0
+            sites = 0
+            global_count = 0
+            for vi, v in enumerate(views):
+                m = vmodels[vi]
+                ra, ca = VIEW_AXES[v]
+                na = 3 - ra - ca
+                energy = np.zeros(shape[na], dtype=np.float64)
+                n_sites = shape[na] * (shape[ra] // config.grid) * (shape[ca] // config.grid)
+                phi = n_sites / m.centres
+                rule = _search.SearchRule(config.grid, min(config.batches, shape[na]), phi, config.index_weight,
+                                          config.r, floor, config.random_candidates, int(rng.integers(0, 2**31)))
+                _search.search_view(volume, src[vi], ra, ca, exemplars[vi], rule, index_hist[vi], assign[vi],
+                                    fresh, omega[vi], energy)
+                energy_sum += float(energy.sum())
+                if config.global_share > 0.0:
+                    n_global, change = coh.global_matches(
+                        volume, v, m, assign[vi], omega[vi], index_hist[vi], share=config.global_share,
+                        bias=config.coherence_bias, phi=phi, index_weight=config.index_weight,
+                        r=config.r, floor=floor)
+                    energy_sum += change
+                    global_count += n_global
+                sites += n_sites
+            global_counts.append(global_count)
+            t_search += time.perf_counter() - ts
+            ts = time.perf_counter()
+            order = rng.permutation(n_vox).astype(np.int64)
+            temperature = decision.temperature(li, it)
+            target = values.target if control is None else phase_prior_target(
+                values.target, phases, np.stack([c.phase_costs(config.phase_weight) for c in control]),
+                config.value_prior)
+            salt = int(rng.integers(0, 2**31)) if temperature > 0.0 else 0
+            for b in range(len(bounds) - 1):
+                # within a batch the histograms are frozen and every voxel depends only on them
+                # and the votes, so visiting a batch in memory order gives the same volume faster
+                order[bounds[b]:bounds[b + 1]].sort()
+            rule = _solver.SolverRule(medoid, config.balance_views, likelihood, h2c, decision.outlier,
+                                      temperature, salt)
+            changed.append(int(_solver.solve(volume, src, assign, omega, packed,
+                                             histograms._replace(value_target=target), rule, order, bounds,
+                                             SOLVE_CHUNK)))
+            t_solve += time.perf_counter() - ts
+            if control is not None:
+                for c, e in zip(control, bin_phase_error(values.hist, values.target, phases)):
+                    c.step(e)
+            level_history.append(energy_sum / max(1, sites))
+            on_step(it + 1, level_history[-1])
+        used = [float((pos_hist[hist_off[vi]:hist_off[vi] + m.pixels] > 0).mean()) for vi, m in enumerate(vmodels)]
+        stats = {
+            "shape": list(shape), "window": window, "iterations": n_iter,
+            "candidates_per_site": 9 * (1 + config.k) + config.random_candidates, "sites_per_iteration": sites,
+            "pca_dims": {v: int(vmodels[vi].basis.shape[1]) for vi, v in enumerate(views)},
+            "centres": {v: int(vmodels[vi].centres) for vi, v in enumerate(views)},
+            "search_seconds": t_search, "solve_seconds": t_solve, "changed": changed,
+            "global_matches": global_counts,
+            "exemplar_pixels_used": {v: used[vi] for vi, v in enumerate(views)},
+        }
+        if control is not None:
+            stats["phase_error"] = [c.last_error.tolist() for c in control]
+            stats["phase_gain"] = [c.gain for c in control]
+        return state, level_history, stats
+
+    def to_arrays(self, state):
+        control = {} if self.control is None else {"phase_control": np.stack([c.to_array() for c in self.control])}
+        return {"volume": state.volume, "sources": state.sources,
+                "widths": np.asarray(state.widths, dtype=np.int64), **control}
+
+    def from_arrays(self, arrays):
+        if self.control is not None and "phase_control" in arrays:
+            self.control = [PhaseControl.from_array(a, 2)
+                            for a in np.asarray(arrays["phase_control"], dtype=np.float64)]
+        return CoherentState(np.ascontiguousarray(arrays["volume"], dtype=np.float32),
+                             np.ascontiguousarray(arrays["sources"], dtype=np.int32),
+                             [int(w) for w in np.atleast_1d(arrays["widths"])])
