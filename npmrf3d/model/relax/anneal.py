@@ -33,17 +33,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..._kernels._jit import single_threaded_blas
-from ..._kernels.gemm import (
-    anneal_update_class_gemm,
-    anneal_update_class_gemm_serial,
-    make_gemm_operands,
-)
+from ..._kernels.gemm import make_gemm_operands
+from ..._kernels.parzen import LcpdfOptions
 from ..._kernels.relax import (
     HEAT_BATH,
     METROPOLIS,
+    AnnealRule,
+    LevelArrays,
     ViewModels,
     anneal_update_class,
-    anneal_update_class_serial,
 )
 from ._sweep import label_counts, mean_class_sites, resolve_distances, sweep
 
@@ -170,17 +168,13 @@ def relax_anneal(
     ops = (make_gemm_operands(models.patches_t, models.n_patches, models.labels.shape[1])
            if distances == "gemm" else None)
 
+    level = LevelArrays(volume, labels_volume, temps, inherited)
+    lcpdf = LcpdfOptions(float(adaptive), float(min_two_h2), float(prune), float(outlier))
+
     def update(sites, drawn, penalty, parallel, old, new, temperature):
-        args = (heuristic, code, temperature, resynth, adaptive, min_two_h2, prune, penalty,
-                outlier, old, new)
-        if distances == "gemm":
-            kernel = anneal_update_class_gemm if parallel else anneal_update_class_gemm_serial
-            kernel(volume, labels_volume, temps, inherited, sites, drawn[0], drawn[1], models,
-                   ops, *args)
-        else:
-            kernel = anneal_update_class if parallel else anneal_update_class_serial
-            kernel(volume, labels_volume, temps, inherited, sites, drawn[0], drawn[1], models,
-                   *args)
+        kernel = anneal_update_class.parallel if parallel else anneal_update_class.serial
+        rule = AnnealRule(int(heuristic), code, temperature, bool(resynth), penalty)
+        kernel(level, sites, drawn[0], drawn[1], models, ops, lcpdf, rule, old, new)
 
     with single_threaded_blas():
         for step, temperature in enumerate(temperatures, start=1):
