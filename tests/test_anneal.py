@@ -11,8 +11,6 @@ import npmrf3d
 from npmrf3d._kernels.gemm import rows_log_lcpdfs
 from npmrf3d._kernels.parzen import LcpdfOptions
 from npmrf3d._kernels.relax import (
-    HEAT_BATH,
-    METROPOLIS,
     AnnealRule,
     IcmRule,
     LevelArrays,
@@ -120,7 +118,7 @@ def _tiny_level(channels, heuristic="ML_H2b", shape=(8, 8, 8), window=3, seed=0)
 
 @pytest.mark.kernels
 @pytest.mark.parametrize("channels", [1, 3, 4])
-@pytest.mark.parametrize("sampler", [METROPOLIS, HEAT_BATH])
+@pytest.mark.parametrize("sampler", ["metropolis", "heat-bath"])
 @pytest.mark.parametrize("heuristic", ["ML_H2a", "ML_H2b"])
 def test_anneal_class_update_equals_a_literal_per_site_loop(channels, sampler, heuristic):
     rng, labels, freq, rule, models, info, lab, volume = _tiny_level(channels, heuristic)
@@ -141,7 +139,7 @@ def test_anneal_class_update_equals_a_literal_per_site_loop(channels, sampler, h
         combine = np.min if heuristic == "ML_H2a" else np.sum
         score = combine(log_l, axis=0) + penalty
         current = int(lab[tuple(site)])
-        if sampler == HEAT_BATH:
+        if sampler == "heat-bath":
             p = naive.naive_sample_probabilities(score, temperature)
             expected.append(int(np.searchsorted(np.cumsum(p), uniforms[q], side="right")))
         else:
@@ -152,9 +150,10 @@ def test_anneal_class_update_equals_a_literal_per_site_loop(channels, sampler, h
     new = np.empty(len(sites), dtype=np.int64)
     before = lab.copy()
     anneal_update_class.parallel(
-        LevelArrays(volume, lab, temps, inherited), sites, candidates, uniforms, models, None,
+        LevelArrays(volume, lab, temps, inherited), sites,
+        candidates if sampler == "metropolis" else None, uniforms, models, None,
         LcpdfOptions(rule.adaptive, adaptive_floor(info), PRUNE, rule.outlier),
-        AnnealRule(code, sampler, temperature, True, penalty), old, new)
+        AnnealRule(code, temperature, True, penalty), old, new)
     np.testing.assert_array_equal(new, expected)
     np.testing.assert_array_equal(old, before[tuple(sites.T)])
     np.testing.assert_array_equal(lab[tuple(sites.T)], expected)
@@ -182,7 +181,7 @@ def test_lcpdf_at_two_labels_equals_the_full_lcpdf(channels, outlier):
 
 
 @pytest.mark.kernels
-@pytest.mark.parametrize("sampler", [METROPOLIS, HEAT_BATH])
+@pytest.mark.parametrize("sampler", ["metropolis", "heat-bath"])
 def test_small_class_serial_kernels_equal_the_parallel_ones(sampler):
     """Classes below PARALLEL_MIN_SITES run serially: the same code, the same result."""
     rng, labels, freq, rule, models, info, lab, volume = _tiny_level(3)
@@ -198,8 +197,9 @@ def test_small_class_serial_kernels_equal_the_parallel_ones(sampler):
     results = []
     for kernel in anneal_update_class:
         v, lb, old, new = volume.copy(), lab.copy(), np.empty(len(sites), np.int64), np.empty(len(sites), np.int64)
-        kernel(LevelArrays(v, lb, np.zeros_like(temps), inherited), sites, candidates, uniforms,
-               models, None, lcpdf, AnnealRule(code, sampler, 0.5, False, penalty), old, new)
+        kernel(LevelArrays(v, lb, np.zeros_like(temps), inherited), sites,
+               candidates if sampler == "metropolis" else None, uniforms, models, None, lcpdf,
+               AnnealRule(code, 0.5, False, penalty), old, new)
         results.append((v, lb, old, new))
     for kernel in icm_update_class:
         v, lb, t = volume.copy(), lab.copy(), temps.copy()
@@ -232,7 +232,7 @@ def test_greedy_at_zero_temperature_never_lowers_a_site_objective():
         LevelArrays(volume, lab, temps, np.zeros(lab.shape, dtype=bool)), sites, candidates,
         np.zeros(len(sites)), models, None,
         LcpdfOptions(rule.adaptive, adaptive_floor(info), PRUNE, rule.outlier),
-        AnnealRule(get_heuristic("ML_H2b").code, METROPOLIS, 0.0, True, penalty), old, new)
+        AnnealRule(get_heuristic("ML_H2b").code, 0.0, True, penalty), old, new)
     after = objective(lab, volume)
     assert (after >= before - 1e-9).all()
     assert (old != new).any()  # some proposals were improvements and were taken

@@ -274,10 +274,10 @@ def view_distances(volume, temps, sites, rows, models, ops, v, out):
 def rows_log_lcpdfs(volume, temps, sites, rows, models, ops, lcpdf, query, log_l):
     """Per-view log-LCPDFs of the sites ``sites[rows]`` (B rows, at most one chunk).
 
-    ``lcpdf``: :class:`npmrf3d._kernels.parzen.LcpdfOptions`. ``query`` (B, Q) int64 with
-    Q >= 1 and ``query[b, 0] >= 0``: only the labels ``query[b]`` are evaluated into
-    ``log_l[b, v, :Q]`` (a Metropolis step's current and proposed labels); ``query`` of shape
-    (0, 0): every label, into ``log_l[b, v, :K]``. ``log_l`` (>= B, V, max(K, Q)) float64.
+    ``lcpdf``: :class:`npmrf3d._kernels.parzen.LcpdfOptions`. ``query`` None: every label,
+    into ``log_l[b, v, :K]``; ``query`` (B, Q) int64 with Q >= 1 and ``query[b, 0] >= 0``: only
+    the labels ``query[b]``, into ``log_l[b, v, :Q]`` (a Metropolis step's current and proposed
+    labels). ``log_l`` (>= B, V, K or Q) float64.
     """
     n_rows = rows.shape[0]
     n_labels = models.labels.shape[0]
@@ -287,12 +287,11 @@ def rows_log_lcpdfs(volume, temps, sites, rows, models, ops, lcpdf, query, log_l
     nonzero = np.empty(n_labels, dtype=np.int64)
     log_weights = np.empty(n_labels, dtype=np.float64)
     wbuf = np.empty((2, n_max), dtype=np.float32)
-    all_labels = query.shape[0] == 0
     for v in range(models.offsets.shape[0]):
         n = models.n_patches[v]
         view_distances(volume, temps, sites, rows, models, ops, v, dist)
         for b in range(n_rows):
-            if all_labels:
+            if query is None:
                 log_lcpdf_from_distances(
                     dist[b], n, models.label_starts[v], models.labels, models.inv_two_h2[v],
                     models.inv_two_hc2[v], lcpdf.adapt_eps, lcpdf.min_two_h2, lcpdf.prune,
@@ -315,8 +314,8 @@ def sites_log_lcpdfs(volume, temps, sites, models, ops, lcpdf, out):
                      dtype=np.float64)
     for start in range(0, n_sites, chunk_sites(ops)):
         stop = min(n_sites, start + chunk_sites(ops))
-        rows_log_lcpdfs(volume, temps, sites, np.arange(start, stop), models, ops, lcpdf,
-                        np.empty((0, 0), dtype=np.int64), log_l)
+        rows_log_lcpdfs(volume, temps, sites, np.arange(start, stop), models, ops, lcpdf, None,
+                        log_l)
         out[start:stop] = log_l[: stop - start]
 
 

@@ -2,17 +2,18 @@
 LCPDFs they apply.
 
 A class update changes every site of one colour class (sites that never interact): ICM
-(:data:`icm_update_class`) or one annealing step (:data:`anneal_update_class`, Metropolis or
-heat-bath). Each comes in two compiled forms from one definition, ``serial`` (the calling thread:
-small classes) and ``parallel`` (chunks of sites on numba's threads), and computes its sites'
-neighbour distances by direct sums or matrix products (:mod:`npmrf3d._kernels.gemm`, chosen by
-``ops``); the arguments come in bundles (:class:`ViewModels`, :class:`LevelArrays`,
+(:data:`icm_update_class`) or one annealing step (:data:`anneal_update_class`: heat-bath, or
+Metropolis when given proposals). Each comes in two compiled forms from one definition,
+``serial`` (the calling thread: small classes) and ``parallel`` (chunks of sites on numba's
+threads), and computes its sites' neighbour distances by direct sums or matrix products
+(:mod:`npmrf3d._kernels.gemm`, chosen by ``ops``). Numba compiles what an argument's type decides
+(``ops`` or the proposals None or not) as separate specialisations, so a run compiles only the
+update it takes. The arguments come in bundles (:class:`ViewModels`, :class:`LevelArrays`,
 :class:`npmrf3d._kernels.parzen.LcpdfOptions`, :class:`IcmRule`, :class:`AnnealRule`).
 
 Heuristic codes (SPEC.md section 3): 0 = ML_H1a, 1 = ML_H1b, 2 = ML_H2a, 3 = ML_H2b.
 Decision codes: 0 = argmax (the paper's ICM), 1 = draw from ``exp(score / tau)`` with a
 pre-drawn uniform (this project's stochastic decision, see docs/quality.md).
-Annealing samplers: 0 = Metropolis (the paper), 1 = heat-bath.
 """
 
 from __future__ import annotations
@@ -27,7 +28,6 @@ from .gemm import chunk_count, chunk_sites, rows_log_lcpdfs
 
 H1A, H1B, H2A, H2B = 0, 1, 2, 3
 ARGMAX, SAMPLE = 0, 1
-METROPOLIS, HEAT_BATH = 0, 1
 #: Classes with fewer sites run in the calling thread: starting a parallel region costs more
 #: than it saves there (milliseconds when the cores are busy), and the result is the same.
 PARALLEL_MIN_SITES = 64
@@ -93,12 +93,11 @@ class IcmRule(NamedTuple):
 
 
 class AnnealRule(NamedTuple):
-    """An annealing step's rule: heuristic code (ML_H2a or ML_H2b), ``sampler`` code,
-    ``temperature``, ``resynth`` (inherited sites may change) and ``penalty`` (K,) float64
-    added to the objective."""
+    """An annealing step's rule: heuristic code (ML_H2a or ML_H2b), ``temperature``,
+    ``resynth`` (inherited sites may change) and ``penalty`` (K,) float64 added to the
+    objective."""
 
     heuristic: int
-    sampler: int
     temperature: float
     resynth: bool
     penalty: np.ndarray
@@ -265,8 +264,8 @@ def icm_update_chunk(start, level, sites, uniforms, models, ops, lcpdf, rule, ol
         return
     n_labels = models.labels.shape[0]
     log_l = np.empty((n_rows, models.offsets.shape[0], n_labels), dtype=np.float64)
-    rows_log_lcpdfs(level.volume, level.temps, sites, rows[:n_rows], models, ops, lcpdf,
-                    np.empty((0, 0), dtype=np.int64), log_l)
+    rows_log_lcpdfs(level.volume, level.temps, sites, rows[:n_rows], models, ops, lcpdf, None,
+                    log_l)
     score = np.empty(n_labels, dtype=np.float64)
     value = np.empty(level.volume.shape[3], dtype=np.float32)
     for b in range(n_rows):
@@ -309,9 +308,8 @@ def anneal_update_chunk(start, level, sites, candidates, uniforms, models, ops, 
     """The annealing step of the chunk of sites from ``start`` on (of one class, see
     :data:`anneal_update_class`): their LCPDFs first, then their decisions."""
     stop = min(sites.shape[0], start + chunk_sites(ops))
-    heat_bath = rule.sampler == HEAT_BATH
     rows = np.empty(stop - start, dtype=np.int64)
-    pairs = np.empty((stop - start, 2), dtype=np.int64)  # current and proposed label per row
+    pairs = np.empty((stop - start, 2), dtype=np.int64)  # Metropolis: current, proposed label
     n_rows = 0
     for q in range(start, stop):
         i, j, k = sites[q, 0], sites[q, 1], sites[q, 2]
@@ -322,7 +320,10 @@ def anneal_update_chunk(start, level, sites, candidates, uniforms, models, ops, 
         current = level.labels_volume[i, j, k]
         old_labels[q] = current
         new_labels[q] = current
-        if heat_bath or (current >= 0 and candidates[q] != current):
+        if candidates is None:  # heat-bath: every visited site draws
+            rows[n_rows] = q
+            n_rows += 1
+        elif current >= 0 and candidates[q] != current:
             rows[n_rows] = q
             pairs[n_rows, 0] = current
             pairs[n_rows, 1] = candidates[q]
@@ -333,17 +334,18 @@ def anneal_update_chunk(start, level, sites, candidates, uniforms, models, ops, 
     if n_rows == 0:
         return
     n_labels = models.labels.shape[0]
-    log_l = np.empty((n_rows, models.offsets.shape[0], n_labels if heat_bath else 2),
+    log_l = np.empty((n_rows, models.offsets.shape[0], n_labels if candidates is None else 2),
                      dtype=np.float64)
     rows_log_lcpdfs(level.volume, level.temps, sites, rows[:n_rows], models, ops, lcpdf,
-                    np.empty((0, 0), dtype=np.int64) if heat_bath else pairs[:n_rows], log_l)
+                    None if candidates is None else pairs[:n_rows], log_l)
     score = np.empty(n_labels, dtype=np.float64)
     pen2 = np.empty(2, dtype=np.float64)
     two = np.empty(2, dtype=np.float64)
     for b in range(n_rows):
         q = rows[b]
-        current = pairs[b, 0]
-        if heat_bath:
+        i, j, k = sites[q, 0], sites[q, 1], sites[q, 2]
+        current = level.labels_volume[i, j, k]
+        if candidates is None:
             objective_scores(log_l[b], rule.heuristic, rule.penalty, score)
             chosen = sample_index(score, rule.temperature, uniforms[q])
         else:
@@ -354,7 +356,7 @@ def anneal_update_chunk(start, level, sites, candidates, uniforms, models, ops, 
                 chosen = current
         new_labels[q] = chosen
         if chosen != current:
-            set_voxel(level, sites[q, 0], sites[q, 1], sites[q, 2], chosen, models.labels[chosen])
+            set_voxel(level, i, j, k, chosen, models.labels[chosen])
 
 
 @serial_and_parallel
@@ -364,11 +366,12 @@ def anneal_update_class(loop):
         """One annealing step at every site of one colour class, at ``rule.temperature``.
 
         ``rule``: :class:`AnnealRule`; the other arguments as for :data:`icm_update_class`.
-        ``rule.sampler`` METROPOLIS: the site's current label is replaced by ``candidates[q]``
-        if :func:`metropolis_accept` agrees on the change of the heuristic's objective (ML_H2a
-        or ML_H2b, plus ``penalty``); only these two labels' LCPDFs are computed, so the cost
-        does not grow with the number of labels. HEAT_BATH: the new label is drawn from
-        ``exp(objective / temperature) / Z`` over all labels (this project's addition).
+        ``candidates`` (S,) int64, Metropolis: the site's current label is replaced by
+        ``candidates[q]`` if :func:`metropolis_accept` agrees on the change of the heuristic's
+        objective (ML_H2a or ML_H2b, plus ``penalty``); only these two labels' LCPDFs are
+        computed, so the cost does not grow with the number of labels. ``candidates`` None,
+        heat-bath: the new label is drawn from ``exp(objective / temperature) / Z`` over all
+        labels (this project's addition).
         Inherited sites are skipped unless ``rule.resynth``. ``level.temps`` only sets the
         neighbours' trust (all zero during annealing: every neighbour counts).
         ``old_labels``/``new_labels`` receive the label indices (-2 where not visited).

@@ -35,14 +35,7 @@ import numpy as np
 from ..._kernels._jit import single_threaded_blas
 from ..._kernels.gemm import make_gemm_operands
 from ..._kernels.parzen import LcpdfOptions
-from ..._kernels.relax import (
-    HEAT_BATH,
-    METROPOLIS,
-    AnnealRule,
-    LevelArrays,
-    ViewModels,
-    anneal_update_class,
-)
+from ..._kernels.relax import AnnealRule, LevelArrays, ViewModels, anneal_update_class
 from ._sweep import label_counts, mean_class_sites, resolve_distances, sweep
 
 __all__ = ["AnnealOptions", "SAMPLERS", "SCHEDULES", "PROPOSALS", "geometric_schedule",
@@ -80,8 +73,8 @@ SCHEDULES: dict[str, Callable[[float, float, int], np.ndarray]] = {
     "geometric": geometric_schedule,
     "linear": linear_schedule,
 }
-#: Samplers by name (kernel codes).
-SAMPLERS = {"metropolis": METROPOLIS, "heat-bath": HEAT_BATH}
+#: Samplers by name.
+SAMPLERS = ("metropolis", "heat-bath")
 #: Where Metropolis proposals come from.
 PROPOSALS = ("exemplar", "labels")
 
@@ -144,13 +137,14 @@ def relax_anneal(
     stats : ``sweeps``, ``updates`` (voxel updates), ``evaluations`` (voxel-view LCPDFs),
         ``changed`` (updates that changed the label), ``acceptance`` (share of changes per sweep)
     """
+    if sampler not in SAMPLERS:
+        raise ValueError(f"sampler must be one of {', '.join(SAMPLERS)}; got {sampler!r}")
     temps[...] = 0.0
     n_views = models.offsets.shape[0]
     n_labels = len(exemplar_freq)
     temperatures = SCHEDULES[schedule](t0, t_end, proposals)
     cumulative = np.cumsum(exemplar_freq)
     cumulative /= cumulative[-1]
-    code = SAMPLERS[sampler]
     counts = label_counts(labels_volume, n_labels)
     history = [float(temperatures[0])]
     acceptance: list[float] = []
@@ -173,8 +167,9 @@ def relax_anneal(
 
     def update(sites, drawn, penalty, parallel, old, new, temperature):
         kernel = anneal_update_class.parallel if parallel else anneal_update_class.serial
-        rule = AnnealRule(int(heuristic), code, temperature, bool(resynth), penalty)
-        kernel(level, sites, drawn[0], drawn[1], models, ops, lcpdf, rule, old, new)
+        candidates = drawn[0] if sampler == "metropolis" else None  # heat-bath: no proposals
+        rule = AnnealRule(int(heuristic), temperature, bool(resynth), penalty)
+        kernel(level, sites, candidates, drawn[1], models, ops, lcpdf, rule, old, new)
 
     with single_threaded_blas():
         for step, temperature in enumerate(temperatures, start=1):
