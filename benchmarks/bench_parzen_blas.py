@@ -29,11 +29,7 @@ from _common import hardware, matmul_gflops
 import npmrf3d
 from npmrf3d import data
 from npmrf3d._kernels._jit import single_threaded_blas, thread_count
-from npmrf3d._kernels.gemm import (
-    make_gemm_operands,
-    sites_best_distances,
-    sites_best_distances_direct,
-)
+from npmrf3d._kernels.gemm import make_gemm_operands, sites_best_distances
 from npmrf3d.config import VARIANTS
 from npmrf3d.model.exemplar import make_labels
 from npmrf3d.model.neighbourhood import colour_classes
@@ -95,7 +91,7 @@ def distance_stage(size: int, repeats: int, exemplar: str, window: int, palette:
         with single_threaded_blas():
             t_gemm = best_of(lambda: sites_best_distances(volume, temps, sites, models, ops, out),
                              repeats)
-        t_direct = best_of(lambda: sites_best_distances_direct(volume, temps, sites, models, out),
+        t_direct = best_of(lambda: sites_best_distances(volume, temps, sites, models, None, out),
                            repeats)
         for name, (wall, cpu) in (("gemm", t_gemm), ("direct", t_direct)):
             rate, rate_cpu = floor / wall / 1e9, floor / cpu / 1e9

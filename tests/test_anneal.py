@@ -8,17 +8,16 @@ import pytest
 from scipy import stats
 
 import npmrf3d
+from npmrf3d._kernels.gemm import rows_log_lcpdfs
+from npmrf3d._kernels.parzen import LcpdfOptions
 from npmrf3d._kernels.relax import (
-    HEAT_BATH,
-    METROPOLIS,
+    AnnealRule,
+    IcmRule,
+    LevelArrays,
     anneal_update_class,
-    anneal_update_class_serial,
     icm_update_class,
-    icm_update_class_serial,
-    make_buffers,
     metropolis_accept,
     sample_index,
-    site_log_lcpdfs_at,
 )
 from npmrf3d.config import VARIANTS
 from npmrf3d.errors import ParameterError
@@ -119,7 +118,7 @@ def _tiny_level(channels, heuristic="ML_H2b", shape=(8, 8, 8), window=3, seed=0)
 
 @pytest.mark.kernels
 @pytest.mark.parametrize("channels", [1, 3, 4])
-@pytest.mark.parametrize("sampler", [METROPOLIS, HEAT_BATH])
+@pytest.mark.parametrize("sampler", ["metropolis", "heat-bath"])
 @pytest.mark.parametrize("heuristic", ["ML_H2a", "ML_H2b"])
 def test_anneal_class_update_equals_a_literal_per_site_loop(channels, sampler, heuristic):
     rng, labels, freq, rule, models, info, lab, volume = _tiny_level(channels, heuristic)
@@ -140,7 +139,7 @@ def test_anneal_class_update_equals_a_literal_per_site_loop(channels, sampler, h
         combine = np.min if heuristic == "ML_H2a" else np.sum
         score = combine(log_l, axis=0) + penalty
         current = int(lab[tuple(site)])
-        if sampler == HEAT_BATH:
+        if sampler == "heat-bath":
             p = naive.naive_sample_probabilities(score, temperature)
             expected.append(int(np.searchsorted(np.cumsum(p), uniforms[q], side="right")))
         else:
@@ -150,9 +149,11 @@ def test_anneal_class_update_equals_a_literal_per_site_loop(channels, sampler, h
     old = np.empty(len(sites), dtype=np.int64)
     new = np.empty(len(sites), dtype=np.int64)
     before = lab.copy()
-    anneal_update_class(volume, lab, temps, inherited, sites, candidates, uniforms, models, code,
-                        sampler, temperature, True, rule.adaptive, adaptive_floor(info), PRUNE,
-                        penalty, rule.outlier, old, new)
+    anneal_update_class.parallel(
+        LevelArrays(volume, lab, temps, inherited), sites,
+        candidates if sampler == "metropolis" else None, uniforms, models, None,
+        LcpdfOptions(rule.adaptive, adaptive_floor(info), PRUNE, rule.outlier),
+        AnnealRule(code, temperature, True, penalty), old, new)
     np.testing.assert_array_equal(new, expected)
     np.testing.assert_array_equal(old, before[tuple(sites.T)])
     np.testing.assert_array_equal(lab[tuple(sites.T)], expected)
@@ -173,14 +174,14 @@ def test_lcpdf_at_two_labels_equals_the_full_lcpdf(channels, outlier):
         site = tuple(int(x) for x in rng.integers(0, 8, size=3))
         full = parzen.log_lcpdf(volume, temps, site, models, outlier=outlier)
         query = rng.integers(0, len(labels), size=2).astype(np.int64)
-        out = np.empty((3, 2))
-        site_log_lcpdfs_at(volume, temps, *site, models, 0.0, 0.0, PRUNE, outlier, query,
-                           make_buffers(models), out)
-        np.testing.assert_allclose(out, full[:, query], rtol=1e-9, atol=1e-9)
+        out = np.empty((1, 3, 2))
+        rows_log_lcpdfs(volume, temps, np.array([site], dtype=np.int64), np.zeros(1, np.int64),
+                        models, None, LcpdfOptions(0.0, 0.0, PRUNE, outlier), query[None], out)
+        np.testing.assert_allclose(out[0], full[:, query], rtol=1e-9, atol=1e-9)
 
 
 @pytest.mark.kernels
-@pytest.mark.parametrize("sampler", [METROPOLIS, HEAT_BATH])
+@pytest.mark.parametrize("sampler", ["metropolis", "heat-bath"])
 def test_small_class_serial_kernels_equal_the_parallel_ones(sampler):
     """Classes below PARALLEL_MIN_SITES run serially: the same code, the same result."""
     rng, labels, freq, rule, models, info, lab, volume = _tiny_level(3)
@@ -192,18 +193,19 @@ def test_small_class_serial_kernels_equal_the_parallel_ones(sampler):
     temps = rng.random(lab.shape).astype(np.float32)
     inherited = rng.random(lab.shape) < 0.3
     code = get_heuristic("ML_H2b").code
+    lcpdf = LcpdfOptions(rule.adaptive, adaptive_floor(info), PRUNE, rule.outlier)
     results = []
-    for kernel in (anneal_update_class, anneal_update_class_serial):
+    for kernel in anneal_update_class:
         v, lb, old, new = volume.copy(), lab.copy(), np.empty(len(sites), np.int64), np.empty(len(sites), np.int64)
-        kernel(v, lb, np.zeros_like(temps), inherited, sites, candidates, uniforms, models, code,
-               sampler, 0.5, False, rule.adaptive, adaptive_floor(info), PRUNE, penalty,
-               rule.outlier, old, new)
+        kernel(LevelArrays(v, lb, np.zeros_like(temps), inherited), sites,
+               candidates if sampler == "metropolis" else None, uniforms, models, None, lcpdf,
+               AnnealRule(code, 0.5, False, penalty), old, new)
         results.append((v, lb, old, new))
-    for kernel in (icm_update_class, icm_update_class_serial):
+    for kernel in icm_update_class:
         v, lb, t = volume.copy(), lab.copy(), temps.copy()
         old, new = np.empty(len(sites), np.int64), np.empty(len(sites), np.int64)
-        kernel(v, lb, t, inherited, sites, uniforms, models, code, 1, 0.2, -3.0, True,
-               rule.adaptive, adaptive_floor(info), PRUNE, penalty, rule.outlier, old, new)
+        kernel(LevelArrays(v, lb, t, inherited), sites, uniforms, models, None, lcpdf,
+               IcmRule(code, 1, 0.2, -3.0, True, penalty), old, new)
         results.append((v, lb, t, old, new))
     for a, b in ((0, 1), (2, 3)):
         for x, y in zip(results[a], results[b]):
@@ -226,10 +228,11 @@ def test_greedy_at_zero_temperature_never_lowers_a_site_objective():
     before = objective(lab, volume)
     old = np.empty(len(sites), dtype=np.int64)
     new = np.empty(len(sites), dtype=np.int64)
-    anneal_update_class(volume, lab, temps, np.zeros(lab.shape, dtype=bool), sites, candidates,
-                        np.zeros(len(sites)), models, get_heuristic("ML_H2b").code, METROPOLIS,
-                        0.0, True, rule.adaptive, adaptive_floor(info), PRUNE, penalty,
-                        rule.outlier, old, new)
+    anneal_update_class.parallel(
+        LevelArrays(volume, lab, temps, np.zeros(lab.shape, dtype=bool)), sites, candidates,
+        np.zeros(len(sites)), models, None,
+        LcpdfOptions(rule.adaptive, adaptive_floor(info), PRUNE, rule.outlier),
+        AnnealRule(get_heuristic("ML_H2b").code, 0.0, True, penalty), old, new)
     after = objective(lab, volume)
     assert (after >= before - 1e-9).all()
     assert (old != new).any()  # some proposals were improvements and were taken

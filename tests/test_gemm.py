@@ -10,16 +10,18 @@ import pytest
 from npmrf3d._kernels._jit import single_threaded_blas
 from npmrf3d._kernels.gemm import (
     BLOCK,
-    anneal_update_class_gemm,
-    anneal_update_class_gemm_serial,
     block_distances,
     gemm_rows,
-    icm_update_class_gemm,
-    icm_update_class_gemm_serial,
-    make_block_scratch,
     make_gemm_operands,
     sites_best_distances,
-    sites_best_distances_direct,
+)
+from npmrf3d._kernels.parzen import LcpdfOptions
+from npmrf3d._kernels.relax import (
+    AnnealRule,
+    IcmRule,
+    LevelArrays,
+    anneal_update_class,
+    icm_update_class,
 )
 from npmrf3d.config import DecisionRule
 from npmrf3d.model import parzen
@@ -93,17 +95,15 @@ def test_block_distances_match_the_direct_sum(channels, window, temps_mode, rng)
     for a, v in enumerate(VIEWS3):
         offsets = ref[v]["offsets"]
         a_rows, s0 = np.empty((BLOCK, width), np.float32), np.empty(BLOCK)
-        gemm_rows(volume, temps, sites, rows, len(sites), models.offsets[a], ops.centre, a_rows,
-                  s0)
+        gemm_rows(volume, temps, sites, rows, models.offsets[a], ops.centre, a_rows, s0)
         want_rows, want_s0 = naive.naive_gemm_rows(volume, temps, sites, offsets,
                                                    ops.centre.astype(np.float64))
         np.testing.assert_allclose(a_rows[: len(sites)], want_rows, rtol=1e-6, atol=1e-6)
         np.testing.assert_allclose(s0[: len(sites)], want_s0, rtol=1e-6, atol=1e-6)
         n = int(models.n_patches[a])
-        scratch = make_block_scratch(BLOCK, width, models.patches_t.shape[2])
+        product = np.empty((BLOCK, models.patches_t.shape[2]), np.float32)
         with single_threaded_blas():
-            block_distances(a_rows, s0, len(sites), n_m, ops.patches[a], ops.norms[a], n, scratch)
-        product = scratch[3]
+            block_distances(a_rows, s0, len(sites), n_m, ops.patches[a], ops.norms[a], n, product)
         got = product[: len(sites), :n].astype(np.float64)
         want = naive.naive_block_distances(volume, temps, sites, offsets, ref[v]["patches"])
         yc = np.abs(ref[v]["patches"] - ops.centre.astype(np.float64))  # (n, M, C)
@@ -162,12 +162,13 @@ def test_icm_class_update_serial_equals_parallel(rng):
     ops = make_gemm_operands(models.patches_t, models.n_patches, 1)
     uniforms = rng.random(len(sites))
     out = []
-    for kernel in (icm_update_class_gemm, icm_update_class_gemm_serial):
+    for kernel in icm_update_class:
         v, lv, t = volume.copy(), lab.copy(), temps.copy()
         old, new = np.empty(len(sites), np.int64), np.empty(len(sites), np.int64)
         with single_threaded_blas():
-            kernel(v, lv, t, inherited, sites, uniforms, models, ops, 3, 1, 0.1, -3.0, True, 0.0,
-                   0.0, PRUNE, np.zeros(len(labels)), 0.01, old, new)
+            kernel(LevelArrays(v, lv, t, inherited), sites, uniforms, models, ops,
+                   LcpdfOptions(0.0, 0.0, PRUNE, 0.01),
+                   IcmRule(3, 1, 0.1, -3.0, True, np.zeros(len(labels))), old, new)
         out.append((v, lv, t, old, new))
     for a, b in zip(*out):
         np.testing.assert_array_equal(a, b)
@@ -177,7 +178,7 @@ def test_icm_class_update_serial_equals_parallel(rng):
     np.testing.assert_array_equal(lv[tuple(sites.T)][visited], new[visited])
 
 
-@pytest.mark.parametrize("sampler", [0, 1], ids=["metropolis", "heat-bath"])
+@pytest.mark.parametrize("sampler", ["metropolis", "heat-bath"])
 def test_anneal_class_update_serial_equals_parallel_and_keeps_unchanged_sites(sampler, rng):
     labels, models, volume, lab, _, inherited, sites = _class_state(rng, channels=3)
     temps = np.zeros(lab.shape, np.float32)
@@ -186,19 +187,21 @@ def test_anneal_class_update_serial_equals_parallel_and_keeps_unchanged_sites(sa
     candidates[::3] = lab[tuple(sites[::3].T)]  # proposals equal to the current label
     uniforms = rng.random(len(sites))
     out = []
-    for kernel in (anneal_update_class_gemm, anneal_update_class_gemm_serial):
+    for kernel in anneal_update_class:
         v, lv = volume.copy(), lab.copy()
         old, new = np.empty(len(sites), np.int64), np.empty(len(sites), np.int64)
         with single_threaded_blas():
-            kernel(v, lv, temps, inherited, sites, candidates, uniforms, models, ops, 3, sampler,
-                   0.5, False, 0.0, 0.0, PRUNE, np.zeros(len(labels)), 0.0, old, new)
+            kernel(LevelArrays(v, lv, temps, inherited), sites,
+                   candidates if sampler == "metropolis" else None, uniforms, models, ops,
+                   LcpdfOptions(0.0, 0.0, PRUNE, 0.0),
+                   AnnealRule(3, 0.5, False, np.zeros(len(labels))), old, new)
         out.append((v, lv, old, new))
     for a, b in zip(*out):
         np.testing.assert_array_equal(a, b)
     v, lv, old, new = out[0]
     skipped = inherited[tuple(sites.T)]
     assert (old[skipped] == -2).all() and (old[~skipped] == lab[tuple(sites[~skipped].T)]).all()
-    if sampler == 0:
+    if sampler == "metropolis":
         assert set(new[~skipped]) <= set(candidates) | set(old)
         same = ~skipped & (candidates == lab[tuple(sites.T)])
         np.testing.assert_array_equal(new[same], old[same])
@@ -217,7 +220,7 @@ def test_best_distances_match_naive_on_both_paths(temps_mode, rng):
     direct = np.empty((len(sites), 3), np.float32)
     with single_threaded_blas():
         sites_best_distances(volume, temps, sites, models, ops, got)
-    sites_best_distances_direct(volume, temps, sites, models, direct)
+    sites_best_distances(volume, temps, sites, models, None, direct)
     want = np.array([[naive.naive_block_distances(volume, temps, [s], ref[v]["offsets"],
                                                   ref[v]["patches"]).min() for v in VIEWS3]
                      for s in sites])

@@ -12,9 +12,10 @@ speed-up in docs/quality.md).
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import NamedTuple
 
 import numba
 import scipy.linalg.cython_blas  # noqa: F401  (loads the BLAS that np.dot in a kernel calls,
@@ -48,6 +49,25 @@ jit = numba.njit(**JIT_OPTIONS)
 jit_parallel = numba.njit(parallel=True, **JIT_OPTIONS)
 jit_contract = numba.njit(**{**JIT_OPTIONS, "fastmath": {"contract"}})
 prange = numba.prange
+
+
+class SerialParallel(NamedTuple):
+    """One kernel in two compiled forms from one definition (:func:`serial_and_parallel`):
+    ``serial`` runs in the calling thread, ``parallel`` on numba's threads; same result."""
+
+    serial: Callable
+    parallel: Callable
+
+
+def serial_and_parallel(define: Callable[[Callable], Callable]) -> SerialParallel:
+    """Compile the kernel ``define(loop)`` twice: with ``loop = range`` by :data:`jit` and with
+    ``loop = prange`` by :data:`jit_parallel` (``define`` returns a function whose parallel loop
+    is ``for x in loop(n)``).
+
+    Each form is its own entry in numba's disk cache: the cache key of a closure includes the
+    contents of its cells (``range`` or ``prange``), not the ``parallel`` flag.
+    """
+    return SerialParallel(jit(define(range)), jit_parallel(define(prange)))
 
 
 def use_threads(threads: int | None) -> int:

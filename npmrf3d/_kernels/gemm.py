@@ -1,8 +1,12 @@
-"""Neighbour distances of many sites at once as one matrix product (issue 14, item 1).
+"""Neighbour distances and per-view log-LCPDFs of a chunk of sites: one matrix product per view
+for a block of sites, or the direct sum site by site.
 
-Why over 400 lines: the block versions of the ICM and annealing class updates live beside the
-product they are built on (the per-site rules they apply are the shared ones of
-:mod:`npmrf3d._kernels.relax`).
+The class updates (:mod:`npmrf3d._kernels.relax`) and the public LCPDF functions work on a chunk
+of sites at a time; ``ops`` chooses how its distances ``D_p`` are computed: a
+:class:`GemmOperands` for the product (blocks of :data:`BLOCK` sites), ``None`` for the direct
+sum of :func:`npmrf3d._kernels.parzen.neighbour_distances` (chunks of :data:`CHUNK` sites).
+Numba compiles each choice as its own specialisation (``ops is None`` is decided when compiling),
+so a run compiles only the path it takes.
 
 For one view, sites ``s`` of a block and exemplar patches ``p``, with trust ``t_m = (1 - T_m)^2``
 of neighbour ``m``, values centred on the exemplar's channel means ``mu`` (``x' = x - mu``,
@@ -46,19 +50,26 @@ from .parzen import (
     log_lcpdf_from_distances,
     neighbour_distances,
 )
-from .relax import (
-    HEAT_BATH,
-    choose_label,
-    cool_site,
-    make_buffers,
-    metropolis_accept,
-    objective_scores,
-    penalty_pair,
-    sample_index,
-)
 
 #: Sites per matrix product (a fixed partition of each class: results do not depend on threads).
 BLOCK = 256
+#: Sites per chunk of the direct sum (few: the threads' loads stay balanced).
+CHUNK = 8
+
+
+@jit
+def chunk_sites(ops):
+    """Sites per chunk: :data:`BLOCK` with matrix products, :data:`CHUNK` with direct sums."""
+    return CHUNK if ops is None else BLOCK
+
+
+@jit
+def chunk_count(n_sites, ops):
+    """Number of chunks of ``n_sites`` sites (the last one may be shorter); chunk ``c`` starts
+    at site ``c * chunk_sites(ops)``, an int64 whether ``c`` is ``range``'s or ``prange``'s
+    (unsigned) index, so the callees compile once for both."""
+    size = chunk_sites(ops)
+    return (n_sites + size - 1) // size
 
 
 class GemmOperands(NamedTuple):
@@ -111,8 +122,8 @@ def make_gemm_operands(patches_t, n_patches, n_channels):
 
 
 @jit
-def gemm_rows(volume, temps, sites, rows, n_rows, offsets, centre, a, s0):
-    """The left operand of the product for the sites ``sites[rows[:n_rows]]`` of one view.
+def gemm_rows(volume, temps, sites, rows, offsets, centre, a, s0):
+    """The left operand of the product for the sites ``sites[rows]`` of one view.
 
     Row ``b`` of ``a`` (B, M*C + M) float32: ``-2 t_m x'_{m,c}`` at ``m*C + c``, ``t_m`` at
     ``M*C + m``; ``s0[b] = sum_m t_m ||x'_m||^2`` (float64).
@@ -120,7 +131,7 @@ def gemm_rows(volume, temps, sites, rows, n_rows, offsets, centre, a, s0):
     n1, n2, n3, nc = volume.shape
     n_m = offsets.shape[0]
     mc = n_m * nc
-    for b in range(n_rows):
+    for b in range(rows.shape[0]):
         q = rows[b]
         i, j, k = sites[q, 0], sites[q, 1], sites[q, 2]
         acc = 0.0
@@ -146,55 +157,43 @@ PACK_BELOW = 0.75
 
 
 @jit
-def make_block_scratch(n_rows_max, width, n_max):
-    """Scratch of :func:`block_distances` for up to ``n_rows_max`` rows: the packed left operand
-    (flat), kept columns, the float64 sum of the fully trusted ``q`` rows, the product."""
-    return (np.empty(n_rows_max * width, dtype=np.float32),
-            np.empty(width, dtype=np.int64),
-            np.empty(n_max, dtype=np.float64),
-            np.empty((n_rows_max, n_max), dtype=np.float32))
-
-
-@jit
-def block_distances(a, s0, n_rows, n_m, patches, norms, n_patches, scratch):
-    """``D_p`` of rows ``b < n_rows`` into the product buffer ``scratch[3][b, p]`` (float32).
+def block_distances(a, s0, n_rows, n_m, patches, norms, n_patches, product):
+    """``D_p`` of rows ``b < n_rows`` into ``product[b, p]`` (float32, (>= n_rows, n_max)).
 
     ``a`` (B, M*C + M) and ``s0`` from :func:`gemm_rows`; ``patches`` (M*C + M, n_max) and
-    ``norms`` (n_max,): one view's :class:`GemmOperands`; ``scratch`` from
-    :func:`make_block_scratch`. Columns that no row needs are left out of the product: a
-    neighbour with trust 0 in every row (a hot voxel) contributes nothing, and the ``q`` column
-    of a neighbour with trust 1 in every row adds the same ``q_{p,m}`` to every row, once, in
-    float64 (all fully trusted: ``norms``). Columns from ``n_patches`` on are left undefined.
+    ``norms`` (n_max,): one view's :class:`GemmOperands`. Columns that no row needs are left
+    out of the product: a neighbour with trust 0 in every row (a hot voxel) contributes nothing,
+    and the ``q`` column of a neighbour with trust 1 in every row adds the same ``q_{p,m}`` to
+    every row, once, in float64 (all fully trusted: ``norms``). Columns from ``n_patches`` on
+    are left undefined.
     """
-    packed_a, kept, extra, product = scratch
     width = patches.shape[0]
+    packed_a = np.empty(n_rows * width, dtype=np.float32)  # the packed left operand (flat)
+    kept = np.empty(width, dtype=np.int64)  # the columns kept
+    extra = np.empty(patches.shape[1], dtype=np.float64)  # sum of the fully trusted q rows
     n_mc = width - n_m
     nc = n_mc // n_m
+    live = np.zeros(n_m, dtype=np.bool_)  # neighbour m is trusted by some row
+    full = np.ones(n_m, dtype=np.bool_)  # ... fully (t_m = 1) by every row
+    for b in range(n_rows):
+        for m in range(n_m):
+            t = a[b, n_mc + m]
+            if t != 0.0:
+                live[m] = True
+            if t != 1.0:
+                full[m] = False
     n_kept = 0
     n_full = 0
     for m in range(n_m):  # value columns of neighbours someone trusts
-        live = False
-        for b in range(n_rows):
-            if a[b, n_mc + m] != 0.0:
-                live = True
-                break
-        if live:
+        if live[m]:
             for c in range(nc):
                 kept[n_kept] = m * nc + c
                 n_kept += 1
     n_values = n_kept
     for m in range(n_m):  # q columns of neighbours trusted partly (not 0 or 1 in every row)
-        live = False
-        full = True
-        for b in range(n_rows):
-            t = a[b, n_mc + m]
-            if t != 0.0:
-                live = True
-            if t != 1.0:
-                full = False
-        if full:
+        if full[m]:
             n_full += 1
-        elif live:
+        elif live[m]:
             kept[n_kept] = n_mc + m
             n_kept += 1
     pack = n_kept < PACK_BELOW * width
@@ -229,12 +228,7 @@ def block_distances(a, s0, n_rows, n_m, patches, norms, n_patches, scratch):
         for p in range(n_patches):
             extra[p] = 0.0
         for m in range(n_m):
-            full = True
-            for b in range(n_rows):
-                if a[b, n_mc + m] != 1.0:
-                    full = False
-                    break
-            if full:
+            if full[m]:
                 row = patches[n_mc + m]
                 for p in range(n_patches):
                     extra[p] += row[p]
@@ -251,284 +245,91 @@ def block_distances(a, s0, n_rows, n_m, patches, norms, n_patches, scratch):
                 row[p] = d if d > 0.0 else 0.0
 
 
-@jit
-def block_log_lcpdfs(volume, temps, sites, rows, n_rows, models, ops, adapt_eps, min_two_h2,
-                     prune, outlier, query, log_l):
-    """Per-view log-LCPDFs of the sites ``sites[rows[:n_rows]]`` (at most :data:`BLOCK`).
 
-    ``query`` (S, Q) int64 with Q >= 1 and ``query[q, 0] >= 0``: only the labels
-    ``query[rows[b]]`` are evaluated into ``log_l[b, v, :Q]`` (a Metropolis step's current and
-    proposed labels); ``query`` of shape (0, 0): every label, into ``log_l[b, v, :K]``.
-    ``log_l`` (at least n_rows, V, max(K, Q)) float64. The same LCPDF as
-    :func:`npmrf3d._kernels.relax.site_log_lcpdfs`; only ``D_p`` is computed differently.
+@jit
+def view_distances(volume, temps, sites, rows, models, ops, v, out):
+    """``D_p`` of the sites ``sites[rows]`` in view ``v`` into ``out[b, :n]`` (float32, (>= B,
+    n_max) for B rows; ``n = models.n_patches[v]``): one matrix product for them all (``ops``:
+    :class:`GemmOperands`) or the direct sum site by site (``ops`` None)."""
+    n = models.n_patches[v]
+    n_rows = rows.shape[0]
+    if ops is None:
+        values = np.empty(models.patches_t.shape[1], dtype=np.float32)
+        trust = np.empty(models.offsets.shape[1], dtype=np.float32)
+        kept = np.empty(models.patches_t.shape[1], dtype=np.int64)
+        for b in range(n_rows):
+            q = rows[b]
+            gather_neighbours(volume, temps, sites[q, 0], sites[q, 1], sites[q, 2],
+                              models.offsets[v], values, trust)
+            neighbour_distances(values, trust, models.patches_t[v], n, out[b], kept)
+    else:
+        a = np.empty((n_rows, ops.patches.shape[1]), dtype=np.float32)
+        s0 = np.empty(n_rows, dtype=np.float64)
+        gemm_rows(volume, temps, sites, rows, models.offsets[v], ops.centre, a, s0)
+        block_distances(a, s0, n_rows, models.offsets.shape[1], ops.patches[v], ops.norms[v], n,
+                        out)
+
+
+@jit
+def rows_log_lcpdfs(volume, temps, sites, rows, models, ops, lcpdf, query, log_l):
+    """Per-view log-LCPDFs of the sites ``sites[rows]`` (B rows, at most one chunk).
+
+    ``lcpdf``: :class:`npmrf3d._kernels.parzen.LcpdfOptions`. ``query`` None: every label,
+    into ``log_l[b, v, :K]``; ``query`` (B, Q) int64 with Q >= 1 and ``query[b, 0] >= 0``: only
+    the labels ``query[b]``, into ``log_l[b, v, :Q]`` (a Metropolis step's current and proposed
+    labels). ``log_l`` (>= B, V, K or Q) float64.
     """
-    n_views, n_m = models.offsets.shape[0], models.offsets.shape[1]
+    n_rows = rows.shape[0]
     n_labels = models.labels.shape[0]
-    nc = volume.shape[3]
-    width = ops.patches.shape[1]
-    a = np.empty((n_rows, width), dtype=np.float32)
-    s0 = np.empty(n_rows, dtype=np.float64)
-    scratch = make_block_scratch(n_rows, width, models.patches_t.shape[2])
-    product = scratch[3]
+    n_max = models.patches_t.shape[2]
+    dist = np.empty((n_rows, n_max), dtype=np.float32)
     weights = np.zeros(n_labels, dtype=np.float64)
     nonzero = np.empty(n_labels, dtype=np.int64)
     log_weights = np.empty(n_labels, dtype=np.float64)
-    wbuf = np.empty((2, models.patches_t.shape[2]), dtype=np.float32)
-    all_labels = query.shape[0] == 0
-    for v in range(n_views):
+    wbuf = np.empty((2, n_max), dtype=np.float32)
+    for v in range(models.offsets.shape[0]):
         n = models.n_patches[v]
-        gemm_rows(volume, temps, sites, rows, n_rows, models.offsets[v], ops.centre, a, s0)
-        block_distances(a, s0, n_rows, n_m, ops.patches[v], ops.norms[v], n, scratch)
+        view_distances(volume, temps, sites, rows, models, ops, v, dist)
         for b in range(n_rows):
-            if all_labels:
+            if query is None:
                 log_lcpdf_from_distances(
-                    product[b], n, models.label_starts[v], models.labels,
-                    models.inv_two_h2[v], models.inv_two_hc2[v], adapt_eps, min_two_h2, prune,
-                    models.log_norm_const[v], models.kernel_tables[v], outlier, weights,
+                    dist[b], n, models.label_starts[v], models.labels, models.inv_two_h2[v],
+                    models.inv_two_hc2[v], lcpdf.adapt_eps, lcpdf.min_two_h2, lcpdf.prune,
+                    models.log_norm_const[v], models.kernel_tables[v], lcpdf.outlier, weights,
                     nonzero, log_weights, wbuf, log_l[b, v])
             else:
                 log_lcpdf_at_labels(
-                    product[b], n, models.label_starts[v], models.labels,
-                    models.inv_two_h2[v], models.inv_two_hc2[v], adapt_eps, min_two_h2, prune,
-                    models.log_norm_const[v], outlier, query[rows[b]], weights, nonzero,
+                    dist[b], n, models.label_starts[v], models.labels, models.inv_two_h2[v],
+                    models.inv_two_hc2[v], lcpdf.adapt_eps, lcpdf.min_two_h2, lcpdf.prune,
+                    models.log_norm_const[v], lcpdf.outlier, query[b], weights, nonzero,
                     log_weights, wbuf, log_l[b, v])
 
 
 @jit
-def icm_update_block(
-    start, stop, volume, labels_volume, temps, inherited, sites, uniforms, models, ops,
-    heuristic, decision, tau, xi, resynth, adapt_eps, min_two_h2, prune, penalty, outlier,
-    old_labels, new_labels,
-):
-    """The ICM update of sites ``start .. stop - 1`` (one block) of one class; the same rule
-    as :func:`npmrf3d._kernels.relax.icm_update_sites`, with the block's distances from one
-    matrix product per view (sites of a class never interact, so gathering every site of the
-    block before updating any of them changes nothing)."""
-    n_views = models.offsets.shape[0]
-    n_labels = models.labels.shape[0]
-    nc = volume.shape[3]
-    rows = np.empty(BLOCK, dtype=np.int64)
-    n_rows = 0
-    for q in range(start, stop):
-        i, j, k = sites[q, 0], sites[q, 1], sites[q, 2]
-        if temps[i, j, k] > 0.0 or (resynth and inherited[i, j, k]):
-            rows[n_rows] = q
-            n_rows += 1
-        else:
-            old_labels[q] = -2
-            new_labels[q] = -2
-    if n_rows == 0:
-        return
-    log_l = np.empty((n_rows, n_views, n_labels), dtype=np.float64)
-    block_log_lcpdfs(volume, temps, sites, rows, n_rows, models, ops, adapt_eps, min_two_h2,
-                     prune, outlier, np.empty((0, 0), dtype=np.int64), log_l)
-    score = np.empty(n_labels, dtype=np.float64)
-    value = np.empty(nc, dtype=np.float32)
-    for b in range(n_rows):
-        q = rows[b]
-        i, j, k = sites[q, 0], sites[q, 1], sites[q, 2]
-        chosen = choose_label(log_l[b], heuristic, decision, tau, uniforms[q], penalty,
-                              models.labels, value, score)
-        old_labels[q] = labels_volume[i, j, k]
-        new_labels[q] = chosen
-        labels_volume[i, j, k] = chosen
-        for c in range(nc):
-            volume[i, j, k, c] = value[c]
-        if not inherited[i, j, k]:
-            cool_site(temps, i, j, k, models.union_offsets, xi)
-
-
-@jit_parallel
-def icm_update_class_gemm(
-    volume, labels_volume, temps, inherited, sites, uniforms, models, ops, heuristic,
-    decision, tau, xi, resynth, adapt_eps, min_two_h2, prune, penalty, outlier, old_labels,
-    new_labels,
-):
-    """:func:`npmrf3d._kernels.relax.icm_update_class` with the distances of each block of
-    :data:`BLOCK` sites from matrix products (blocks in parallel)."""
+def sites_log_lcpdfs(volume, temps, sites, models, ops, lcpdf, out):
+    """Per-view log-LCPDFs of every site of ``sites`` (S, 3) into ``out`` (S, V, K), chunk by
+    chunk (the public :func:`npmrf3d.model.parzen.log_lcpdf` and ``log_lcpdf_sites``)."""
     n_sites = sites.shape[0]
-    for blk in prange((n_sites + BLOCK - 1) // BLOCK):
-        icm_update_block(blk * BLOCK, min(n_sites, (blk + 1) * BLOCK), volume, labels_volume,
-                         temps, inherited, sites, uniforms, models, ops, heuristic, decision,
-                         tau, xi, resynth, adapt_eps, min_two_h2, prune, penalty, outlier,
-                         old_labels, new_labels)
-
-
-@jit
-def icm_update_class_gemm_serial(
-    volume, labels_volume, temps, inherited, sites, uniforms, models, ops, heuristic,
-    decision, tau, xi, resynth, adapt_eps, min_two_h2, prune, penalty, outlier, old_labels,
-    new_labels,
-):
-    """:func:`icm_update_class_gemm` in the calling thread (small classes; same blocks, same
-    result)."""
-    n_sites = sites.shape[0]
-    for blk in range((n_sites + BLOCK - 1) // BLOCK):
-        icm_update_block(blk * BLOCK, min(n_sites, (blk + 1) * BLOCK), volume, labels_volume,
-                         temps, inherited, sites, uniforms, models, ops, heuristic, decision,
-                         tau, xi, resynth, adapt_eps, min_two_h2, prune, penalty, outlier,
-                         old_labels, new_labels)
-
-
-@jit
-def anneal_update_block(
-    start, stop, volume, labels_volume, temps, inherited, sites, candidates, uniforms, models,
-    ops, heuristic, sampler, temperature, resynth, adapt_eps, min_two_h2, prune, penalty,
-    outlier, old_labels, new_labels,
-):
-    """The annealing step of sites ``start .. stop - 1`` (one block) of one class; the same
-    rule as :func:`npmrf3d._kernels.relax.anneal_update_sites`, with the block's distances
-    from one matrix product per view."""
-    n_views = models.offsets.shape[0]
-    n_labels = models.labels.shape[0]
-    nc = volume.shape[3]
-    rows = np.empty(BLOCK, dtype=np.int64)
-    n_rows = 0
-    heat_bath = sampler == HEAT_BATH
-    pairs = np.empty((stop - start, 2), dtype=np.int64)
-    for q in range(start, stop):
-        i, j, k = sites[q, 0], sites[q, 1], sites[q, 2]
-        if inherited[i, j, k] and not resynth:
-            old_labels[q] = -2
-            new_labels[q] = -2
-            continue
-        current = labels_volume[i, j, k]
-        old_labels[q] = current
-        new_labels[q] = current
-        pairs[q - start, 0] = current
-        pairs[q - start, 1] = candidates[q]
-        if heat_bath or (current >= 0 and candidates[q] != current):
-            rows[n_rows] = q
-            n_rows += 1
-        elif candidates[q] != current:  # a voxel without a label takes the proposal as it is
-            chosen = candidates[q]
-            new_labels[q] = chosen
-            labels_volume[i, j, k] = chosen
-            for c in range(nc):
-                volume[i, j, k, c] = models.labels[chosen, c]
-    if n_rows == 0:
-        return
-    width = n_labels if heat_bath else 2
-    log_l = np.empty((n_rows, n_views, width), dtype=np.float64)
-    # the block's own rows of ``pairs`` are addressed by ``rows[b] - start``: shift them
-    local = np.empty(BLOCK, dtype=np.int64)
-    for b in range(n_rows):
-        local[b] = rows[b] - start
-    block_log_lcpdfs(volume, temps, sites[start:stop], local, n_rows, models, ops, adapt_eps,
-                     min_two_h2, prune, outlier,
-                     np.empty((0, 0), dtype=np.int64) if heat_bath else pairs, log_l)
-    score = np.empty(n_labels, dtype=np.float64)
-    pen2 = np.empty(2, dtype=np.float64)
-    two = np.empty(2, dtype=np.float64)
-    for b in range(n_rows):
-        q = rows[b]
-        i, j, k = sites[q, 0], sites[q, 1], sites[q, 2]
-        current = labels_volume[i, j, k]
-        if heat_bath:
-            objective_scores(log_l[b], heuristic, penalty, score)
-            chosen = sample_index(score, temperature, uniforms[q])
-        else:
-            chosen = candidates[q]
-            pair = pairs[q - start]
-            objective_scores(log_l[b], heuristic, penalty_pair(penalty, pair, pen2), two)
-            if not metropolis_accept(two[1] - two[0], temperature, uniforms[q]):
-                chosen = current
-        new_labels[q] = chosen
-        if chosen != current:
-            labels_volume[i, j, k] = chosen
-            for c in range(nc):
-                volume[i, j, k, c] = models.labels[chosen, c]
-
-
-@jit_parallel
-def anneal_update_class_gemm(
-    volume, labels_volume, temps, inherited, sites, candidates, uniforms, models, ops,
-    heuristic, sampler, temperature, resynth, adapt_eps, min_two_h2, prune, penalty, outlier,
-    old_labels, new_labels,
-):
-    """:func:`npmrf3d._kernels.relax.anneal_update_class` with the distances of each block of
-    :data:`BLOCK` sites from matrix products (blocks in parallel)."""
-    n_sites = sites.shape[0]
-    for blk in prange((n_sites + BLOCK - 1) // BLOCK):
-        anneal_update_block(blk * BLOCK, min(n_sites, (blk + 1) * BLOCK), volume, labels_volume,
-                            temps, inherited, sites, candidates, uniforms, models, ops,
-                            heuristic, sampler, temperature, resynth, adapt_eps, min_two_h2,
-                            prune, penalty, outlier, old_labels, new_labels)
-
-
-@jit
-def anneal_update_class_gemm_serial(
-    volume, labels_volume, temps, inherited, sites, candidates, uniforms, models, ops,
-    heuristic, sampler, temperature, resynth, adapt_eps, min_two_h2, prune, penalty, outlier,
-    old_labels, new_labels,
-):
-    """:func:`anneal_update_class_gemm` in the calling thread (small classes; same result)."""
-    n_sites = sites.shape[0]
-    for blk in range((n_sites + BLOCK - 1) // BLOCK):
-        anneal_update_block(blk * BLOCK, min(n_sites, (blk + 1) * BLOCK), volume, labels_volume,
-                            temps, inherited, sites, candidates, uniforms, models, ops,
-                            heuristic, sampler, temperature, resynth, adapt_eps, min_two_h2,
-                            prune, penalty, outlier, old_labels, new_labels)
-
-
-@jit
-def sites_log_lcpdfs(volume, temps, sites, models, ops, adapt_eps, min_two_h2, prune, outlier,
-                     out):
-    """Per-view log-LCPDFs of every site of ``sites`` (S, 3) into ``out`` (S, V, K), block by
-    block (the public :func:`npmrf3d.model.parzen.log_lcpdf_sites`)."""
-    n_sites = sites.shape[0]
-    rows = np.arange(BLOCK)
-    log_l = np.empty((BLOCK, models.offsets.shape[0], models.labels.shape[0]), dtype=np.float64)
-    none = np.empty((0, 0), dtype=np.int64)
-    for start in range(0, n_sites, BLOCK):
-        n_rows = min(BLOCK, n_sites - start)
-        block_log_lcpdfs(volume, temps, sites[start:start + n_rows], rows, n_rows, models, ops,
-                         adapt_eps, min_two_h2, prune, outlier, none, log_l)
-        out[start:start + n_rows] = log_l[:n_rows]
-
-
-@jit
-def best_distances_block(start, stop, volume, temps, sites, models, ops, out):
-    """``out[q, v] = min_p D_p`` of sites ``start .. stop - 1`` (one block) by the product."""
-    n_m = models.offsets.shape[1]
-    width = ops.patches.shape[1]
-    rows = np.arange(BLOCK)
-    n_rows = stop - start
-    a = np.empty((n_rows, width), dtype=np.float32)
-    s0 = np.empty(n_rows, dtype=np.float64)
-    scratch = make_block_scratch(n_rows, width, models.patches_t.shape[2])
-    for v in range(models.offsets.shape[0]):
-        n = models.n_patches[v]
-        gemm_rows(volume, temps, sites[start:stop], rows, n_rows, models.offsets[v], ops.centre,
-                  a, s0)
-        block_distances(a, s0, n_rows, n_m, ops.patches[v], ops.norms[v], n, scratch)
-        for b in range(n_rows):
-            out[start + b, v] = scratch[3][b, :n].min()
+    log_l = np.empty((chunk_sites(ops), models.offsets.shape[0], models.labels.shape[0]),
+                     dtype=np.float64)
+    for start in range(0, n_sites, chunk_sites(ops)):
+        stop = min(n_sites, start + chunk_sites(ops))
+        rows_log_lcpdfs(volume, temps, sites, np.arange(start, stop), models, ops, lcpdf, None,
+                        log_l)
+        out[start:stop] = log_l[: stop - start]
 
 
 @jit_parallel
 def sites_best_distances(volume, temps, sites, models, ops, out):
     """The best-matching patch distance ``min_p D_p`` of every site (S, 3) and view into ``out``
-    (S, V) float32, by blocks of matrix products in parallel (the distance stage of the
-    relaxations alone: what ``benchmarks/bench_parzen_blas.py`` times)."""
+    (S, V) float32, by chunks in parallel: the distance stage of the relaxations alone (what
+    ``benchmarks/bench_parzen_blas.py`` times; ``ops`` as for :func:`view_distances`)."""
     n_sites = sites.shape[0]
-    for blk in prange((n_sites + BLOCK - 1) // BLOCK):
-        best_distances_block(blk * BLOCK, min(n_sites, (blk + 1) * BLOCK), volume, temps, sites,
-                             models, ops, out)
-
-
-@jit_parallel
-def sites_best_distances_direct(volume, temps, sites, models, out):
-    """:func:`sites_best_distances` by the direct per-site sum
-    (:func:`npmrf3d._kernels.parzen.neighbour_distances`), for comparison."""
-    n_sites = sites.shape[0]
-    for blk in prange((n_sites + BLOCK - 1) // BLOCK):
-        buffers = make_buffers(models)
-        values, trust, dist, _, _, _, rows, _ = buffers
-        for q in range(blk * BLOCK, min(n_sites, (blk + 1) * BLOCK)):
-            for v in range(models.offsets.shape[0]):
-                n = models.n_patches[v]
-                gather_neighbours(volume, temps, sites[q, 0], sites[q, 1], sites[q, 2],
-                                  models.offsets[v], values, trust)
-                neighbour_distances(values, trust, models.patches_t[v], n, dist, rows)
-                out[q, v] = dist[:n].min()
+    for chunk in prange(chunk_count(n_sites, ops)):
+        start = chunk * chunk_sites(ops)
+        stop = min(n_sites, start + chunk_sites(ops))
+        dist = np.empty((stop - start, models.patches_t.shape[2]), dtype=np.float32)
+        for v in range(models.offsets.shape[0]):
+            view_distances(volume, temps, sites, np.arange(start, stop), models, ops, v, dist)
+            for b in range(stop - start):
+                out[start + b, v] = dist[b, : models.n_patches[v]].min()

@@ -21,11 +21,27 @@ min_two_h2)`` (a relative, Efros-Leung-like tolerance around the best match).
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from ._jit import jit, jit_contract
 from .vecmath import WEIGHT_LOG_MIN, relative_weights
+
+
+class LcpdfOptions(NamedTuple):
+    """How a site's per-view log-LCPDF is computed (:func:`log_lcpdf_from_distances`).
+
+    adapt_eps, min_two_h2 : the per-site bandwidth ``2 h^2 = max(adapt_eps * D_min,
+        min_two_h2)`` when ``adapt_eps > 0`` (else the view's ``h``)
+    prune : patches whose log weight is more than this below the best one are skipped
+    outlier : weight of the uniform term in each view's LCPDF (0: off)
+    """
+
+    adapt_eps: float
+    min_two_h2: float
+    prune: float
+    outlier: float
 
 
 @jit

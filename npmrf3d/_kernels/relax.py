@@ -1,4 +1,15 @@
-"""Heuristic choice of one value from the per-view LCPDFs, and the parallel ICM class update.
+"""The class updates of the relaxations, and the heuristic choice of one value from the per-view
+LCPDFs they apply.
+
+A class update changes every site of one colour class (sites that never interact): ICM
+(:data:`icm_update_class`) or one annealing step (:data:`anneal_update_class`: heat-bath, or
+Metropolis when given proposals). Each comes in two compiled forms from one definition,
+``serial`` (the calling thread: small classes) and ``parallel`` (chunks of sites on numba's
+threads), and computes its sites' neighbour distances by direct sums or matrix products
+(:mod:`npmrf3d._kernels.gemm`, chosen by ``ops``). Numba compiles what an argument's type decides
+(``ops`` or the proposals None or not) as separate specialisations, so a run compiles only the
+update it takes. The arguments come in bundles (:class:`ViewModels`, :class:`LevelArrays`,
+:class:`npmrf3d._kernels.parzen.LcpdfOptions`, :class:`IcmRule`, :class:`AnnealRule`).
 
 Heuristic codes (SPEC.md section 3): 0 = ML_H1a, 1 = ML_H1b, 2 = ML_H2a, 3 = ML_H2b.
 Decision codes: 0 = argmax (the paper's ICM), 1 = draw from ``exp(score / tau)`` with a
@@ -12,18 +23,14 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._jit import jit, jit_parallel, prange
-from .parzen import (
-    gather_neighbours,
-    log_lcpdf_at_labels,
-    log_lcpdf_from_distances,
-    neighbour_distances,
-)
+from ._jit import jit, serial_and_parallel
+from .gemm import chunk_count, chunk_sites, rows_log_lcpdfs
 
 H1A, H1B, H2A, H2B = 0, 1, 2, 3
 ARGMAX, SAMPLE = 0, 1
-
-
+#: Classes with fewer sites run in the calling thread: starting a parallel region costs more
+#: than it saves there (milliseconds when the cores are busy), and the result is the same.
+PARALLEL_MIN_SITES = 64
 
 
 class ViewModels(NamedTuple):
@@ -55,6 +62,45 @@ class ViewModels(NamedTuple):
     kernel_tables: np.ndarray
     labels: np.ndarray
     union_offsets: np.ndarray
+
+
+class LevelArrays(NamedTuple):
+    """The arrays of one level that a class update reads and writes in place.
+
+    volume : (N1, N2, N3, C) float32
+    labels_volume : (N1, N2, N3) int32 label index of each voxel (-1: not a label)
+    temps : (N1, N2, N3) float32 voxel temperatures (the neighbours' trust)
+    inherited : (N1, N2, N3) bool, voxels inherited from the coarser level
+    """
+
+    volume: np.ndarray
+    labels_volume: np.ndarray
+    temps: np.ndarray
+    inherited: np.ndarray
+
+
+class IcmRule(NamedTuple):
+    """The ICM update's rule: heuristic and decision codes, ``tau`` of the ``sample`` decision,
+    cooling step ``xi`` (< 0), ``resynth`` (inherited sites are revisited) and ``penalty`` (K,)
+    float64 added to the ML_H2a/ML_H2b score."""
+
+    heuristic: int
+    decision: int
+    tau: float
+    xi: float
+    resynth: bool
+    penalty: np.ndarray
+
+
+class AnnealRule(NamedTuple):
+    """An annealing step's rule: heuristic code (ML_H2a or ML_H2b), ``temperature``,
+    ``resynth`` (inherited sites may change) and ``penalty`` (K,) float64 added to the
+    objective."""
+
+    heuristic: int
+    temperature: float
+    resynth: bool
+    penalty: np.ndarray
 
 
 @jit
@@ -168,64 +214,6 @@ def metropolis_accept(delta, temperature, u):
 
 
 @jit
-def site_log_lcpdfs(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune, outlier,
-                    buffers, log_l):
-    """Per-view log-LCPDF of site (i, j, k) into ``log_l`` (V, K)."""
-    values, trust, dist, weights, nonzero, log_weights, rows, wbuf = buffers
-    n_views = models.offsets.shape[0]
-    for v in range(n_views):
-        gather_neighbours(volume, temps, i, j, k, models.offsets[v], values, trust)
-        n = models.n_patches[v]
-        neighbour_distances(values, trust, models.patches_t[v], n, dist, rows)
-        log_lcpdf_from_distances(
-            dist, n, models.label_starts[v], models.labels, models.inv_two_h2[v],
-            models.inv_two_hc2[v], adapt_eps, min_two_h2, prune, models.log_norm_const[v],
-            models.kernel_tables[v], outlier,
-            weights, nonzero, log_weights, wbuf, log_l[v],
-        )
-
-
-@jit
-def site_log_lcpdfs_at(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune, outlier,
-                       query, buffers, log_q):
-    """Per-view log-LCPDF of site (i, j, k) at the labels ``query`` (Q,) into ``log_q`` (V, Q)."""
-    values, trust, dist, weights, nonzero, log_weights, rows, wbuf = buffers
-    for v in range(models.offsets.shape[0]):
-        gather_neighbours(volume, temps, i, j, k, models.offsets[v], values, trust)
-        n = models.n_patches[v]
-        neighbour_distances(values, trust, models.patches_t[v], n, dist, rows)
-        log_lcpdf_at_labels(
-            dist, n, models.label_starts[v], models.labels, models.inv_two_h2[v],
-            models.inv_two_hc2[v], adapt_eps, min_two_h2, prune, models.log_norm_const[v],
-            outlier, query, weights, nonzero, log_weights, wbuf, log_q[v],
-        )
-
-
-@jit
-def make_buffers(models):
-    """Scratch arrays for one thread: values, trust, dist, weights, nonzero, log_weights, rows,
-    wbuf (the label stage's float32 weights and their exponent bits)."""
-    n_m = models.offsets.shape[1]
-    n_labels = models.labels.shape[0]
-    return (
-        np.empty(models.patches_t.shape[1], dtype=np.float32),
-        np.empty(n_m, dtype=np.float32),
-        np.empty(models.patches_t.shape[2], dtype=np.float32),
-        np.zeros(n_labels, dtype=np.float64),
-        np.empty(n_labels, dtype=np.int64),
-        np.empty(n_labels, dtype=np.float64),
-        np.empty(models.patches_t.shape[1], dtype=np.int64),
-        np.empty((2, models.patches_t.shape[2]), dtype=np.float32),
-    )
-
-
-CHUNK = 8
-#: Classes with fewer sites run in the calling thread: starting a parallel region costs more
-#: than it saves there (milliseconds when the cores are busy), and the result is the same.
-PARALLEL_MIN_SITES = 64
-
-
-@jit
 def cool_site(temps, i, j, k, union_offsets, xi):
     """The ICM temperature update of site ``(i, j, k)`` after its decision: the mean of ``xi``
     and its union neighbourhood's temperatures, ``max(0, (xi + sum_r T[x + o_r]) / n_union)``
@@ -240,77 +228,6 @@ def cool_site(temps, i, j, k, union_offsets, xi):
 
 
 @jit
-def icm_update_sites(
-    start, stop, volume, labels_volume, temps, inherited, sites, uniforms, models, heuristic,
-    decision, tau, xi, resynth, adapt_eps, min_two_h2, prune, penalty, outlier, old_labels,
-    new_labels,
-):
-    """The ICM update of sites ``start .. stop - 1`` of one class (see :func:`icm_update_class`)."""
-    n_views = models.offsets.shape[0]
-    n_labels = models.labels.shape[0]
-    nc = volume.shape[3]
-    buffers = make_buffers(models)
-    log_l = np.empty((n_views, n_labels), dtype=np.float64)
-    score = np.empty(n_labels, dtype=np.float64)
-    value = np.empty(nc, dtype=np.float32)
-    for q in range(start, stop):
-        i, j, k = sites[q, 0], sites[q, 1], sites[q, 2]
-        is_inherited = inherited[i, j, k]
-        if not (temps[i, j, k] > 0.0 or (resynth and is_inherited)):
-            old_labels[q] = -2
-            new_labels[q] = -2
-            continue
-        site_log_lcpdfs(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune,
-                        outlier, buffers, log_l)
-        chosen = choose_label(log_l, heuristic, decision, tau, uniforms[q], penalty,
-                              models.labels, value, score)
-        old_labels[q] = labels_volume[i, j, k]
-        new_labels[q] = chosen
-        labels_volume[i, j, k] = chosen
-        for c in range(nc):
-            volume[i, j, k, c] = value[c]
-        if not is_inherited:
-            cool_site(temps, i, j, k, models.union_offsets, xi)
-
-
-@jit_parallel
-def icm_update_class(
-    volume, labels_volume, temps, inherited, sites, uniforms, models, heuristic, decision,
-    tau, xi, resynth, adapt_eps, min_two_h2, prune, penalty, outlier, old_labels, new_labels,
-):
-    """Update every site of one colour class (sites never interact, so order is irrelevant).
-
-    ``sites`` (S, 3) int64. A site is visited when its temperature is positive, or when it is
-    inherited and ``resynth`` is set. Its new value is the heuristic's choice; afterwards a
-    non-inherited site cools as ``t_s = max(0, (xi + sum_{r in N_s} t_r) / |N_s|)``.
-    ``old_labels``/``new_labels`` (S,) receive the label indices (-2 where not visited), so the
-    caller can update label counts. Randomness comes only from ``uniforms`` (S,), drawn by the
-    caller before this call: the result does not depend on the number of threads.
-    """
-    n_sites = sites.shape[0]
-    n_chunks = (n_sites + CHUNK - 1) // CHUNK
-    for chunk in prange(n_chunks):
-        icm_update_sites(chunk * CHUNK, min(n_sites, (chunk + 1) * CHUNK), volume,
-                         labels_volume, temps, inherited, sites, uniforms, models, heuristic,
-                         decision, tau, xi, resynth, adapt_eps, min_two_h2, prune, penalty,
-                         outlier, old_labels, new_labels)
-
-
-@jit
-def icm_update_class_serial(
-    volume, labels_volume, temps, inherited, sites, uniforms, models, heuristic, decision,
-    tau, xi, resynth, adapt_eps, min_two_h2, prune, penalty, outlier, old_labels, new_labels,
-):
-    """:func:`icm_update_class` in the calling thread (for small classes; same result)."""
-    icm_update_sites(0, sites.shape[0], volume, labels_volume, temps, inherited, sites,
-                     uniforms, models, heuristic, decision, tau, xi, resynth, adapt_eps,
-                     min_two_h2, prune, penalty, outlier, old_labels, new_labels)
-
-
-METROPOLIS, HEAT_BATH = 0, 1
-
-
-@jit
 def penalty_pair(penalty, pair, out):
     """``out[q] = penalty[pair[q]]``: the penalty of the labels a Metropolis step compares."""
     for q in range(pair.shape[0]):
@@ -319,87 +236,149 @@ def penalty_pair(penalty, pair, out):
 
 
 @jit
-def anneal_update_sites(
-    start, stop, volume, labels_volume, temps, inherited, sites, candidates, uniforms, models,
-    heuristic, sampler, temperature, resynth, adapt_eps, min_two_h2, prune, penalty, outlier,
-    old_labels, new_labels,
-):
-    """The annealing step of sites ``start .. stop - 1`` of one class (see
-    :func:`anneal_update_class`)."""
-    n_views = models.offsets.shape[0]
-    n_labels = models.labels.shape[0]
-    nc = volume.shape[3]
-    buffers = make_buffers(models)
-    log_l = np.empty((n_views, n_labels), dtype=np.float64)
-    score = np.empty(n_labels, dtype=np.float64)
-    pair = np.empty(2, dtype=np.int64)
-    log_pair = np.empty((n_views, 2), dtype=np.float64)
-    pen2 = np.empty(2, dtype=np.float64)
-    two = np.empty(2, dtype=np.float64)
-    for q in range(start, stop):
-        i, j, k = sites[q, 0], sites[q, 1], sites[q, 2]
-        if inherited[i, j, k] and not resynth:
-            old_labels[q] = -2
-            new_labels[q] = -2
-            continue
-        current = labels_volume[i, j, k]
-        if sampler == HEAT_BATH:
-            site_log_lcpdfs(volume, temps, i, j, k, models, adapt_eps, min_two_h2, prune,
-                            outlier, buffers, log_l)
-            objective_scores(log_l, heuristic, penalty, score)
-            chosen = sample_index(score, temperature, uniforms[q])
-        else:
-            chosen = candidates[q]
-            if current >= 0 and chosen != current:
-                pair[0] = current
-                pair[1] = chosen
-                site_log_lcpdfs_at(volume, temps, i, j, k, models, adapt_eps, min_two_h2,
-                                   prune, outlier, pair, buffers, log_pair)
-                objective_scores(log_pair, heuristic, penalty_pair(penalty, pair, pen2), two)
-                if not metropolis_accept(two[1] - two[0], temperature, uniforms[q]):
-                    chosen = current
-        old_labels[q] = current
-        new_labels[q] = chosen
-        if chosen != current:
-            labels_volume[i, j, k] = chosen
-            for c in range(nc):
-                volume[i, j, k, c] = models.labels[chosen, c]
-
-
-@jit_parallel
-def anneal_update_class(
-    volume, labels_volume, temps, inherited, sites, candidates, uniforms, models, heuristic,
-    sampler, temperature, resynth, adapt_eps, min_two_h2, prune, penalty, outlier, old_labels,
-    new_labels,
-):
-    """One annealing step at every site of one colour class, at global ``temperature``.
-
-    ``sampler`` METROPOLIS: the site's current label is replaced by ``candidates[q]`` if
-    :func:`metropolis_accept` agrees on the change of the heuristic's objective (ML_H2a or
-    ML_H2b, plus ``penalty``); only these two labels' LCPDFs are computed, so the cost does
-    not grow with the number of labels. HEAT_BATH: the new label is drawn from
-    ``exp(objective / temperature) / Z`` over all labels (this project's addition).
-    Inherited sites are skipped unless ``resynth``. ``temps`` only sets the neighbours' trust
-    (all zero during annealing: every neighbour counts). ``old_labels``/``new_labels`` receive
-    the label indices (-2 where not visited). Randomness comes only from ``candidates`` and
-    ``uniforms``, drawn by the caller: the result does not depend on the number of threads.
-    """
-    n_sites = sites.shape[0]
-    n_chunks = (n_sites + CHUNK - 1) // CHUNK
-    for chunk in prange(n_chunks):
-        anneal_update_sites(chunk * CHUNK, min(n_sites, (chunk + 1) * CHUNK), volume,
-                            labels_volume, temps, inherited, sites, candidates, uniforms, models,
-                            heuristic, sampler, temperature, resynth, adapt_eps, min_two_h2,
-                            prune, penalty, outlier, old_labels, new_labels)
+def set_voxel(level, i, j, k, label, value):
+    """Voxel ``(i, j, k)`` takes label index ``label`` and value ``value`` (C,)."""
+    level.labels_volume[i, j, k] = label
+    for c in range(value.shape[0]):
+        level.volume[i, j, k, c] = value[c]
 
 
 @jit
-def anneal_update_class_serial(
-    volume, labels_volume, temps, inherited, sites, candidates, uniforms, models, heuristic,
-    sampler, temperature, resynth, adapt_eps, min_two_h2, prune, penalty, outlier, old_labels,
-    new_labels,
-):
-    """:func:`anneal_update_class` in the calling thread (for small classes; same result)."""
-    anneal_update_sites(0, sites.shape[0], volume, labels_volume, temps, inherited, sites,
-                        candidates, uniforms, models, heuristic, sampler, temperature, resynth,
-                        adapt_eps, min_two_h2, prune, penalty, outlier, old_labels, new_labels)
+def icm_update_chunk(start, level, sites, uniforms, models, ops, lcpdf, rule, old_labels,
+                     new_labels):
+    """The ICM update of the chunk of sites from ``start`` on (of one class, see
+    :data:`icm_update_class`): their LCPDFs first, then their decisions (sites of a class never
+    interact, so this equals updating them one by one)."""
+    stop = min(sites.shape[0], start + chunk_sites(ops))
+    rows = np.empty(stop - start, dtype=np.int64)
+    n_rows = 0
+    for q in range(start, stop):
+        i, j, k = sites[q, 0], sites[q, 1], sites[q, 2]
+        if level.temps[i, j, k] > 0.0 or (rule.resynth and level.inherited[i, j, k]):
+            rows[n_rows] = q
+            n_rows += 1
+        else:
+            old_labels[q] = -2
+            new_labels[q] = -2
+    if n_rows == 0:
+        return
+    n_labels = models.labels.shape[0]
+    log_l = np.empty((n_rows, models.offsets.shape[0], n_labels), dtype=np.float64)
+    rows_log_lcpdfs(level.volume, level.temps, sites, rows[:n_rows], models, ops, lcpdf, None,
+                    log_l)
+    score = np.empty(n_labels, dtype=np.float64)
+    value = np.empty(level.volume.shape[3], dtype=np.float32)
+    for b in range(n_rows):
+        q = rows[b]
+        i, j, k = sites[q, 0], sites[q, 1], sites[q, 2]
+        chosen = choose_label(log_l[b], rule.heuristic, rule.decision, rule.tau, uniforms[q],
+                              rule.penalty, models.labels, value, score)
+        old_labels[q] = level.labels_volume[i, j, k]
+        new_labels[q] = chosen
+        set_voxel(level, i, j, k, chosen, value)
+        if not level.inherited[i, j, k]:
+            cool_site(level.temps, i, j, k, models.union_offsets, rule.xi)
+
+
+@serial_and_parallel
+def icm_update_class(loop):
+    def icm_update_class(level, sites, uniforms, models, ops, lcpdf, rule, old_labels,
+                         new_labels):
+        """Update every site of one colour class (sites never interact, so order is irrelevant).
+
+        ``level``: :class:`LevelArrays`, updated in place; ``sites`` (S, 3) int64; ``ops``:
+        :class:`npmrf3d._kernels.gemm.GemmOperands` or None (how distances are computed);
+        ``rule``: :class:`IcmRule`. A site is visited when its temperature is positive, or when
+        it is inherited and ``rule.resynth`` is set. Its new value is the heuristic's choice;
+        afterwards a non-inherited site cools as ``t_s = max(0, (xi + sum_{r in N_s} t_r) /
+        |N_s|)``. ``old_labels``/``new_labels`` (S,) receive the label indices (-2 where not
+        visited), so the caller can update label counts. Randomness comes only from
+        ``uniforms`` (S,), drawn by the caller before this call: the result does not depend on
+        the number of threads.
+        """
+        for chunk in loop(chunk_count(sites.shape[0], ops)):
+            icm_update_chunk(chunk * chunk_sites(ops), level, sites, uniforms, models, ops, lcpdf,
+                             rule, old_labels, new_labels)
+    return icm_update_class
+
+
+@jit
+def anneal_update_chunk(start, level, sites, candidates, uniforms, models, ops, lcpdf, rule,
+                        old_labels, new_labels):
+    """The annealing step of the chunk of sites from ``start`` on (of one class, see
+    :data:`anneal_update_class`): their LCPDFs first, then their decisions."""
+    stop = min(sites.shape[0], start + chunk_sites(ops))
+    rows = np.empty(stop - start, dtype=np.int64)
+    pairs = np.empty((stop - start, 2), dtype=np.int64)  # Metropolis: current, proposed label
+    n_rows = 0
+    for q in range(start, stop):
+        i, j, k = sites[q, 0], sites[q, 1], sites[q, 2]
+        if level.inherited[i, j, k] and not rule.resynth:
+            old_labels[q] = -2
+            new_labels[q] = -2
+            continue
+        current = level.labels_volume[i, j, k]
+        old_labels[q] = current
+        new_labels[q] = current
+        if candidates is None:  # heat-bath: every visited site draws
+            rows[n_rows] = q
+            n_rows += 1
+        elif current >= 0 and candidates[q] != current:
+            rows[n_rows] = q
+            pairs[n_rows, 0] = current
+            pairs[n_rows, 1] = candidates[q]
+            n_rows += 1
+        elif candidates[q] != current:  # a voxel without a label takes the proposal as it is
+            new_labels[q] = candidates[q]
+            set_voxel(level, i, j, k, candidates[q], models.labels[candidates[q]])
+    if n_rows == 0:
+        return
+    n_labels = models.labels.shape[0]
+    log_l = np.empty((n_rows, models.offsets.shape[0], n_labels if candidates is None else 2),
+                     dtype=np.float64)
+    rows_log_lcpdfs(level.volume, level.temps, sites, rows[:n_rows], models, ops, lcpdf,
+                    None if candidates is None else pairs[:n_rows], log_l)
+    score = np.empty(n_labels, dtype=np.float64)
+    pen2 = np.empty(2, dtype=np.float64)
+    two = np.empty(2, dtype=np.float64)
+    for b in range(n_rows):
+        q = rows[b]
+        i, j, k = sites[q, 0], sites[q, 1], sites[q, 2]
+        current = level.labels_volume[i, j, k]
+        if candidates is None:
+            objective_scores(log_l[b], rule.heuristic, rule.penalty, score)
+            chosen = sample_index(score, rule.temperature, uniforms[q])
+        else:
+            chosen = candidates[q]
+            objective_scores(log_l[b], rule.heuristic, penalty_pair(rule.penalty, pairs[b], pen2),
+                             two)
+            if not metropolis_accept(two[1] - two[0], rule.temperature, uniforms[q]):
+                chosen = current
+        new_labels[q] = chosen
+        if chosen != current:
+            set_voxel(level, i, j, k, chosen, models.labels[chosen])
+
+
+@serial_and_parallel
+def anneal_update_class(loop):
+    def anneal_update_class(level, sites, candidates, uniforms, models, ops, lcpdf, rule,
+                            old_labels, new_labels):
+        """One annealing step at every site of one colour class, at ``rule.temperature``.
+
+        ``rule``: :class:`AnnealRule`; the other arguments as for :data:`icm_update_class`.
+        ``candidates`` (S,) int64, Metropolis: the site's current label is replaced by
+        ``candidates[q]`` if :func:`metropolis_accept` agrees on the change of the heuristic's
+        objective (ML_H2a or ML_H2b, plus ``penalty``); only these two labels' LCPDFs are
+        computed, so the cost does not grow with the number of labels. ``candidates`` None,
+        heat-bath: the new label is drawn from ``exp(objective / temperature) / Z`` over all
+        labels (this project's addition).
+        Inherited sites are skipped unless ``rule.resynth``. ``level.temps`` only sets the
+        neighbours' trust (all zero during annealing: every neighbour counts).
+        ``old_labels``/``new_labels`` receive the label indices (-2 where not visited).
+        Randomness comes only from ``candidates`` and ``uniforms``, drawn by the caller: the
+        result does not depend on the number of threads.
+        """
+        for chunk in loop(chunk_count(sites.shape[0], ops)):
+            anneal_update_chunk(chunk * chunk_sites(ops), level, sites, candidates, uniforms,
+                                models, ops, lcpdf, rule, old_labels, new_labels)
+    return anneal_update_class

@@ -10,8 +10,8 @@ import numpy as np
 
 from .._kernels._jit import single_threaded_blas
 from .._kernels.gemm import make_gemm_operands, sites_log_lcpdfs
-from .._kernels.parzen import label_kernel_table, label_log_norm_const
-from .._kernels.relax import ViewModels, make_buffers, site_log_lcpdfs
+from .._kernels.parzen import LcpdfOptions, label_kernel_table, label_log_norm_const
+from .._kernels.relax import ViewModels
 from ..config import DecisionRule
 from .exemplar import decimation_phases, extract_patches
 from .neighbourhood import union_offsets, view_offsets
@@ -155,13 +155,13 @@ def log_lcpdf(
     -------
     (V, K) float64 ndarray; ``exp`` of each row sums to 1 (also with ``outlier``).
     """
-    out = np.empty((models.offsets.shape[0], models.labels.shape[0]), dtype=np.float64)
-    i, j, k = (int(x) for x in site)
-    site_log_lcpdfs(np.ascontiguousarray(volume, dtype=np.float32),
-                    np.ascontiguousarray(temps, dtype=np.float32), i, j, k, models,
-                    float(adaptive), float(min_two_h2), float(prune), float(outlier),
-                    make_buffers(models), out)
-    return out
+    out = np.empty((1, models.offsets.shape[0], models.labels.shape[0]), dtype=np.float64)
+    sites_log_lcpdfs(np.ascontiguousarray(volume, dtype=np.float32),
+                     np.ascontiguousarray(temps, dtype=np.float32),
+                     np.array([site], dtype=np.int64).reshape(1, 3), models, None,
+                     LcpdfOptions(float(adaptive), float(min_two_h2), float(prune), float(outlier)),
+                     out)
+    return out[0]
 
 
 def log_lcpdf_sites(
@@ -204,5 +204,6 @@ def log_lcpdf_sites(
     with single_threaded_blas():
         sites_log_lcpdfs(np.ascontiguousarray(volume, dtype=np.float32),
                          np.ascontiguousarray(temps, dtype=np.float32), sites, models, ops,
-                         float(adaptive), float(min_two_h2), float(prune), float(outlier), out)
+                         LcpdfOptions(float(adaptive), float(min_two_h2), float(prune),
+                                      float(outlier)), out)
     return out

@@ -33,18 +33,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..._kernels._jit import single_threaded_blas
-from ..._kernels.gemm import (
-    anneal_update_class_gemm,
-    anneal_update_class_gemm_serial,
-    make_gemm_operands,
-)
-from ..._kernels.relax import (
-    HEAT_BATH,
-    METROPOLIS,
-    ViewModels,
-    anneal_update_class,
-    anneal_update_class_serial,
-)
+from ..._kernels.gemm import make_gemm_operands
+from ..._kernels.parzen import LcpdfOptions
+from ..._kernels.relax import AnnealRule, LevelArrays, ViewModels, anneal_update_class
 from ._sweep import label_counts, mean_class_sites, resolve_distances, sweep
 
 __all__ = ["AnnealOptions", "SAMPLERS", "SCHEDULES", "PROPOSALS", "geometric_schedule",
@@ -82,8 +73,8 @@ SCHEDULES: dict[str, Callable[[float, float, int], np.ndarray]] = {
     "geometric": geometric_schedule,
     "linear": linear_schedule,
 }
-#: Samplers by name (kernel codes).
-SAMPLERS = {"metropolis": METROPOLIS, "heat-bath": HEAT_BATH}
+#: Samplers by name.
+SAMPLERS = ("metropolis", "heat-bath")
 #: Where Metropolis proposals come from.
 PROPOSALS = ("exemplar", "labels")
 
@@ -146,13 +137,14 @@ def relax_anneal(
     stats : ``sweeps``, ``updates`` (voxel updates), ``evaluations`` (voxel-view LCPDFs),
         ``changed`` (updates that changed the label), ``acceptance`` (share of changes per sweep)
     """
+    if sampler not in SAMPLERS:
+        raise ValueError(f"sampler must be one of {', '.join(SAMPLERS)}; got {sampler!r}")
     temps[...] = 0.0
     n_views = models.offsets.shape[0]
     n_labels = len(exemplar_freq)
     temperatures = SCHEDULES[schedule](t0, t_end, proposals)
     cumulative = np.cumsum(exemplar_freq)
     cumulative /= cumulative[-1]
-    code = SAMPLERS[sampler]
     counts = label_counts(labels_volume, n_labels)
     history = [float(temperatures[0])]
     acceptance: list[float] = []
@@ -170,17 +162,14 @@ def relax_anneal(
     ops = (make_gemm_operands(models.patches_t, models.n_patches, models.labels.shape[1])
            if distances == "gemm" else None)
 
+    level = LevelArrays(volume, labels_volume, temps, inherited)
+    lcpdf = LcpdfOptions(float(adaptive), float(min_two_h2), float(prune), float(outlier))
+
     def update(sites, drawn, penalty, parallel, old, new, temperature):
-        args = (heuristic, code, temperature, resynth, adaptive, min_two_h2, prune, penalty,
-                outlier, old, new)
-        if distances == "gemm":
-            kernel = anneal_update_class_gemm if parallel else anneal_update_class_gemm_serial
-            kernel(volume, labels_volume, temps, inherited, sites, drawn[0], drawn[1], models,
-                   ops, *args)
-        else:
-            kernel = anneal_update_class if parallel else anneal_update_class_serial
-            kernel(volume, labels_volume, temps, inherited, sites, drawn[0], drawn[1], models,
-                   *args)
+        kernel = anneal_update_class.parallel if parallel else anneal_update_class.serial
+        candidates = drawn[0] if sampler == "metropolis" else None  # heat-bath: no proposals
+        rule = AnnealRule(int(heuristic), temperature, bool(resynth), penalty)
+        kernel(level, sites, candidates, drawn[1], models, ops, lcpdf, rule, old, new)
 
     with single_threaded_blas():
         for step, temperature in enumerate(temperatures, start=1):

@@ -16,8 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..._kernels._jit import single_threaded_blas
-from ..._kernels.gemm import icm_update_class_gemm, icm_update_class_gemm_serial, make_gemm_operands
-from ..._kernels.relax import ViewModels, icm_update_class, icm_update_class_serial
+from ..._kernels.gemm import make_gemm_operands
+from ..._kernels.parzen import LcpdfOptions
+from ..._kernels.relax import IcmRule, LevelArrays, ViewModels, icm_update_class
 from ._sweep import histogram_penalty, label_counts, mean_class_sites, resolve_distances, sweep
 
 __all__ = ["IcmOptions", "expected_sweeps", "histogram_penalty", "relax_icm"]
@@ -126,15 +127,14 @@ def relax_icm(
     ops = (make_gemm_operands(models.patches_t, models.n_patches, models.labels.shape[1])
            if distances == "gemm" else None)
 
+    level = LevelArrays(volume, labels_volume, temps, inherited)
+    lcpdf = LcpdfOptions(float(adaptive), float(min_two_h2), float(prune), float(outlier))
+    rule = IcmRule(int(heuristic), int(decision), float(tau), float(xi), bool(resynth),
+                   np.zeros(0))
+
     def update(sites, drawn, penalty, parallel, old, new):
-        args = (heuristic, decision, tau, xi, resynth, adaptive, min_two_h2, prune, penalty,
-                outlier, old, new)
-        if distances == "gemm":
-            kernel = icm_update_class_gemm if parallel else icm_update_class_gemm_serial
-            kernel(volume, labels_volume, temps, inherited, sites, drawn[0], models, ops, *args)
-        else:
-            kernel = icm_update_class if parallel else icm_update_class_serial
-            kernel(volume, labels_volume, temps, inherited, sites, drawn[0], models, *args)
+        kernel = icm_update_class.parallel if parallel else icm_update_class.serial
+        kernel(level, sites, drawn[0], models, ops, lcpdf, rule._replace(penalty=penalty), old, new)
 
     with single_threaded_blas():
         while sweeps < max_sweeps and history[-1] > target:
