@@ -284,8 +284,8 @@ def test_an_option_is_refused_where_it_cannot_apply_and_accepted_where_it_can(na
             options = {"size": 16, "levels": 2, "support": support, "relaxation": relaxation,
                        name: NON_DEFAULT[name]}
             if (support, relaxation) in APPLIES[name]:
-                if name == "sampler" and support == "coherent":
-                    continue  # Metropolis over candidates: see the coherent sampler's own tests
+                if name in ("sampler", "upsample") and support == "coherent":
+                    continue  # Metropolis and 1/8 over candidates: the coherent sampler's own tests
                 assert getattr(make_config(**options), name, None) in (NON_DEFAULT[name], None)
             else:
                 with pytest.raises(ParameterError, match=f"option {name} does not apply to support "

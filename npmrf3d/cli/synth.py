@@ -97,7 +97,9 @@ def register(commands, formatter_class) -> None:
         "--upsample", default=None, metavar=choices(UPSAMPLING),
         help="how a level initialises the next finer one: 1/8 keeps only the inherited voxel and "
              "draws the other 7 at random, 8/8 copies the parent into all 8 "
-             "(default: none = the paper's choice, 1/8 for icm and 8/8 for anneal)",
+             "(support coherent: 8/8, its children copying the parent's shifted sources) "
+             "(default: none = 8/8 for support coherent; for support full the paper's choice, "
+             "1/8 for icm and 8/8 for anneal)",
     )
     shape.add_argument(
         "--inherit", default=_d("inherit"), metavar=choices(INHERIT),

@@ -71,8 +71,10 @@ def npmrf_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress: Pr
     exemplars : dict view -> exemplar, optional
         A different exemplar for some views.
     upsample : {"1/8", "8/8"} or None
-        Support ``full``: how a level initialises the next finer one (docs/model.md, section
-        7); None: the paper's choice, ``1/8`` for ICM and ``8/8`` for annealing.
+        How a level initialises the next finer one (docs/model.md, section 7). None: ``8/8``
+        for support ``coherent`` (every child copies its parent's shifted sources, the only
+        choice there); for support ``full`` the paper's choice, ``1/8`` for ICM and ``8/8`` for
+        annealing.
     inherit : {"resynth", "fixed"}
         Support ``full``: whether inherited voxels may still change (temperature 0 either way).
     xi : float < 0

@@ -41,7 +41,7 @@ APPLIES: dict[str, tuple[tuple[str, str], ...]] = {
     "xi": (("full", "icm"),),
     "stop": (("full", "icm"),),
     "max_sweeps": (("full", "icm"),),
-    "upsample": (("full", "icm"), ("full", "anneal")),
+    "upsample": (("full", "icm"), ("full", "anneal"), ("coherent", "icm"), ("coherent", "anneal")),
     "inherit": (("full", "icm"), ("full", "anneal")),
     "sampler": (("full", "anneal"), ("coherent", "anneal")),
     "schedule": (("full", "anneal"), ("coherent", "anneal")),
@@ -60,6 +60,7 @@ APPLIES: dict[str, tuple[tuple[str, str], ...]] = {
 }
 #: What the coherent support supports of each axis (the rest is refused with the reason).
 COHERENT_SAMPLERS = ("heat-bath",)
+COHERENT_UPSAMPLING = ("8/8",)
 
 _C = SynthesisConfig  # every default below is a field default of the configuration
 
@@ -140,7 +141,8 @@ def make_config(
         check.fail(f"heuristic {heuristic} cannot drive annealing: annealing compares objective "
                    f"values, and {heuristic} is defined by per-view argmax searches with no "
                    f"objective; use ML_H2a or ML_H2b, or relaxation 'icm'")
-    upsample = DEFAULT_UPSAMPLE[relaxation] if upsample is None else upsample
+    if upsample is None:
+        upsample = COHERENT_UPSAMPLING[0] if support == "coherent" else DEFAULT_UPSAMPLE[relaxation]
     upsample = check.choice("upsample", upsample, UPSAMPLING)
     inherit = check.choice("inherit", inherit, INHERIT)
     xi = check.real("xi", xi, high=0.0, high_open=True)
@@ -172,6 +174,10 @@ def make_config(
         if heuristic not in npmrf_coherent.CANDIDATE_HEURISTICS:
             check.fail(f"support 'coherent' ranks candidates by ML_H2b or ML_H2a so far; heuristic "
                        f"{heuristic} runs with support 'full'")
+        if upsample not in COHERENT_UPSAMPLING:
+            check.fail(f"support 'coherent' up-samples {' or '.join(COHERENT_UPSAMPLING)} so far (every "
+                       f"child copies its parent's shifted sources); upsample {upsample!r} runs with "
+                       f"support 'full'")
         if relaxation == "anneal" and sampler not in COHERENT_SAMPLERS:
             check.fail(f"support 'coherent' anneals with sampler {' or '.join(COHERENT_SAMPLERS)} so "
                        f"far; sampler {sampler!r} runs with support 'full'")
