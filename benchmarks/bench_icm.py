@@ -19,16 +19,14 @@ from _common import hardware, matmul_gflops
 
 import npmrf3d
 from npmrf3d import data
-from npmrf3d.config import VARIANT_ALIASES
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0],
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     parser.add_argument("--size", type=int, default=64)
-    full_parzen = sorted(set(npmrf3d.VARIANTS) - {"coherent"}) + sorted(VARIANT_ALIASES)
-    parser.add_argument("--variant", default="default", choices=full_parzen,
-                        help="a full-Parzen decision rule (default is an alias of sharp); the "
+    parser.add_argument("--preset", default="tuned", choices=sorted(npmrf3d.PRESETS),
+                        help="the full-Parzen support's decision rule; the "
                              "coherent sampler, synth's default, is timed by `npmrf3d synth "
                              "--size 64` and benchmarks/bench_scaling.py")
     parser.add_argument("--seed", type=int, default=0)
@@ -38,11 +36,11 @@ def main(argv=None) -> int:
     npmrf3d.synthesize(ex, size=8, window=3, levels=1, rng=0)
     print(f"hardware: {hardware()}")
     print(f"job: {args.size}^3 grey, exemplar {ex.shape[0]}x{ex.shape[1]}, 7x7, 3 levels, ICM, "
-          f"ML_H2b, 8/8, resynth, xi=-3, stop at 95 %, variant {args.variant}")
+          f"ML_H2b, 8/8, resynth, xi=-3, stop at 95 %, preset {args.preset}")
     t0 = time.perf_counter()
     res = npmrf3d.synthesize(ex, size=args.size, window=7, levels=3, heuristic="ML_H2b",
                              upsample="8/8", inherit="resynth", xi=-3.0, stop=0.95,
-                             variant=args.variant, rng=args.seed)
+                             support="full", preset=args.preset, rng=args.seed)
     wall = time.perf_counter() - t0
     flops = 0.0
     evaluations = 0

@@ -30,7 +30,7 @@ import npmrf3d
 from npmrf3d import data
 from npmrf3d._kernels._jit import single_threaded_blas, thread_count
 from npmrf3d._kernels.gemm import make_gemm_operands, sites_best_distances
-from npmrf3d.config import VARIANTS
+from npmrf3d.config import PRESETS
 from npmrf3d.model.exemplar import make_labels
 from npmrf3d.model.neighbourhood import colour_classes
 from npmrf3d.model.parzen import build_view_models
@@ -66,7 +66,7 @@ def distance_stage(size: int, repeats: int, exemplar: str, window: int, palette:
     rng = np.random.default_rng(0)
     labels, images = make_labels([ex], palette=palette, rng=rng)
     models, info = build_view_models({v: images[0] for v in VIEWS}, labels, window=window, level=0,
-                                     rule=VARIANTS["sharp"])
+                                     rule=PRESETS["tuned"])
     ops = make_gemm_operands(models.patches_t, models.n_patches, labels.shape[1])
     n, d = info["front"]["n"], labels.shape[1] * (window * window - 1)
     shape = (size,) * 3

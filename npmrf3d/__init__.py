@@ -16,8 +16,8 @@ data, metrics
     Bundled exemplars (``data.path(name)``) and the comparison metrics (``metrics.evaluate``).
 load_exemplar
     Read an exemplar image or array as float32 (H, W, C).
-SynthesisConfig, SynthesisResult, DecisionRule, VARIANTS, DEFAULT_SIZE
-    The NP-MRF sampler's configuration and decision-rule presets, the result object every method
+SynthesisConfig, SynthesisResult, DecisionRule, SUPPORTS, PRESETS, DEFAULT_SIZE
+    The NP-MRF sampler's configuration, its estimator supports and decision-rule presets, the result object every method
     returns, and the output size when none is given (every method).
 ParameterError
     The exception raised for user mistakes.
@@ -27,15 +27,16 @@ from importlib.metadata import PackageNotFoundError, version
 
 from . import data
 from .analysis import metrics
-from .config import DEFAULT_SIZE, VARIANTS, DecisionRule, SynthesisConfig, SynthesisResult
+from .config import DEFAULT_SIZE, PRESETS, SUPPORTS, DecisionRule, SynthesisConfig, SynthesisResult
 from .errors import ParameterError
 from .methods import METHODS, get_method, synthesize
 from .methods.chen_wang import chen_wang_synthesize
 from .methods.kopf import kopf_synthesize
 from .methods.neural import neural_synthesize
-from .methods.npmrf import make_config, npmrf_synthesize
+from .methods.npmrf import npmrf_synthesize
 from .methods.npmrf_3d import npmrf_volume_synthesize
 from .methods.npmrf_coherent import coherent_synthesize
+from .methods.npmrf_options import make_config
 from .methods.volume_lh import volume_synthesize
 from .model.exemplar import load_exemplar
 from .model.heuristics import HEURISTICS
@@ -49,7 +50,8 @@ __all__ = [
     "DEFAULT_SIZE",
     "HEURISTICS",
     "METHODS",
-    "VARIANTS",
+    "PRESETS",
+    "SUPPORTS",
     "DecisionRule",
     "ParameterError",
     "SynthesisConfig",

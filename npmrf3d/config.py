@@ -1,10 +1,10 @@
 """Frozen run configurations and the result object.
 
-A :class:`SynthesisConfig` is what a run was asked to do, after validation: it is stored in
-``run.json``, compared by the tests and rebuilt by the CLI. :data:`VARIANTS` holds the named
-presets for how voxels decide (docs/model.md, section 8): ``literal`` is the paper word for word
-(the ablation baseline), ``coherent`` and ``sharp`` are the variants chosen by measurement
-(``benchmarks/bench_quality.py``, ``docs/quality.md``).
+A :class:`SynthesisConfig` is what an NP-MRF run was asked to do, after validation: it is stored
+in ``run.json``, compared by the tests and rebuilt by the CLI. The sampler's estimator supports
+are :data:`SUPPORTS`; the full support's decision rules by name are :data:`PRESETS` (``paper``,
+Urs et al. 2014 word for word, the ablation baseline; ``tuned``, chosen by measurement,
+``benchmarks/bench_quality.py``, ``docs/quality.md``).
 """
 
 from __future__ import annotations
@@ -20,7 +20,8 @@ from .model.relax import RELAXATIONS, AnnealOptions, IcmOptions
 #: Side of the cube made when no size is given (API and command line, every method).
 DEFAULT_SIZE = 64
 
-__all__ = ["DEFAULT_SIZE", "DEFAULT_VARIANT", "VARIANT_ALIASES", "DecisionRule", "SynthesisConfig", "SynthesisMethod", "SynthesisResult", "VARIANTS"]
+__all__ = ["COHERENT_RULE", "DEFAULT_SIZE", "DecisionRule", "PRESETS", "SUPPORTS", "SynthesisConfig",
+           "SynthesisMethod", "SynthesisResult", "VARIANTS"]
 
 
 @dataclass(frozen=True)
@@ -57,26 +58,35 @@ class DecisionRule:
     outlier: float = 0.0
 
 
-VARIANTS: dict[str, DecisionRule] = {
-    # the coherent NP-MRF sampler (npmrf3d.methods.npmrf_coherent): each view's Parzen estimate
-    # sums over coherent candidates; here centre_bandwidth is a factor of the exemplar's standard
-    # deviation and outlier the uniform share of each view's estimate (the other fields unused)
-    "coherent": DecisionRule(centre_bandwidth=0.1, outlier=0.01),
-    "literal": DecisionRule(),
-    # the full-Parzen rule chosen by measurement (docs/quality.md, "The levers, measured"); the
-    # name "default" selects it too (VARIANT_ALIASES)
-    "sharp": DecisionRule(
+#: The estimator supports: which exemplar neighbourhoods a view's Parzen sum runs over
+#: (docs/model.md, section 8): ``coherent`` candidates (the default, chosen by measurement,
+#: docs/quality.md) or ``full``, every exemplar patch (Urs et al. 2014).
+SUPPORTS = ("coherent", "full")
+
+#: The full-Parzen support's decision rules by name: ``paper`` is Urs et al. 2014 word for word
+#: (the ablation baseline; it collapses to flat volumes on photographs, docs/quality.md),
+#: ``tuned`` the sharpened bandwidths, sampled decision, histogram penalty and outlier share
+#: chosen by measurement (docs/quality.md, "The levers, measured").
+PRESETS: dict[str, DecisionRule] = {
+    "paper": DecisionRule(),
+    "tuned": DecisionRule(
         bandwidth=0.2, centre_bandwidth=0.1, adaptive=0.0, decision="sample", tau=0.1,
         histogram_weight=8.0, outlier=0.01,
     ),
 }
+#: The coherent support's rule: ``centre_bandwidth`` is a factor of the exemplar's standard
+#: deviation and ``outlier`` the uniform share of each view's estimate (its other fields unused).
+COHERENT_RULE = DecisionRule(centre_bandwidth=0.1, outlier=0.01)
 
-#: Other names that select a variant.
-VARIANT_ALIASES: dict[str, str] = {"default": "sharp"}
-
-#: The variant used when none is asked for, per relaxation (annealing needs a full-Parzen rule).
-DEFAULT_VARIANT: dict[str, str] = {"icm": "coherent", "anneal": "sharp"}
-#: ``segmented``: whether the coherent variant uses its preset for segmented exemplars
+#: ``variant``, the older single name of a support and a preset, still accepted:
+#: name -> (support, preset).
+VARIANTS: dict[str, tuple[str, str]] = {
+    "coherent": ("coherent", "tuned"),
+    "sharp": ("full", "tuned"),
+    "default": ("full", "tuned"),
+    "literal": ("full", "paper"),
+}
+#: ``segmented``: whether the coherent support uses its preset for segmented exemplars
 #: (:data:`npmrf3d.methods.npmrf_coherent.SEGMENTED`): "auto" when the exemplars hold few grey values.
 SEGMENTED_MODES = ("auto", "yes", "no")
 
@@ -109,7 +119,8 @@ class SynthesisConfig:
     t_end: float = AnnealOptions.t_end
     proposals: int = AnnealOptions.proposals
     proposal: str = AnnealOptions.proposal
-    variant: str = "coherent"
+    support: str = "coherent"
+    preset: str = "tuned"
     segmented: str = "auto"
     rule: DecisionRule = field(default_factory=DecisionRule)
     grey_levels: int | None = None

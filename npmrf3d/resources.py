@@ -242,7 +242,7 @@ def npmrf_estimate(config, exemplars) -> Estimate:
     The label count ``K`` is bounded by the distinct values (the pixels when only shapes are
     given, or the palette / grey levels); the label kernel tables by their cap
     (:data:`npmrf3d.model.parzen.KERNEL_TABLE_BYTES`).
-    (The ``coherent`` variant is estimated by :func:`coherent_estimate` on its own options, see
+    (The ``coherent`` support is estimated by :func:`coherent_estimate` on its own options, see
     :func:`npmrf3d.methods.npmrf.npmrf_resources`.)
     """
     exemplar_shapes = _shapes(exemplars)

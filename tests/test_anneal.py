@@ -19,7 +19,7 @@ from npmrf3d._kernels.relax import (
     metropolis_accept,
     sample_index,
 )
-from npmrf3d.config import VARIANTS
+from npmrf3d.config import PRESETS
 from npmrf3d.errors import ParameterError
 from npmrf3d.model import parzen
 from npmrf3d.model.exemplar import make_labels
@@ -108,7 +108,7 @@ def _tiny_level(channels, heuristic="ML_H2b", shape=(8, 8, 8), window=3, seed=0)
     exemplar = palette[rng.integers(0, 5, size=(10, 12))].astype(np.float32)
     labels, (image,) = make_labels([exemplar], rng=rng)
     freq = np.bincount(image.ravel(), minlength=len(labels)) / image.size
-    rule = VARIANTS["sharp"]
+    rule = PRESETS["tuned"]
     models, info = build_view_models({v: image for v in VIEWS3}, labels, window=window,
                                      level=0, rule=rule)
     lab = rng.integers(0, len(labels), size=shape).astype(np.int32)
@@ -286,7 +286,7 @@ def stripe_correlation(volume: np.ndarray, view: str, axis_in_slice: int, lag: i
 
 @pytest.mark.parametrize("sampler", ["metropolis", "heat-bath"])
 def test_colour_stripes_period_appears_in_constrained_views(sampler):
-    res = npmrf3d.synthesize(stripes_rgb(diagonal=True), size=16, window=5, levels=2, relaxation="anneal",
+    res = npmrf3d.synthesize(stripes_rgb(diagonal=True), size=16, window=5, levels=2, relaxation="anneal", support="full",
                              sampler=sampler, proposals=6, rng=0)
     assert res.volume.shape == (16, 16, 16, 3)
     assert res.config.upsample == "8/8"  # the paper's default for annealing
@@ -301,7 +301,7 @@ def test_with_two_views_the_unconstrained_view_is_free():
     (i, k)); a volume of layers ``s(i)`` satisfies both. The right view (slices (j, k), no
     i in them) is free: it shows flat layers, nothing like the exemplar's stripes."""
     horizontal = stripes_rgb().transpose(1, 0, 2)
-    res = npmrf3d.synthesize(horizontal, size=16, window=5, levels=2, relaxation="anneal",
+    res = npmrf3d.synthesize(horizontal, size=16, window=5, levels=2, relaxation="anneal", support="full",
                              sampler="heat-bath", views="front,top", proposals=6, rng=1)
     for view in ("front", "top"):
         assert stripe_correlation(res.volume, view, 0, 4) > 0.5, view
@@ -324,7 +324,7 @@ def test_multichannel_anneal_runs_and_keeps_exemplar_values(channels):
     base = stripes_rgb().astype(np.float32) / 255
     extra = [base[..., :1] * 0.5 + 0.1] if channels == 4 else []
     exemplar = np.concatenate([base, *extra], axis=2)[..., :channels]
-    res = npmrf3d.synthesize(exemplar, size=8, window=3, levels=1, relaxation="anneal",
+    res = npmrf3d.synthesize(exemplar, size=8, window=3, levels=1, relaxation="anneal", support="full",
                              proposals=2, rng=rng)
     assert res.volume.shape == (8, 8, 8, channels)
     values = {tuple(v) for v in res.volume.reshape(-1, channels).tolist()}
@@ -333,7 +333,7 @@ def test_multichannel_anneal_runs_and_keeps_exemplar_values(channels):
 
 
 def test_anneal_is_deterministic_for_a_seed():
-    kw = dict(size=8, window=3, levels=2, relaxation="anneal", proposals=2, sampler="heat-bath")
+    kw = dict(size=8, window=3, levels=2, relaxation="anneal", support="full", proposals=2, sampler="heat-bath")
     a = npmrf3d.synthesize(stripes_rgb(), rng=5, **kw).volume
     b = npmrf3d.synthesize(stripes_rgb(), rng=5, **kw).volume
     np.testing.assert_array_equal(a, b)
@@ -345,7 +345,7 @@ def test_anneal_is_deterministic_for_a_seed():
 @pytest.mark.parametrize("heuristic", ["ML_H1a", "ML_H1b"])
 def test_annealing_with_an_objective_free_heuristic_is_a_usage_error(heuristic):
     with pytest.raises(ParameterError, match=rf"{heuristic} cannot drive annealing.*ML_H2a or ML_H2b"):
-        npmrf3d.synthesize(stripes_rgb(), size=8, levels=1, window=3, relaxation="anneal",
+        npmrf3d.synthesize(stripes_rgb(), size=8, levels=1, window=3, relaxation="anneal", support="full",
                            heuristic=heuristic)
 
 
@@ -360,10 +360,10 @@ def test_annealing_with_an_objective_free_heuristic_is_a_usage_error(heuristic):
 ])
 def test_bad_annealing_parameters(kwargs, message):
     with pytest.raises(ParameterError, match=message):
-        npmrf3d.synthesize(stripes_rgb(), size=8, levels=1, window=3, relaxation="anneal", **kwargs)
+        npmrf3d.synthesize(stripes_rgb(), size=8, levels=1, window=3, relaxation="anneal", support="full", **kwargs)
 
 
 def test_linear_schedule_may_end_at_zero():
-    res = npmrf3d.synthesize(stripes_rgb(), size=8, levels=1, window=3, relaxation="anneal",
+    res = npmrf3d.synthesize(stripes_rgb(), size=8, levels=1, window=3, relaxation="anneal", support="full",
                              schedule="linear", t_end=0.0, proposals=2, rng=0)
     assert res.history[0][-1] == 0.0

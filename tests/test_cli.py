@@ -76,11 +76,11 @@ def test_synth_help_lists_every_option_with_its_default(capsys):
     for expected in ("(default: 7)", "(default: 64)", "(default: 3)", "(default: ML_H2b)",
                      "(default: icm)", "(default: -3.0)", "(default: 0.95)", "(default: 30)",
                      "1/8 for icm and 8/8 for anneal", "(default: resynth)", "(default: front,right,top)",
-                     "coherent for icm, sharp for anneal", "(default: 0)", "(default: npmrf3d-out)",
+                     "(default: none = coherent)", "(default: 0)", "(default: npmrf3d-out)",
                      "(default: heat-bath)", "(default: geometric)", "(default: 10)",
                      "(default: 0.05)", "(default: exemplar)", "this project's addition",
                      "needs ML_H2a or ML_H2b", "word for word", "docs/quality.md",
-                     "'sharp' variant uses 0.1", "bundled:gravel64"):
+                     "preset tuned uses 0.1", "bundled:gravel64"):
         assert expected in text, expected
 
 
@@ -97,7 +97,7 @@ def test_annealing_with_objective_free_heuristic_exits_2_naming_the_valid_ones(c
 
 def test_anneal_run_writes_a_colour_run(capsys, tmp_path):
     out = tmp_path / "run"
-    code, _, err = run_cli(capsys, "synth", "bundled:ihc64", "--relaxation", "anneal",
+    code, _, err = run_cli(capsys, "synth", "bundled:ihc64", "--relaxation", "anneal", "--support", "full",
                            "--sampler", "heat-bath", "--palette", "16", "--size", "8",
                            "--levels", "2", "--window", "3", "--proposals", "2", "--out", str(out),
                            "--quiet")
@@ -114,11 +114,11 @@ def test_anneal_run_writes_a_colour_run(capsys, tmp_path):
 def test_synth_suggests_a_palette_for_many_colours(capsys, tmp_path, monkeypatch):
     monkeypatch.setattr(cli.synth, "MANY_VALUES", 50)
     code, _, err = run_cli(capsys, "synth", "bundled:ihc64", "--size", "8", "--levels", "1",
-                           "--window", "3", "--max-sweeps", "1", "--grey-levels", "4",
+                           "--window", "3", "--grey-levels", "4",
                            "--out", str(tmp_path / "a"))
     assert code == 0 and "--palette 64" not in err  # asked for few labels: no note
     code, _, err = run_cli(capsys, "synth", "bundled:gravel64", "--size", "8", "--levels", "1",
-                           "--window", "3", "--max-sweeps", "1", "--out", str(tmp_path / "b"))
+                           "--window", "3", "--out", str(tmp_path / "b"))
     assert code == 0 and "178 distinct values" in err and "--palette 64" in err
 
 
@@ -128,7 +128,7 @@ def test_info_prints_version_and_registries(capsys):
     code, out, err = run_cli(capsys, "info")
     assert code == 0 and err == ""
     assert f"npmrf3d {npmrf3d.__version__}" in out
-    for word in ("numba threads", "CPU count", "numpy", "gravel64", "ML_H2b", "literal",
+    for word in ("numba threads", "CPU count", "numpy", "gravel64", "ML_H2b", "paper", "coherent",
                  "histogram_weight"):
         assert word in out
 
@@ -341,7 +341,10 @@ BAD_INPUTS = {
     "unknown-bundled-exemplar": (lambda t: ["bundled:marble"], "gravel64"),
     "negative-seed": (lambda t: ["--seed", "-1"], "seed"),
     "sample-with-H1": (lambda t: ["--heuristic", "ML_H1a", "--decision", "sample", "--variant", "sharp"], "argmax"),
-    "coherent-with-H1": (lambda t: ["--heuristic", "ML_H1a"], "variant 'coherent' ranks candidates by an objective"),
+    "coherent-with-H1": (lambda t: ["--heuristic", "ML_H1a"], "support 'coherent' ranks candidates by ML_H2b or ML_H2a"),
+    "icm-option-with-coherent": (lambda t: ["--xi", "-10"], "option xi does not apply to support 'coherent'"),
+    "variant-contradicts-support": (lambda t: ["--variant", "literal", "--support", "coherent"],
+                                    "contradicts"),
     "coherent-anneal-hot-end": (lambda t: ["--relaxation", "anneal", "--variant", "coherent", "--t0", "0.5",
                                            "--t-end", "0.9"], "--t-end"),
 }

@@ -93,7 +93,7 @@ def test_config_make_config_and_cli_agree_on_every_default(name):
     cli = _cli_defaults(*path)
     made = _signature_defaults(builder)
     # options whose default is decided elsewhere on purpose
-    special = {"upsample", "variant"} if name == "npmrf" else {"iterations"} if name == "kopf" else set()
+    special = {"upsample", "support", "preset"} if name == "npmrf" else {"iterations"} if name == "kopf" else set()
     checked = 0
     for field, value in fields.items():
         if field in special or field in ("seed", "constrained", "rule"):
@@ -117,10 +117,13 @@ def test_special_defaults_agree_too():
     # NP-MRF up-sampling: None everywhere means "the relaxation's choice"
     assert _signature_defaults(make_config)["upsample"] is None
     assert _cli_defaults("synth")["upsample"] is None
-    # NP-MRF variant: None everywhere means "the relaxation's choice" (coherent for icm)
-    assert _signature_defaults(make_config)["variant"] is None
-    assert _cli_defaults("synth")["variant"] is None
-    assert make_config().variant == SynthesisConfig.variant == "coherent"
+    # NP-MRF support and preset: None everywhere means coherent (and tuned for support full)
+    for name in ("variant", "support", "preset"):
+        assert _signature_defaults(make_config)[name] is None
+        assert _cli_defaults("synth")[name] is None
+    assert make_config().support == SynthesisConfig.support == "coherent"
+    assert make_config(relaxation="anneal").support == "coherent"
+    assert make_config(support="full").preset == SynthesisConfig.preset == "tuned"
     # NP_K iterations: one number for every level
     one = _signature_defaults(make_kopf_config)["iterations"]
     assert _cli_defaults("baseline", "kopf")["iterations"] == str(one)

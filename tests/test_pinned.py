@@ -41,11 +41,11 @@ PINNED = {
         "95fb8f536f248435bf22829e9a7d5645c7fd1571e81cc6f523d6c8063351dd6e"),
     "npmrf_anneal_heatbath": (
         lambda: npmrf3d.synthesize(_ihc(), size=8, window=3, levels=2, relaxation="anneal",
-                                   palette=8, proposals=2, rng=7),
+                                   support="full", palette=8, proposals=2, rng=7),
         "2c7246a546b49389d73f481e20477dab577cdbe55f20d308a886e532842a0934"),
     "npmrf_anneal_metropolis": (
         lambda: npmrf3d.synthesize(_ihc(), size=8, window=3, levels=2, relaxation="anneal",
-                                   sampler="metropolis", palette=8, proposals=2, rng=7),
+                                   support="full", sampler="metropolis", palette=8, proposals=2, rng=7),
         "e1004b2c16282c4594730026e7c923b506d69e0645c8c6b024449f0779e55d0b"),
     "kopf_trilinear": (
         lambda: npmrf3d.kopf_synthesize(_ihc(), size=16, window=4, levels=2, iterations=2, rng=7),

@@ -12,7 +12,7 @@ import pytest
 
 import npmrf3d
 from npmrf3d.analysis import metrics
-from npmrf3d.config import VARIANTS
+from npmrf3d.config import PRESETS
 from npmrf3d.model.exemplar import make_labels
 from npmrf3d.model.heuristics import DECISIONS, get_heuristic
 from npmrf3d.model.neighbourhood import colour_classes
@@ -55,7 +55,7 @@ def test_volume_does_not_depend_on_thread_count(tmp_path):
         vols = [res.volume]
         for sampler in ("metropolis", "heat-bath"):
             vols.append(npmrf3d.synthesize(npmrf3d.data.path("ihc64"), size=16, window=5,
-                                           levels=2, relaxation="anneal", sampler=sampler,
+                                           levels=2, relaxation="anneal", sampler=sampler, support="full",
                                            palette=16, proposals=2, rng=11).volume)
         np.save(sys.argv[1], np.concatenate(vols, axis=3))
         """
@@ -74,7 +74,7 @@ def _level_setup(window=5, shape=(16, 16, 16), seed=0):
     ex = npmrf3d.load_exemplar(None)[:32, :32]
     labels, (image,) = make_labels([ex], rng=rng)
     freq = np.bincount(image.ravel(), minlength=len(labels)) / image.size
-    rule = VARIANTS["sharp"]
+    rule = PRESETS["tuned"]
     models, info = build_view_models({"front": image, "right": image, "top": image}, labels,
                                      window=window, level=0, rule=rule)
     parent = random_state(tuple(n // 2 for n in shape), labels, freq, rng)

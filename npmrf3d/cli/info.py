@@ -8,7 +8,7 @@ import os
 
 from .. import __version__, data, io
 from .._kernels import _jit
-from ..config import VARIANTS
+from ..config import COHERENT_RULE, PRESETS, SUPPORTS
 from ..methods import METHODS
 from ..model.exemplar import BUNDLED_PREFIX
 from ..model.heuristics import HEURISTICS
@@ -21,16 +21,16 @@ def register(commands, formatter_class) -> None:
     """Add the ``info`` sub-command."""
     parser = commands.add_parser(
         "info",
-        help="print versions, threads, bundled exemplars, methods, heuristics and variants",
+        help="print versions, threads, bundled exemplars, methods, heuristics, supports and presets",
         description="Print the version, package versions, numba threads, CPU count, bundled "
-                    "exemplars, registered methods, heuristics and decision-rule variants.",
+                    "exemplars, registered methods, heuristics, estimator supports and decision-rule presets.",
         formatter_class=formatter_class,
     )
     parser.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace, argv: list[str]) -> int:
-    """``npmrf3d info``: versions, threads, exemplars, methods, heuristics and variants."""
+    """``npmrf3d info``: versions, threads, exemplars, methods, heuristics, supports, presets."""
     versions = io.package_versions()
     say(f"npmrf3d {__version__}")
     say(f"platform: {versions['platform']}")
@@ -52,8 +52,10 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
     for h in HEURISTICS.values():
         kind = "objective" if h.objective else "no objective"
         say(f"  {h.name}  {h.description} ({kind})")
-    say("variants:")
-    for name, rule in VARIANTS.items():
+    say(f"supports: {', '.join(SUPPORTS)} (coherent: centre_bandwidth={COHERENT_RULE.centre_bandwidth} "
+        f"x the exemplar's deviation, outlier={COHERENT_RULE.outlier})")
+    say("presets of support full:")
+    for name, rule in PRESETS.items():
         fields = ", ".join(f"{k}={v}" for k, v in dataclasses.asdict(rule).items())
         say(f"  {name:<8} {fields}")
     return 0

@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 from .. import data
-from ..config import DEFAULT_SIZE, SEGMENTED_MODES, VARIANT_ALIASES, VARIANTS, SynthesisConfig
+from ..config import DEFAULT_SIZE, PRESETS, SEGMENTED_MODES, SUPPORTS, VARIANTS, SynthesisConfig
 from ..io.runs import RUN_FILES
 from ..methods.npmrf import METHOD
 from ..methods.npmrf_coherent import SEGMENTED, SEGMENTED_MAX_VALUES
@@ -43,7 +43,7 @@ __all__ = ["register", "run"]
 
 #: Parameters whose library name differs from the option; messages name the option instead.
 OPTION_NAMES = ("max_sweeps", "centre_bandwidth", "histogram_weight", "grey_levels", "t_end")
-_DEFAULT_RULE = VARIANTS["sharp"]
+_DEFAULT_RULE = PRESETS["tuned"]
 
 
 def _d(name: str):
@@ -52,7 +52,7 @@ def _d(name: str):
 
 def _rule_help(text: str, field: str) -> str:
     value = getattr(_DEFAULT_RULE, field)
-    return f"{text} (default: None = the variant's value; the 'sharp' variant uses {value})"
+    return f"{text} (default: None = the preset's value; support full with preset tuned uses {value})"
 
 
 def register(commands, formatter_class) -> None:
@@ -84,12 +84,12 @@ def register(commands, formatter_class) -> None:
     )
     shape.add_argument(
         "--window", type=int, default=_d("window"), metavar="W",
-        help="side of each view's square neighbourhood, an odd integer from 3 to 15 (variant "
+        help="side of each view's square neighbourhood, an odd integer from 3 to 15 (support "
              "coherent on a segmented exemplar: 5, see --segmented)",
     )
     shape.add_argument(
         "--levels", type=int, default=_d("levels"), metavar="L",
-        help="number of pyramid levels (the paper's scales), an integer from 1 to 8 (variant "
+        help="number of pyramid levels (the paper's scales), an integer from 1 to 8 (support "
              "coherent on a segmented exemplar: this many and one fewer are both run, see "
              "--segmented)",
     )
@@ -97,7 +97,9 @@ def register(commands, formatter_class) -> None:
         "--upsample", default=None, metavar=choices(UPSAMPLING),
         help="how a level initialises the next finer one: 1/8 keeps only the inherited voxel and "
              "draws the other 7 at random, 8/8 copies the parent into all 8 "
-             "(default: none = the paper's choice, 1/8 for icm and 8/8 for anneal)",
+             "(support coherent: 8/8, its children copying the parent's shifted sources) "
+             "(default: none = 8/8 for support coherent; for support full the paper's choice, "
+             "1/8 for icm and 8/8 for anneal)",
     )
     shape.add_argument(
         "--inherit", default=_d("inherit"), metavar=choices(INHERIT),
@@ -162,20 +164,30 @@ def register(commands, formatter_class) -> None:
              "uniformly from the label set",
     )
     method.add_argument(
-        "--variant", default=None, metavar=choices(sorted([*VARIANTS, *VARIANT_ALIASES])),
-        help="how a voxel decides: coherent = the NP-MRF likelihood over coherent candidates (each "
-             "view's Parzen estimate sums over the exemplar patches that the neighbourhoods "
-             "containing the voxel copy; chosen by measurement, docs/quality.md; uses --window at "
-             "every level, --heuristic ML_H2b/ML_H2a, --centre-bandwidth as a factor of the "
-             "exemplar's standard deviation and --outlier; the icm/anneal options are not used), "
-             "sharp = the full-Parzen rule with sharpened bandwidths and a sampled decision (old "
-             "name: default), literal = the "
-             "paper word for word (collapses to a flat volume) "
-             "(default: none = coherent for icm, sharp for anneal)",
+        "--support", default=None, metavar=choices(SUPPORTS),
+        help="which exemplar neighbourhoods each view's Parzen estimate sums over: coherent = the "
+             "coherent candidates of the neighbourhoods containing the voxel (chosen by measurement, "
+             "docs/quality.md; --window at every level, --heuristic ML_H2b/ML_H2a, --centre-bandwidth "
+             "as a factor of the exemplar's standard deviation and --outlier; with anneal, a "
+             "heat-bath draw among the candidates, --proposals iterations per level), full = every "
+             "exemplar patch (Urs et al. 2014) with the decision rule --preset "
+             "(default: none = coherent)",
+    )
+    method.add_argument(
+        "--preset", default=None, metavar=choices(PRESETS),
+        help="support full: the decision rule, tuned = sharpened bandwidths, a sampled decision, "
+             "a histogram penalty (chosen by measurement), paper = Urs et al. 2014 word for word "
+             "(collapses to a flat volume on photographs) (default: none = tuned)",
+    )
+    method.add_argument(
+        "--variant", default=None, metavar=choices(VARIANTS),
+        help="the older single name of a support and a preset: coherent = --support coherent, "
+             "sharp or default = --support full --preset tuned, literal = --support full --preset "
+             "paper (default: none)",
     )
     method.add_argument(
         "--segmented", default=_d("segmented"), metavar=choices(SEGMENTED_MODES),
-        help="variant coherent: the preset for a segmented exemplar (a thresholded scan slice, a "
+        help="support coherent: the preset for a segmented exemplar (a thresholded scan slice, a "
              "label map): window 5 at every level in place of --window, and histogram vote "
              "weighting, which keep the phase fractions and the pore sizes; then a second run "
              "with one level fewer, and the volume kept is the one whose two-point correlation "
@@ -274,6 +286,7 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
         upsample=args.upsample, inherit=args.inherit, xi=args.xi, stop=args.stop,
         max_sweeps=args.max_sweeps, sampler=args.sampler, schedule=args.schedule, t0=args.t0,
         t_end=args.t_end, proposals=args.proposals, proposal=args.proposal, variant=args.variant,
+        support=args.support, preset=args.preset,
         segmented=args.segmented, bandwidth=args.bandwidth,
         centre_bandwidth=args.centre_bandwidth, adaptive=args.adaptive, decision=args.decision,
         tau=args.tau, histogram_weight=args.histogram_weight, outlier=args.outlier,
@@ -288,7 +301,8 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
     with claim_output(out, args.overwrite):
         result = run_method(args, METHOD, config, per_view, checkpoint=checkpoint, t_start=t_start)
         window = SEGMENTED.window if result.stats.get("segmented") else config.window
-        title = (f"npmrf3d {config.heuristic}, variant {config.variant}, window {window}, "
+        rule = "" if config.support == "coherent" else f" ({config.preset})"
+        title = (f"npmrf3d {config.heuristic}, support {config.support}{rule}, window {window}, "
                  f"{result.stats.get('levels_kept', config.levels)} levels, seed {config.seed}")
         write_result(out, args, argv, "synth", result, per_view, sources, title,
                      method=METHOD.name, labels=int(len(result.labels)))

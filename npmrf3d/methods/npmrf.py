@@ -10,110 +10,23 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import _validation as check
 from .._kernels import _jit
-from ..config import (DEFAULT_SIZE, DEFAULT_VARIANT, SEGMENTED_MODES, VARIANT_ALIASES, VARIANTS,
-    SynthesisConfig, SynthesisMethod, SynthesisResult)
+from ..config import DEFAULT_SIZE, SynthesisConfig, SynthesisMethod, SynthesisResult
 from ..model.exemplar import make_labels
 from ..model.heuristics import DECISIONS, get_heuristic
-from ..model.neighbourhood import VIEWS, colour_classes
+from ..model.neighbourhood import colour_classes
 from ..model.parzen import PRUNE, adaptive_floor, build_view_models
-from ..model.pyramid import INHERIT, UPSAMPLING, Levels, LevelState, random_state, run_pyramid, upsample
+from ..model.pyramid import Levels, LevelState, random_state, run_pyramid, upsample
 from ..model.relax import RELAXATIONS
-from ..model.relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
 from ..model.relax.icm import expected_sweeps
 from ..resources import coherent_estimate, npmrf_estimate, one_after_another
 from . import npmrf_coherent
 from ._api import prepare
+from .npmrf_options import make_config
 
 __all__ = ["METHOD", "make_config", "npmrf_method", "npmrf_synthesize", "run"]
 
 ProgressCallback = Callable[[int, int, int, float], None]
-
-
-#: Up-sampling used when none is asked for: the paper's choice for each relaxation.
-DEFAULT_UPSAMPLE = {"icm": "1/8", "anneal": "8/8"}
-
-
-_C = SynthesisConfig  # every default below is a field default of the configuration
-
-
-def make_config(
-    *, size=DEFAULT_SIZE, window=_C.window, levels=_C.levels, heuristic=_C.heuristic,
-    relaxation=_C.relaxation, views=_C.views, upsample=None, inherit=_C.inherit, xi=_C.xi,
-    stop=_C.stop, max_sweeps=_C.max_sweeps, sampler=_C.sampler, schedule=_C.schedule, t0=_C.t0,
-    t_end=_C.t_end, proposals=_C.proposals, proposal=_C.proposal, variant=None,
-    segmented=_C.segmented, bandwidth=None, centre_bandwidth=None, adaptive=None, decision=None, tau=None,
-    histogram_weight=None, outlier=None, grey_levels=None, palette=None, toroidal_exemplar=False,
-    seed=None,
-) -> SynthesisConfig:
-    """Validate plain keyword arguments into a frozen :class:`SynthesisConfig`.
-
-    ``variant`` names a preset of :data:`npmrf3d.config.VARIANTS`; the seven rule arguments
-    (``bandwidth`` ... ``outlier``) override single fields of it when not None.
-    """
-    levels = check.integer("levels", levels, low=1, high=8)
-    window = check.window(window)
-    dims = check.size(size, levels=levels, window=window)
-    heuristic = get_heuristic(heuristic).name
-    relaxation = check.choice("relaxation", relaxation, RELAXATIONS)
-    views = check.views(views, VIEWS)
-    if relaxation == "anneal" and not get_heuristic(heuristic).objective:
-        check.fail(f"heuristic {heuristic} cannot drive annealing: the Metropolis rule compares "
-                   f"objective values, and {heuristic} is defined by per-view argmax searches "
-                   f"with no objective; use ML_H2a or ML_H2b, or relaxation 'icm'")
-    upsample = DEFAULT_UPSAMPLE[relaxation] if upsample is None else upsample
-    upsample = check.choice("upsample", upsample, UPSAMPLING)
-    inherit = check.choice("inherit", inherit, INHERIT)
-    xi = check.real("xi", xi, high=0.0, high_open=True)
-    stop = check.real("stop", stop, low=0.0, high=1.0, low_open=True)
-    max_sweeps = check.integer("max_sweeps", max_sweeps, low=1)
-    sampler = check.choice("sampler", sampler, SAMPLERS)
-    schedule = check.choice("schedule", schedule, SCHEDULES)
-    t0 = check.real("t0", t0, low=0.0, low_open=True)
-    t_end = check.real("t_end", t_end, low=0.0, low_open=schedule == "geometric", high=t0)
-    proposals = check.integer("proposals", proposals, low=1)
-    proposal = check.choice("proposal", proposal, PROPOSALS)
-    variant = DEFAULT_VARIANT[relaxation] if variant is None else VARIANT_ALIASES.get(variant, variant)
-    variant = check.choice("variant", variant, VARIANTS)
-    segmented = check.choice("segmented", segmented, SEGMENTED_MODES)
-    if variant == "coherent":
-        if heuristic not in npmrf_coherent.CANDIDATE_HEURISTICS:
-            check.fail(f"variant 'coherent' ranks candidates by an objective: use heuristic ML_H2b or "
-                       f"ML_H2a, or variant 'sharp' or 'literal' for {heuristic}")
-        if toroidal_exemplar:
-            check.fail("variant 'coherent' does not wrap exemplar patches; drop toroidal_exemplar or "
-                       "use variant 'sharp' or 'literal'")
-    rule = VARIANTS[variant]
-    overrides = {}
-    for name, value, low in (("bandwidth", bandwidth, 0.0), ("centre_bandwidth", centre_bandwidth, 0.0),
-                             ("tau", tau, 0.0)):
-        if value is not None:
-            overrides[name] = check.real(name, value, low=low, low_open=True)
-    for name, value in (("adaptive", adaptive), ("histogram_weight", histogram_weight)):
-        if value is not None:
-            overrides[name] = check.real(name, value, low=0.0)
-    if outlier is not None:
-        overrides["outlier"] = check.real("outlier", outlier, low=0.0, high=1.0, high_open=True)
-    if decision is not None:
-        overrides["decision"] = check.choice("decision", decision, DECISIONS)
-    rule = dataclasses.replace(rule, **overrides)
-    if rule.decision == "sample" and heuristic in ("ML_H1a", "ML_H1b"):
-        check.fail(f"decision 'sample' needs a heuristic with an objective (ML_H2a, ML_H2b); "
-                   f"{heuristic} is defined by per-view argmax searches: use decision='argmax'")
-    if grey_levels is not None:
-        grey_levels = check.integer("grey_levels", grey_levels, low=2, high=65536)
-    if palette is not None:
-        palette = check.integer("palette", palette, low=2, high=65536)
-    if seed is not None:
-        seed = check.integer("seed", seed, low=0)
-    return SynthesisConfig(
-        size=dims, window=window, levels=levels, heuristic=heuristic, relaxation=relaxation,
-        views=views, upsample=upsample, inherit=inherit, xi=xi, stop=stop, max_sweeps=max_sweeps,
-        sampler=sampler, schedule=schedule, t0=t0, t_end=t_end, proposals=proposals,
-        proposal=proposal, variant=variant, segmented=segmented, rule=rule, grey_levels=grey_levels,
-        palette=palette, toroidal_exemplar=bool(toroidal_exemplar), seed=seed,
-    )
 
 
 def npmrf_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress: ProgressCallback | None = None,
@@ -132,65 +45,79 @@ def npmrf_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress: Pr
         Side of each view's square neighbourhood.
     levels : int
         Number of pyramid levels (the paper's "scales").
+    support : {"coherent", "full"} or None
+        Which exemplar neighbourhoods each view's Parzen estimate sums over (docs/model.md,
+        section 8). ``coherent`` (None, the default, chosen by measurement: docs/quality.md):
+        the coherent candidates of every neighbourhood containing the voxel
+        (:mod:`npmrf3d.methods.npmrf_coherent`), the voxel copies the best exemplar texel,
+        ``window`` at every level, ``history`` the mean patch energy per iteration. ``full``:
+        every exemplar patch (Urs et al. 2014), with the decision rule ``preset``.
     heuristic : {"ML_H1a", "ML_H1b", "ML_H2a", "ML_H2b"}
+        How the views' estimates combine (docs/model.md, section 3); support ``coherent``
+        ranks its candidates by ML_H2b or ML_H2a.
     relaxation : {"icm", "anneal"}
-        ICM with per-voxel temperatures, or simulated annealing with one global temperature
-        (:mod:`npmrf3d.model.relax.anneal`; needs ML_H2a or ML_H2b).
+        ICM, or simulated annealing with one global temperature (needs ML_H2a or ML_H2b). With
+        support ``full`` ICM has per-voxel temperatures (``xi``, ``stop``, ``max_sweeps``); with
+        support ``coherent`` it re-decides every voxel in each of a level's iterations.
+    preset : {"tuned", "paper"} or None
+        Support ``full``: the decision rule (:data:`npmrf3d.config.PRESETS`); ``paper`` is Urs
+        et al. 2014 word for word, ``tuned`` (None) the rule chosen by measurement.
+    variant : {"coherent", "sharp", "literal"} or None
+        The older single name of a support and a preset (:data:`npmrf3d.config.VARIANTS`):
+        ``sharp`` (also ``default``) is support ``full`` with preset ``tuned``, ``literal`` with
+        ``paper``.
     views : sequence of {"front", "right", "top"} (or a comma-separated string)
         Constrained views; see :mod:`npmrf3d.model.neighbourhood` for the axis mapping.
     exemplars : dict view -> exemplar, optional
         A different exemplar for some views.
     upsample : {"1/8", "8/8"} or None
-        How a level initialises the next finer one (docs/model.md, section 7); None: the paper's
-        choice, ``1/8`` for ICM and ``8/8`` for annealing.
+        How a level initialises the next finer one (docs/model.md, section 7). None: ``8/8``
+        for support ``coherent`` (every child copies its parent's shifted sources, the only
+        choice there); for support ``full`` the paper's choice, ``1/8`` for ICM and ``8/8`` for
+        annealing.
     inherit : {"resynth", "fixed"}
-        Whether inherited voxels may still change (their temperature stays 0 either way).
+        Support ``full``: whether inherited voxels may still change (temperature 0 either way).
     xi : float < 0
-        ICM cooling step.
+        Support ``full``, ICM: the cooling step.
     stop : float in (0, 1]
-        Stop a level once the global temperature fell by this fraction (1: down to 0).
+        Support ``full``, ICM: stop a level once the global temperature fell by this fraction.
     max_sweeps : int
-        Hard limit of sweeps per level.
+        Support ``full``, ICM: hard limit of sweeps per level.
     sampler : {"heat-bath", "metropolis"}
-        Annealing: a heat-bath draw from the tempered objective over all labels (this
-        project's addition, the default: better volumes for the same number of sweeps, see
-        docs/quality.md), or the paper's Metropolis proposals.
+        Annealing: a heat-bath draw from the tempered objective (the default; support
+        ``coherent`` draws among its candidates), or the paper's Metropolis proposals
+        (support ``full``).
     schedule : {"geometric", "linear"}
         Annealing: how the global temperature falls from ``t0`` to ``t_end`` within a level.
     t0, t_end : float
         Annealing: first and last temperature of each level (``0 < t_end <= t0``; ``t_end = 0``
         allowed for the linear schedule).
     proposals : int
-        Annealing: proposals per voxel per level (one per voxel per sweep).
+        Annealing: proposals per voxel per level (one per voxel per sweep; with support
+        ``coherent`` the level's iterations).
     proposal : {"exemplar", "labels"}
-        Annealing (Metropolis): candidates drawn from the exemplar's values (the paper) or
+        Support ``full``, Metropolis: candidates drawn from the exemplar's values (the paper) or
         uniformly from the label set.
-    variant : {"coherent", "sharp", "literal"} or None
-        How a voxel decides (:data:`npmrf3d.config.VARIANTS`). None: ``coherent`` for ICM, ``sharp``
-        for annealing. ``coherent`` (:mod:`npmrf3d.methods.npmrf_coherent`; docs/model.md, section
-        8): each view's Parzen estimate sums over the coherent candidates of every neighbourhood
-        containing the voxel, and the voxel copies the best exemplar texel (``window`` at every
-        level; the ICM options are not used; ``history`` holds the mean patch energy per iteration).
-        With ``relaxation="anneal"`` it draws among its candidates with probability proportional to
-        ``exp(score / T)``, ``T`` from ``t0`` to ``t_end`` by ``schedule`` over each level's
-        iterations (``sampler``, ``proposals``, ``proposal`` are not used). ``sharp`` (also selected
-        by ``default``): the full-Parzen rule chosen by measurement (docs/quality.md, "The levers,
-        measured"). ``literal``: the paper word for word.
     segmented : {"auto", "yes", "no"}
-        The ``coherent`` variant's preset for segmented exemplars (:data:`npmrf3d.methods.npmrf_coherent.SEGMENTED`:
+        Support ``coherent``: its preset for segmented exemplars (:data:`npmrf3d.methods.npmrf_coherent.SEGMENTED`:
         window 5 at every level, histogram vote weighting 8, and two pyramids, ``levels`` and
         one fewer, of which :func:`npmrf3d.methods.npmrf_coherent.best_of_pyramids` keeps the one nearer the
         exemplars' two-point correlation; about twice the time). "auto": when the exemplars hold
         at most :data:`npmrf3d.methods.npmrf_coherent.SEGMENTED_MAX_VALUES` grey values together; "no":
         ``window`` and ``levels`` as given. The result's ``stats`` say what ran (docs/volume.md).
-    bandwidth, centre_bandwidth, adaptive, decision, tau, histogram_weight, outlier : optional
-        Override single fields of the preset (:class:`npmrf3d.config.DecisionRule`).
+    bandwidth, adaptive, decision, tau, histogram_weight : optional
+        Support ``full``: override single fields of the preset (:class:`npmrf3d.config.DecisionRule`).
+    centre_bandwidth, outlier : optional
+        Override the support's centre bandwidth and outlier share.
     grey_levels : int, optional
         Re-quantise the exemplar to this many levels per channel.
     palette : int, optional
         Reduce the exemplar to at most this many colours (k-means).
     toroidal_exemplar : bool
-        Let exemplar patches wrap around its borders.
+        Support ``full``: let exemplar patches wrap around its borders.
+
+    An option set away from its default where the chosen combination cannot use it is refused
+    with one line (:mod:`npmrf3d.methods.npmrf_options`).
     rng : None, int or numpy Generator
         Seed; the result depends on it only (not on the number of threads).
     progress : callable, optional
@@ -326,14 +253,14 @@ def npmrf_method(per_view: dict[str, np.ndarray], config: SynthesisConfig, rng: 
     ``t_start`` (optional, every method accepts it): ``time.perf_counter()`` when the caller
     started, so that ``timings["setup"]`` includes loading the exemplars.
     """
-    if config.variant == "coherent":
+    if config.support == "coherent":
         return _run_coherent(per_view, config, rng, progress=progress, checkpoint=checkpoint,
                              t_start=t_start)
     return run(config, per_view, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
 
 
 def segmented(config: SynthesisConfig, per_view) -> bool:
-    """Whether a ``coherent``-variant run uses :data:`npmrf3d.methods.npmrf_coherent.SEGMENTED`: ``segmented``
+    """Whether a ``coherent``-support run uses :data:`npmrf3d.methods.npmrf_coherent.SEGMENTED`: ``segmented``
     "yes", or "auto" and the exemplars (``per_view``: view -> array, before any palette or grey
     levels) are segmented (:func:`npmrf3d.methods.npmrf_coherent.is_segmented`)."""
     if config.segmented == "auto":
@@ -342,7 +269,7 @@ def segmented(config: SynthesisConfig, per_view) -> bool:
 
 
 def _coherent_options(config: SynthesisConfig, phases: bool, levels: int) -> npmrf_coherent.CoherentConfig:
-    """The coherent sampler's options for a ``coherent``-variant configuration: its window at
+    """The coherent sampler's options for a ``coherent``-support configuration: its window at
     every level (:data:`npmrf3d.methods.npmrf_coherent.SEGMENTED`'s window and histogram vote weighting for a
     segmented exemplar, ``phases`` = :func:`segmented`), ``levels`` levels, its views,
     heuristic, centre bandwidth and outlier share; with relaxation ``anneal`` its temperatures
@@ -356,7 +283,8 @@ def _coherent_options(config: SynthesisConfig, phases: bool, levels: int) -> npm
         size=config.size, window=(window,) * levels, levels=levels,
         views=config.views, heuristic=config.heuristic, centre_bandwidth=config.rule.centre_bandwidth,
         outlier=config.rule.outlier, value_weight=value_weight, t0=config.t0 if anneal else 0.0,
-        t_end=config.t_end, schedule=config.schedule, seed=config.seed)
+        t_end=config.t_end, schedule=config.schedule, seed=config.seed,
+        **({"iterations": (config.proposals,) * levels} if anneal else {}))
 
 
 def _coherent_runs(config: SynthesisConfig, phases: bool) -> list[npmrf_coherent.CoherentConfig]:
@@ -367,15 +295,15 @@ def _coherent_runs(config: SynthesisConfig, phases: bool) -> list[npmrf_coherent
 
 def npmrf_resources(config: SynthesisConfig, per_view):
     """The memory estimate of a run: the coherent sampler's (its pyramids') for the ``coherent``
-    variant, the full-Parzen sampler's otherwise."""
-    if config.variant == "coherent":
+    support, the full-Parzen sampler's otherwise."""
+    if config.support == "coherent":
         runs = _coherent_runs(config, segmented(config, per_view))
         return one_after_another(coherent_estimate(options, per_view) for options in runs)
     return npmrf_estimate(config, per_view)
 
 
 def _run_coherent(per_view, config: SynthesisConfig, rng, *, progress, checkpoint, t_start) -> SynthesisResult:
-    """The ``coherent`` variant: :mod:`npmrf3d.methods.npmrf_coherent` with the options of :func:`_coherent_options`
+    """The ``coherent`` support: :mod:`npmrf3d.methods.npmrf_coherent` with the options of :func:`_coherent_options`
     (decided on the exemplars as given); the exemplars reduced to ``grey_levels`` or a
     ``palette`` first when asked. ``stats["segmented"]`` says whether the segmented preset ran;
     the preset runs two pyramids and keeps the better (:func:`npmrf3d.methods.npmrf_coherent.best_of_pyramids`)."""

@@ -73,8 +73,8 @@ _FULL = dict(seeds=(0, 1, 2), sizes=(64,), levels=3, crop=64)
 NPK_FULL_EXEMPLARS: tuple[str, ...] = ("gravel", "brick", "ihc")
 _QUICK = dict(exemplars=("gravel64",), seeds=(0,), sizes=(8,), levels=1, crop=24,
               common=(("window", 3), ("max_sweeps", 2)))
-_ANNEAL = (("relaxation", "anneal"), ("sampler", "metropolis"), ("schedule", "geometric"),
-           ("proposals", 8))
+_ANNEAL = (("relaxation", "anneal"), ("support", "full"), ("sampler", "metropolis"),
+           ("schedule", "geometric"), ("proposals", 8))
 _QUICK_ANNEAL = (("proposals", 2),)
 #: The on-demand neural generator (Gutierrez et al. 2020) in the NP_K comparison. Full: the
 #: paper's network (85,003 parameters) trained for NEURAL_ITERATIONS steps of one 64^2 slice per
@@ -89,18 +89,19 @@ _QUICK_NEURAL = Method("neural", "neural", (
 
 
 def _m(name: str, algorithm: str = "npmrf", **params) -> Method:
-    # the paper's studies compare full-Parzen NP-MRF settings: they use the full-Parzen rule
-    # "sharp" (docs/model.md, section 8) unless they name one
-    if algorithm == "npmrf" and "variant" not in params and params.get("relaxation", "icm") == "icm":
-        params = {**params, "variant": "sharp"}
+    # the paper's studies compare full-Parzen NP-MRF settings: they use the full support with
+    # the tuned rule (docs/model.md, section 8) unless they name a support or variant
+    if algorithm == "npmrf" and not {"variant", "support"} & set(params):
+        params = {**params, "support": "full"}
     return Method(name, algorithm, tuple(params.items()))
 
 
 #: synth's default (ICM, the coherent NP-MRF sampler, full colours): the studies that compare the
 #: paper's full-Parzen settings show it beside them.
-_DEFAULT = _m("default", relaxation="icm", variant="coherent", palette=None)
+_DEFAULT = _m("default", relaxation="icm", support="coherent", palette=None)
 #: The coherent sampler annealed over its candidates (docs/model.md, section 8), full colours.
-_COHERENT_ANNEAL = _m("coherent-anneal", relaxation="anneal", variant="coherent", palette=None)
+_COHERENT_ANNEAL = _m("coherent-anneal", relaxation="anneal", support="coherent", sampler="heat-bath",
+                      proposals=4, palette=None)
 
 HEURISTICS = Study(
     name="heuristics",
@@ -113,11 +114,11 @@ HEURISTICS = Study(
     common=(("relaxation", "icm"), ("window", 7), ("upsample", "8/8"), ("inherit", "resynth"),
             ("xi", -3.0), ("stop", 0.95), ("max_sweeps", 30)),
     methods=(
-        _m("ML_H1a", heuristic="ML_H1a", variant="literal"),
-        _m("ML_H1b", heuristic="ML_H1b", variant="literal"),
-        _m("ML_H2a", heuristic="ML_H2a", variant="literal"),
-        _m("ML_H2b", heuristic="ML_H2b", variant="literal"),
-        _m("ML_H2b-default", heuristic="ML_H2b", variant="sharp"),
+        _m("ML_H1a", heuristic="ML_H1a", support="full", preset="paper"),
+        _m("ML_H1b", heuristic="ML_H1b", support="full", preset="paper"),
+        _m("ML_H2a", heuristic="ML_H2a", support="full", preset="paper"),
+        _m("ML_H2b", heuristic="ML_H2b", support="full", preset="paper"),
+        _m("ML_H2b-default", heuristic="ML_H2b", support="full", preset="tuned"),
     ),
     full=Scale(exemplars=("gravel64",), **_FULL),
     quick=Scale(**_QUICK),
@@ -179,7 +180,7 @@ ICM_VS_ANNEAL = Study(
     common=(("heuristic", "ML_H2b"), ("window", 7), ("grey_levels", 32)),
     methods=(
         _m("ICM", relaxation="icm", max_sweeps=30),
-        _m("ICM-literal", relaxation="icm", variant="literal", max_sweeps=30),
+        _m("ICM-literal", relaxation="icm", support="full", preset="paper", max_sweeps=30),
         Method("anneal", "npmrf", _ANNEAL),
     ),
     full=Scale(exemplars=("gravel64",), **_FULL),
@@ -260,8 +261,8 @@ VIEWS = Study(
     methods=(
         _m("3views", views="front,right,top"),
         _m("2views", views="front,top"),
-        _m("3views-default", views="front,right,top", variant="coherent", palette=None),
-        _m("2views-default", views="front,top", variant="coherent", palette=None),
+        _m("3views-default", views="front,right,top", support="coherent", palette=None),
+        _m("2views-default", views="front,top", support="coherent", palette=None),
     ),
     full=Scale(exemplars=("wood",), **_FULL),
     quick=Scale(**{**_QUICK, "exemplars": ("stripes",)}),

@@ -11,7 +11,9 @@ Parameters reach the algorithms like this:
 Registered methods (:data:`npmrf3d.methods.METHODS`) are called through their ``synthesize``:
 
 * ``npmrf`` methods call :func:`npmrf3d.synthesize` with ``study.common``, then
-  ``scale.common``, then the method's own ``params`` (later ones win) plus ``size``,
+  ``scale.common`` (each only where the method's support and relaxation use it,
+  :func:`npmrf3d.methods.npmrf_options.applies`), then the method's own ``params`` (later ones
+  win) plus ``size``,
   ``levels`` and ``rng=seed``; keyword arguments are passed through unchanged, so settings of
   newer samplers (``relaxation="anneal"``, ``proposals``, ``schedule``, ``t0``, ``t_end``,
   ``sampler``) need nothing here.
@@ -46,6 +48,7 @@ from typing import Any
 
 from ..errors import ParameterError
 from ..methods import ALIASES, METHODS
+from ..methods.npmrf_options import applies, combination
 from ..model.neighbourhood import VIEWS
 
 __all__ = ["ALGORITHMS", "MODES", "Method", "RunSpec", "Scale", "Study", "run_id"]
@@ -276,7 +279,10 @@ class Study:
         specs = []
         for exemplar in exemplars:
             for method in methods:
-                params = dict(common) if method.algorithm == "npmrf" else {}
+                params = {}
+                if method.algorithm == "npmrf":  # the common settings the method's sampler uses
+                    where = combination({**common, **dict(method.params)})
+                    params = {k: v for k, v in common.items() if applies(k, where)}
                 params.update(method.params)
                 for size in sizes:
                     for seed in seeds:

@@ -1,0 +1,199 @@
+"""The NP-MRF sampler's options, validated by axis into a frozen :class:`SynthesisConfig`.
+
+The sampler has three independent choices (docs/model.md, section 8): the estimator
+**support** (``coherent`` candidates or the ``full`` exemplar), the **heuristic** (ML_H1a,
+ML_H1b, ML_H2a, ML_H2b) and the **relaxation** (``icm`` or ``anneal``), each with its own
+options. :func:`make_config` accepts an option only where it changes the result: an option
+given a value other than its default where the chosen combination cannot use it is refused in
+one line (:class:`npmrf3d.ParameterError`), never silently ignored. :data:`APPLIES` says which
+option belongs to which combination (the README's option table is made from it).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from .. import _validation as check
+from ..config import (
+    COHERENT_RULE,
+    DEFAULT_SIZE,
+    PRESETS,
+    SEGMENTED_MODES,
+    SUPPORTS,
+    VARIANTS,
+    SynthesisConfig,
+)
+from ..model.heuristics import DECISIONS, get_heuristic
+from ..model.neighbourhood import VIEWS
+from ..model.pyramid import INHERIT, UPSAMPLING
+from ..model.relax import RELAXATIONS
+from ..model.relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
+from . import npmrf_coherent
+
+__all__ = ["APPLIES", "DEFAULT_UPSAMPLE", "applies", "combination", "make_config"]
+
+#: Up-sampling used when none is asked for: the paper's choice for each relaxation.
+DEFAULT_UPSAMPLE = {"icm": "1/8", "anneal": "8/8"}
+
+#: The combinations (support, relaxation) that use an option, for the options that some
+#: combinations cannot use; every other option applies everywhere.
+APPLIES: dict[str, tuple[tuple[str, str], ...]] = {
+    "xi": (("full", "icm"),),
+    "stop": (("full", "icm"),),
+    "max_sweeps": (("full", "icm"),),
+    "upsample": (("full", "icm"), ("full", "anneal"), ("coherent", "icm"), ("coherent", "anneal")),
+    "inherit": (("full", "icm"), ("full", "anneal")),
+    "sampler": (("full", "anneal"), ("coherent", "anneal")),
+    "schedule": (("full", "anneal"), ("coherent", "anneal")),
+    "t0": (("full", "anneal"), ("coherent", "anneal")),
+    "t_end": (("full", "anneal"), ("coherent", "anneal")),
+    "proposals": (("full", "anneal"), ("coherent", "anneal")),
+    "proposal": (("full", "anneal"),),
+    "preset": (("full", "icm"), ("full", "anneal")),
+    "bandwidth": (("full", "icm"), ("full", "anneal")),
+    "adaptive": (("full", "icm"), ("full", "anneal")),
+    "decision": (("full", "icm"), ("full", "anneal")),
+    "tau": (("full", "icm"), ("full", "anneal")),
+    "histogram_weight": (("full", "icm"), ("full", "anneal")),
+    "toroidal_exemplar": (("full", "icm"), ("full", "anneal")),
+    "segmented": (("coherent", "icm"), ("coherent", "anneal")),
+}
+#: What the coherent support supports of each axis (the rest is refused with the reason).
+COHERENT_SAMPLERS = ("heat-bath",)
+COHERENT_UPSAMPLING = ("8/8",)
+
+_C = SynthesisConfig  # every default below is a field default of the configuration
+
+
+def combination(options) -> tuple[str, str]:
+    """(support, relaxation) that keyword ``options`` of :func:`make_config` ask for (unchecked).
+
+    >>> combination({"variant": "literal"}), combination({"relaxation": "anneal"})
+    (('full', 'icm'), ('coherent', 'anneal'))
+    """
+    variant = options.get("variant")
+    support = VARIANTS[variant][0] if variant in VARIANTS else options.get("support") or _C.support
+    return support, options.get("relaxation", _C.relaxation)
+
+
+def applies(name: str, where: tuple[str, str]) -> bool:
+    """Whether option ``name`` changes the result of the combination ``where``."""
+    return name not in APPLIES or where in APPLIES[name]
+
+
+def _refuse_unused(given: dict, support: str, relaxation: str) -> None:
+    """One line for the first option set away from its default that (support, relaxation)
+    cannot use."""
+    for name, value in given.items():
+        default = getattr(_C, name, None) if name != "upsample" else None
+        if value is None or value == default or applies(name, (support, relaxation)):
+            continue
+        users = " or ".join(f"support '{s}' with relaxation '{r}'" for s, r in APPLIES[name])
+        check.fail(f"option {name} does not apply to support '{support}' with relaxation "
+                   f"'{relaxation}' (it is used by {users}); drop it or choose that combination")
+
+
+def _support_and_preset(variant, support, preset) -> tuple[str, str]:
+    """(support, preset) from the older ``variant`` name or the two axes themselves."""
+    if variant is not None:
+        named = VARIANTS.get(variant) if isinstance(variant, str) else None
+        if named is None:
+            check.fail(f"variant must be one of {', '.join(VARIANTS)}; got {variant!r}")
+        if (support is not None and support != named[0]) or (preset is not None and preset != named[1]):
+            check.fail(f"variant {variant!r} means support {named[0]!r} with preset {named[1]!r}; "
+                       f"it contradicts support={support!r}, preset={preset!r}: give one or the other")
+        return named
+    support = check.choice("support", _C.support if support is None else support, SUPPORTS)
+    preset = check.choice("preset", _C.preset if preset is None else preset, tuple(PRESETS))
+    return support, preset
+
+
+def make_config(
+    *, size=DEFAULT_SIZE, window=_C.window, levels=_C.levels, heuristic=_C.heuristic,
+    relaxation=_C.relaxation, views=_C.views, support=None, preset=None, upsample=None,
+    inherit=_C.inherit, xi=_C.xi, stop=_C.stop, max_sweeps=_C.max_sweeps, sampler=_C.sampler,
+    schedule=_C.schedule, t0=_C.t0, t_end=_C.t_end, proposals=_C.proposals, proposal=_C.proposal,
+    variant=None, segmented=_C.segmented, bandwidth=None, centre_bandwidth=None, adaptive=None,
+    decision=None, tau=None, histogram_weight=None, outlier=None, grey_levels=None, palette=None,
+    toroidal_exemplar=False, seed=None,
+) -> SynthesisConfig:
+    """Validate plain keyword arguments into a frozen :class:`SynthesisConfig`.
+
+    ``support`` (None: ``coherent``) and ``preset`` (None: ``tuned``; the full support's
+    decision rule, :data:`npmrf3d.config.PRESETS`) may also be given together by the older name
+    ``variant`` (:data:`npmrf3d.config.VARIANTS`). The rule arguments (``bandwidth`` ...
+    ``outlier``) override single fields of the support's rule when not None.
+    """
+    levels = check.integer("levels", levels, low=1, high=8)
+    window = check.window(window)
+    dims = check.size(size, levels=levels, window=window)
+    heuristic = get_heuristic(heuristic).name
+    relaxation = check.choice("relaxation", relaxation, RELAXATIONS)
+    views = check.views(views, VIEWS)
+    support, preset_name = _support_and_preset(variant, support, preset)
+    given = {"xi": xi, "stop": stop, "max_sweeps": max_sweeps, "upsample": upsample, "inherit": inherit,
+             "sampler": sampler, "schedule": schedule, "t0": t0, "t_end": t_end, "proposals": proposals,
+             "proposal": proposal, "preset": preset if variant is None else None, "bandwidth": bandwidth,
+             "adaptive": adaptive, "decision": decision, "tau": tau, "histogram_weight": histogram_weight,
+             "toroidal_exemplar": bool(toroidal_exemplar) or None,
+             "segmented": segmented if segmented == "yes" else None}
+    if relaxation == "anneal" and not get_heuristic(heuristic).objective:
+        check.fail(f"heuristic {heuristic} cannot drive annealing: annealing compares objective "
+                   f"values, and {heuristic} is defined by per-view argmax searches with no "
+                   f"objective; use ML_H2a or ML_H2b, or relaxation 'icm'")
+    if upsample is None:
+        upsample = COHERENT_UPSAMPLING[0] if support == "coherent" else DEFAULT_UPSAMPLE[relaxation]
+    upsample = check.choice("upsample", upsample, UPSAMPLING)
+    inherit = check.choice("inherit", inherit, INHERIT)
+    xi = check.real("xi", xi, high=0.0, high_open=True)
+    stop = check.real("stop", stop, low=0.0, high=1.0, low_open=True)
+    max_sweeps = check.integer("max_sweeps", max_sweeps, low=1)
+    sampler = check.choice("sampler", sampler, SAMPLERS)
+    schedule = check.choice("schedule", schedule, SCHEDULES)
+    t0 = check.real("t0", t0, low=0.0, low_open=True)
+    t_end = check.real("t_end", t_end, low=0.0, low_open=schedule == "geometric", high=t0)
+    proposals = check.integer("proposals", proposals, low=1)
+    proposal = check.choice("proposal", proposal, PROPOSALS)
+    segmented = check.choice("segmented", segmented, SEGMENTED_MODES)
+    rule = COHERENT_RULE if support == "coherent" else PRESETS[preset_name]
+    overrides = {}
+    for name, value, low in (("bandwidth", bandwidth, 0.0), ("centre_bandwidth", centre_bandwidth, 0.0),
+                             ("tau", tau, 0.0)):
+        if value is not None:
+            overrides[name] = check.real(name, value, low=low, low_open=True)
+    for name, value in (("adaptive", adaptive), ("histogram_weight", histogram_weight)):
+        if value is not None:
+            overrides[name] = check.real(name, value, low=0.0)
+    if outlier is not None:
+        overrides["outlier"] = check.real("outlier", outlier, low=0.0, high=1.0, high_open=True)
+    if decision is not None:
+        overrides["decision"] = check.choice("decision", decision, DECISIONS)
+    rule = dataclasses.replace(rule, **overrides)
+    _refuse_unused(given, support, relaxation)  # after the values' own checks
+    if support == "coherent":
+        if heuristic not in npmrf_coherent.CANDIDATE_HEURISTICS:
+            check.fail(f"support 'coherent' ranks candidates by ML_H2b or ML_H2a so far; heuristic "
+                       f"{heuristic} runs with support 'full'")
+        if upsample not in COHERENT_UPSAMPLING:
+            check.fail(f"support 'coherent' up-samples {' or '.join(COHERENT_UPSAMPLING)} so far (every "
+                       f"child copies its parent's shifted sources); upsample {upsample!r} runs with "
+                       f"support 'full'")
+        if relaxation == "anneal" and sampler not in COHERENT_SAMPLERS:
+            check.fail(f"support 'coherent' anneals with sampler {' or '.join(COHERENT_SAMPLERS)} so "
+                       f"far; sampler {sampler!r} runs with support 'full'")
+    if rule.decision == "sample" and heuristic in ("ML_H1a", "ML_H1b"):
+        check.fail(f"decision 'sample' needs a heuristic with an objective (ML_H2a, ML_H2b); "
+                   f"{heuristic} is defined by per-view argmax searches: use decision='argmax'")
+    if grey_levels is not None:
+        grey_levels = check.integer("grey_levels", grey_levels, low=2, high=65536)
+    if palette is not None:
+        palette = check.integer("palette", palette, low=2, high=65536)
+    if seed is not None:
+        seed = check.integer("seed", seed, low=0)
+    return SynthesisConfig(
+        size=dims, window=window, levels=levels, heuristic=heuristic, relaxation=relaxation,
+        views=views, upsample=upsample, inherit=inherit, xi=xi, stop=stop, max_sweeps=max_sweeps,
+        sampler=sampler, schedule=schedule, t0=t0, t_end=t_end, proposals=proposals,
+        proposal=proposal, support=support, preset=preset_name, segmented=segmented, rule=rule,
+        grey_levels=grey_levels, palette=palette, toroidal_exemplar=bool(toroidal_exemplar), seed=seed,
+    )
