@@ -171,20 +171,28 @@ def winner_sources(winners, tops, ug, uv, u, ex_flat, ex_off, new_src_t):
         if uv[tops[winners[v]]] == v:
             new_src_t[v] = g - ex_off[v]
             continue
-        near = -1
-        near_d = np.inf
-        for q in range(u):
-            if uv[q] != v:
-                continue
-            dd = 0.0
-            for ch in range(ex_flat.shape[1]):
-                diff = ex_flat[ug[q], ch] - ex_flat[g, ch]
-                dd += diff * diff
-            if dd < near_d:
-                near_d = dd
-                near = q
+        near = nearest_vote(v, g, ug, uv, u, ex_flat)
         if near >= 0:
             new_src_t[v] = ug[near] - ex_off[v]
+
+
+@jit
+def nearest_vote(v, g, ug, uv, u, ex_flat):
+    """The merged vote of view ``v`` whose texel is nearest in colour to texel ``g`` (first on
+    ties), -1 when the view has none."""
+    near = -1
+    near_d = np.inf
+    for q in range(u):
+        if uv[q] != v:
+            continue
+        dd = 0.0
+        for ch in range(ex_flat.shape[1]):
+            diff = ex_flat[ug[q], ch] - ex_flat[g, ch]
+            dd += diff * diff
+        if dd < near_d:
+            near_d = dd
+            near = q
+    return near
 
 
 @jit

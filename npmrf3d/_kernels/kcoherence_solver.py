@@ -1,6 +1,6 @@
 """Compiled discrete solver of the k-coherence engine (Chen & Wang 2010, section 4.2).
 
-Why one module of ~480 lines: one kernel, :func:`solve`, whose decision rules (weighted mean,
+Why one module of ~490 lines: one kernel, :func:`solve`, whose decision rules (weighted mean,
 weighted medoid, the NP-MRF rules and their annealed draws, the latter's helpers in
 :mod:`npmrf3d._kernels.candidate_decision`) share the votes and their buffers, with its vote
 helpers and the three bundles of its arguments.
@@ -459,18 +459,7 @@ def solve(volume, src, assign, omega, views, hist, rule, order, batch_bounds, ch
                     if v == vv[best]:
                         new_src[t, v] = g - ex_off[v]
                         continue
-                    near = -1
-                    near_d = np.inf
-                    for q in range(u):
-                        if uv[q] != v:
-                            continue
-                        dd = 0.0
-                        for ch in range(channels):
-                            diff = ex_flat[ug[q], ch] - ex_flat[g, ch]
-                            dd += diff * diff
-                        if dd < near_d:
-                            near_d = dd
-                            near = q
+                    near = _decide.nearest_vote(v, g, ug, uv, u, ex_flat)
                     if near >= 0:
                         new_src[t, v] = ug[near] - ex_off[v]
         # sequential, fixed order: histograms follow the new sources
