@@ -526,16 +526,59 @@ def naive_votes(site, views, assign, omega, exemplars, window, grid, pos_hist, t
     return votes
 
 
+def naive_view_estimates(colour, votes, totals, n_views, h2c, outlier):
+    """Every view's Parzen estimate of ``colour`` from its votes, mixed with the outlier share
+    (the outlier share alone for a view without votes); differences in float32."""
+    lik = {}
+    for m in votes:
+        dd = 0.0
+        for ch in range(len(m[0])):
+            diff = np.float32(colour[ch]) - np.float32(m[0][ch])
+            dd += float(diff * diff)
+        lik[m[1]] = lik.get(m[1], 0.0) + m[3] * np.exp(-dd / h2c)
+    return [(1.0 - outlier) * lik.get(v, 0.0) / totals[v] + outlier if totals.get(v, 0.0) > 0 else outlier
+            for v in range(n_views)]
+
+
+def naive_prior(colour, values):
+    """The histogram prior of a colour: ``prior * sum_c log((target + e) / (max(hist, 0) + e))``
+    at its bins (0 without ``values`` or with a zero strength)."""
+    if values is None or values.get("prior", 0.0) <= 0:
+        return 0.0
+    eps = 1.0 / values["unit"]
+    prior = 0.0
+    for ch in range(len(colour)):
+        b = naive_value_bin(colour[ch], values["lo"][ch], values["scale"][ch], len(values["hist"][ch]))
+        prior += values["prior"] * np.log((values["target"][ch][b] + eps) / (max(values["hist"][ch][b], 0.0) + eps))
+    return prior
+
+
+def naive_score(per_view, prior, likelihood, has_prior):
+    """The raw score of an objective rule: ML_H2b (1) the sum of logs plus the prior, ML_H2a (2)
+    the minimum times ``exp(prior)``."""
+    score = sum(np.log(x) for x in per_view) if likelihood == 1 else min(per_view)
+    if has_prior:
+        score = score + prior if likelihood == 1 else score * np.exp(prior)
+    return score
+
+
 def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, order, bounds,
                 pos_hist, theta, position_weight, position_boost=0.0, medoid=0, balance=False,
-                likelihood=0, h2c=1.0, outlier=0.0, values=None, temperature=0.0, salt=0):
+                likelihood=0, h2c=1.0, outlier=0.0, values=None, temperature=0.0, salt=0, sampler=0):
     """Literal discrete solver; returns (volume, src, pos_hist, changed). ``likelihood`` 1 or 2:
     the coherent NP-MRF decision (per-view Parzen estimate of each candidate's colour, product or
     minimum over views) instead of the medoid; with ``temperature > 0`` a heat-bath draw among the
     candidates, ``P(a) ~ exp(l_a / temperature)`` (``l`` the log-score), from the voxel's hash
-    ``(naive_mix(salt * n + flat) + 0.5) / 2**31``. ``values`` (see :func:`naive_votes`, plus
-    ``unit``): the value histogram, which follows every changed voxel between batches (updated
-    in place)."""
+    ``(naive_mix(salt * n + flat) + 0.5) / 2**31``, or with ``sampler`` 1 a Metropolis step: the
+    proposal ``a = floor(u * n_candidates)`` from that hash ``u``, accepted if its log-score is at
+    least the current colour's, else if ``(naive_mix(naive_mix(salt * n + flat) + 2**31) + 0.5) /
+    2**31 < exp(gap / temperature)``; a rejected voxel is left as it is. ``likelihood`` 3
+    (ML_H1a) or 4 (ML_H1b): every view with votes picks the candidate of highest estimate (times
+    ``exp(prior)``; first on ties); ML_H1a copies the pick of lowest own estimate (first view on
+    ties), ML_H1b takes the mean of the picks' colours and each view's source becomes its pick
+    (its nearest own vote when the pick is another view's). ``values`` (see
+    :func:`naive_votes`, plus ``unit``): the value histogram, which follows every changed voxel
+    between batches (updated in place)."""
     volume = volume.copy()
     src = src.copy()
     pos_hist = [h.astype(np.float64).copy() for h in pos_hist]
@@ -569,39 +612,59 @@ def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, o
                         ranked.append(q)
                 ranked = ranked[:medoid]
                 best, best_e = None, np.inf
+                picks = None
                 if likelihood:
                     totals = {}
                     for m in votes:
                         totals[m[1]] = totals.get(m[1], 0.0) + m[3]
+                    has_prior = values is not None and values.get("prior", 0.0) > 0
                     best_score = -np.inf
-                    logs = []
+                    logs, tables = [], []
                     for q in ranked:
-                        lik = {}
-                        for m in votes:
-                            dd = 0.0
-                            for ch in range(len(m[0])):
-                                diff = np.float32(votes[q][0][ch]) - np.float32(m[0][ch])
-                                dd += float(diff * diff)
-                            lik[m[1]] = lik.get(m[1], 0.0) + m[3] * np.exp(-dd / h2c)
-                        per_view = [(1.0 - outlier) * lik.get(v, 0.0) / totals[v] + outlier if totals.get(v, 0.0) > 0
-                                    else outlier for v in range(len(views))]
-                        score = sum(np.log(x) for x in per_view) if likelihood == 1 else min(per_view)
-                        if values is not None and values.get("prior", 0.0) > 0:
-                            eps = 1.0 / values["unit"]
-                            prior = 0.0
-                            for ch in range(len(votes[q][0])):
-                                bq = naive_value_bin(votes[q][0][ch], values["lo"][ch], values["scale"][ch],
-                                                     len(values["hist"][ch]))
-                                prior += values["prior"] * np.log((values["target"][ch][bq] + eps)
-                                                                  / (max(values["hist"][ch][bq], 0.0) + eps))
-                            score = score + prior if likelihood == 1 else score * np.exp(prior)
+                        per_view = naive_view_estimates(votes[q][0], votes, totals, len(views), h2c, outlier)
+                        prior = naive_prior(votes[q][0], values)
+                        if likelihood >= 3:
+                            tables.append([x * np.exp(prior) for x in per_view])
+                            continue
+                        score = naive_score(per_view, prior, likelihood, has_prior)
                         logs.append(score if likelihood == 1 else np.log(score))
                         if score > best_score:
                             best, best_score = votes[q], score
-                    if temperature > 0 and len(ranked) > 1 and max(logs) > -np.inf:
+                    n_vox = volume.shape[0] * n1 * n2
+                    if likelihood >= 3:
+                        picks = {}
+                        for v in range(len(views)):
+                            if totals.get(v, 0.0) > 0:
+                                picks[v] = 0
+                                for a in range(1, len(ranked)):
+                                    if tables[a][v] > tables[picks[v]][v]:
+                                        picks[v] = a
+                        if not picks:
+                            updates.append((site, new, False))
+                            continue
+                        lowest = min(picks, key=lambda v: (tables[picks[v]][v], v))
+                        best = votes[ranked[picks[lowest]]]
+                        picks = {v: votes[ranked[a]] for v, a in picks.items()}
+                        if likelihood == 4:
+                            acc = np.zeros(len(best[0]))
+                            for v in picks:
+                                acc += picks[v][0]
+                            best = [(acc / len(picks)).astype(np.float32).astype(np.float64), -1, -1, 0.0]
+                    elif temperature > 0 and sampler == 1:
+                        cur = volume[site]
+                        per_view = naive_view_estimates(cur, votes, totals, len(views), h2c, outlier)
+                        cur_score = naive_score(per_view, naive_prior(cur, values), likelihood, has_prior)
+                        cur_log = cur_score if likelihood == 1 else np.log(cur_score)
+                        h = naive_mix(salt * n_vox + int(flat))
+                        a = min(int((h + 0.5) / 2147483648.0 * len(ranked)), len(ranked) - 1)
+                        gap = logs[a] - cur_log
+                        if not (gap >= 0 or (naive_mix(h + 2147483648) + 0.5) / 2147483648.0 < np.exp(gap / temperature)):
+                            updates.append((site, new, False))
+                            continue
+                        best = votes[ranked[a]]
+                    elif temperature > 0 and len(ranked) > 1 and max(logs) > -np.inf:
                         top = max(logs)
                         weights = [np.exp((x - top) / temperature) for x in logs]
-                        n_vox = volume.shape[0] * n1 * n2
                         u = (naive_mix(salt * n_vox + int(flat)) + 0.5) / 2147483648.0 * sum(weights)
                         cum, pick = 0.0, len(ranked) - 1
                         for a, wgt in enumerate(weights):
@@ -628,12 +691,17 @@ def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, o
                                 naive_value_bin(colour[ch], values["lo"][ch], values["scale"][ch],
                                                 len(values["hist"][ch]))) for ch in range(len(colour))])
             for vi in range(len(views)):
-                if vi == best[1]:
-                    new[vi] = best[2]
+                target = best
+                if likelihood == 4:  # ML_H1b: each proposing view's source is its own pick
+                    if vi not in picks:
+                        continue
+                    target = picks[vi]
+                if vi == target[1]:
+                    new[vi] = target[2]
                     continue
                 own = [v for v in votes if v[1] == vi]
                 if own:
-                    new[vi] = min(own, key=lambda v: ((v[0] - colour) ** 2).sum())[2]
+                    new[vi] = min(own, key=lambda v: ((v[0] - target[0]) ** 2).sum())[2]
             volume[site] = colour
             updates.append((site, new, flag))
         for pairs in binned:

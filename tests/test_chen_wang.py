@@ -17,14 +17,15 @@ import numpy as np
 import pytest
 
 from npmrf3d._kernels import kcoherence as _k
+from npmrf3d._kernels.candidate_decision import HEAT_BATH, METROPOLIS, ML_H1A, ML_H1B, ML_H2A, ML_H2B
 from npmrf3d._kernels import kcoherence_solver as _s
 from npmrf3d.config import SynthesisResult
 from npmrf3d.errors import ParameterError
 from npmrf3d.methods import chen_wang as CW
 from npmrf3d.methods.chen_wang import ChenWangConfig, chen_wang_synthesize
-from npmrf3d.methods.npmrf_coherent import coherent_synthesize
+from npmrf3d.methods.npmrf_coherent import _chen_wang_config, coherent_synthesize, make_coherent_config
 from npmrf3d.model import kcoherence as coh
-from npmrf3d.model.kcoherence_engine import ValueHistogram, pack_exemplars
+from npmrf3d.model.kcoherence_engine import CandidateDecision, KCoherenceLevels, ValueHistogram, pack_exemplars
 from npmrf3d.model.neighbourhood import VIEW_AXES
 from tests.naive import (
     naive_candidates,
@@ -361,6 +362,27 @@ def _histograms(positions, offsets, theta, weight, boost, texels, values=None, v
 @pytest.mark.parametrize("grid,channels", [(1, 1), (2, 3)])
 def test_solve_matches_twin(rng, views, medoid, balance, boost, likelihood, value_weight, temperature, grid,
                             channels):
+    _check_solve_against_twin(rng, views, medoid, balance, boost, likelihood, value_weight, temperature, grid,
+                              channels)
+
+
+@pytest.mark.parametrize("views", [("front",), ("front", "top"), VIEWS3])
+@pytest.mark.parametrize("likelihood,balance,value_weight,temperature,sampler", [
+    (ML_H1A, False, 0.0, 0.0, HEAT_BATH), (ML_H1A, True, 4.0, 0.0, HEAT_BATH),
+    (ML_H1B, False, 0.0, 0.0, HEAT_BATH), (ML_H1B, True, 4.0, 0.0, HEAT_BATH),
+    (ML_H2B, False, 4.0, 0.7, METROPOLIS), (ML_H2B, True, 0.0, 0.05, METROPOLIS),
+    (ML_H2A, False, 4.0, 2.0, METROPOLIS), (ML_H2A, True, 0.0, 0.3, METROPOLIS)])
+@pytest.mark.kernels
+@pytest.mark.parametrize("grid,channels", [(1, 1), (2, 3)])
+def test_solve_candidate_heuristics_and_metropolis_match_twin(rng, views, likelihood, balance, value_weight,
+                                                              temperature, sampler, grid, channels):
+    """ML_H1a, ML_H1b (ICM) and the Metropolis step over the candidates, against the twin."""
+    _check_solve_against_twin(rng, views, 6, balance, 2.0, likelihood, value_weight, temperature, grid, channels,
+                              sampler)
+
+
+def _check_solve_against_twin(rng, views, medoid, balance, boost, likelihood, value_weight, temperature, grid,
+                              channels, sampler=HEAT_BATH):
     window = 4
     exemplars, models, assign, omega, src, volume = _solve_case(rng, views, window, channels, grid,
                                                                 shared=len(views) != 2)
@@ -378,14 +400,15 @@ def test_solve_matches_twin(rng, views, medoid, balance, boost, likelihood, valu
         volume, src, assign, omega, views, exemplars, window=window, grid=grid, order=order,
         bounds=bounds, pos_hist=pos_hist, theta=theta, position_weight=3.0, position_boost=boost, medoid=medoid,
         balance=balance, likelihood=likelihood, h2c=0.05, outlier=0.01, values=values,
-        temperature=temperature, salt=12345)
+        temperature=temperature, salt=12345, sampler=sampler)
     got_vol, got_src = volume.copy(), src.copy()
     got_hist = np.concatenate(pos_hist)
     changed = _s.solve(got_vol, got_src, assign, omega,
                        _packed([VIEW_AXES[v] for v in views], packed, ex_off, [10] * len(views), window,
                                coh.anchor(window), grid),
                        _histograms(got_hist, hist_off, theta, 3.0, boost, packed, vh, value_weight, values["prior"]),
-                       _s.SolverRule(medoid, balance, likelihood, 0.05, 0.01, temperature, 12345), order, bounds, 7)
+                       _s.SolverRule(medoid, balance, likelihood, 0.05, 0.01, temperature, 12345, sampler), order,
+                       bounds, 7)
     np.testing.assert_array_equal(got_vol, want_vol)
     np.testing.assert_allclose(vh.hist, np.array(values["hist"]), atol=1e-12)
     np.testing.assert_array_equal(got_src, want_src)
@@ -484,6 +507,11 @@ def test_same_seed_same_volume_at_one_and_two_threads(tmp_path):
                 for solver in chen_wang.SOLVERS]
         vols.append(coherent_synthesize(ex, size=16, window=(4, 4), levels=2, iterations=(2, 2),
                                         t0=2.0, rng=7).volume)  # annealed: hashed draws
+        vols.append(coherent_synthesize(ex, size=16, window=(4, 4), levels=2, iterations=(2, 2),
+                                        t0=2.0, sampler="metropolis", rng=7).volume)
+        for heuristic in ("ML_H1a", "ML_H1b"):
+            vols.append(coherent_synthesize(ex, size=16, window=(4, 4), levels=2, iterations=(2, 2),
+                                            heuristic=heuristic, rng=7).volume)
         np.save(sys.argv[1], np.stack(vols))
         """
     )
@@ -617,3 +645,33 @@ def test_solve_does_not_depend_on_the_order_within_a_batch(rng):
         out.append((vol, s, hist))
     for a, b in zip(*out):
         np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("heuristic", ["ML_H1a", "ML_H1b"])
+def test_coherent_per_view_heuristics_refuse_annealing(heuristic):
+    with pytest.raises(ParameterError, match=f"heuristic {heuristic} cannot be annealed .* ICM-only per-view argmax"):
+        make_coherent_config(size=16, levels=2, window=4, heuristic=heuristic, t0=1.0)
+    assert make_coherent_config(size=16, levels=2, window=4, heuristic=heuristic).heuristic == heuristic
+
+
+def test_coherent_sampler_is_validated_and_in_the_checkpoint_key():
+    with pytest.raises(ParameterError, match="sampler must be one of heat-bath, metropolis; got 'gibbs'"):
+        make_coherent_config(size=16, levels=2, window=4, sampler="gibbs")
+    assert make_coherent_config(size=16, levels=2, window=4).sampler == "heat-bath"
+    ex = np.random.default_rng(0).random((24, 24, 1)).astype(np.float32)
+    keys = {KCoherenceLevels("coherent", _chen_wang_config(make_coherent_config(size=16, levels=2, window=4)),
+                             {v: ex for v in VIEWS3}, CandidateDecision("ML_H2b", 0.1, 0.01, None, sampler)).key
+            for sampler in ("heat-bath", "metropolis")}
+    assert len(keys) == 2
+
+
+def test_ml_h1b_averages_the_views_picks_into_new_colours():
+    """ML_H1b's mean of the views' picks makes colours the exemplar lacks (Urs et al. 2014's
+    averaging artefact); ML_H1a, like ML_H2b, copies exemplar colours only."""
+    ex = np.random.default_rng(5).random((24, 24, 3)).astype(np.float32)
+    colours = {tuple(c) for c in ex.reshape(-1, 3)}
+    for heuristic, only_exemplar in (("ML_H1a", True), ("ML_H1b", False)):
+        vol = coherent_synthesize(ex, size=16, window=(4, 4), levels=2, iterations=(2, 2), heuristic=heuristic,
+                                  rng=1).volume
+        new = sum(tuple(c) not in colours for c in vol.reshape(-1, 3))
+        assert (new == 0) == only_exemplar

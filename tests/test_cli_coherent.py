@@ -46,6 +46,8 @@ def test_bad_options_exit_2_and_write_nothing(name, bad, message, tmp_path, caps
     assert not out.exists()
 
 
-def test_coherent_refuses_a_heuristic_without_objective(tmp_path, capsys):
-    assert main(["coherent", "--heuristic", "ML_H1a", "--out", str(tmp_path / "x")]) == 2
-    assert "--heuristic must be one of ML_H2b, ML_H2a" in capsys.readouterr().err
+def test_coherent_refuses_to_anneal_a_heuristic_without_objective(tmp_path, capsys):
+    assert main(["coherent", "--heuristic", "ML_H1a", "--t0", "1", "--out", str(tmp_path / "x")]) == 2
+    assert "heuristic ML_H1a cannot be annealed (t0 > 0): ML_H1a and ML_H1b are ICM-only" in capsys.readouterr().err
+    assert main(["coherent", "--heuristic", "ML_H3", "--out", str(tmp_path / "y")]) == 2
+    assert "--heuristic must be one of ML_H2b, ML_H2a, ML_H1a, ML_H1b" in capsys.readouterr().err

@@ -1,8 +1,9 @@
 """Compiled discrete solver of the k-coherence engine (Chen & Wang 2010, section 4.2).
 
-Why one module of ~480 lines: one kernel, :func:`solve`, whose decision rules (weighted mean,
-weighted medoid, the NP-MRF score, its annealed draw) share the votes and their buffers, with
-its vote helpers and the three bundles of its arguments.
+Why one module of ~490 lines: one kernel, :func:`solve`, whose decision rules (weighted mean,
+weighted medoid, the NP-MRF rules and their annealed draws, the latter's helpers in
+:mod:`npmrf3d._kernels.candidate_decision`) share the votes and their buffers, with its vote
+helpers and the three bundles of its arguments.
 
 Private: called by :mod:`npmrf3d.model.kcoherence_engine` with validated arrays only; nothing
 here raises a user-facing error. :func:`solve` (parallel over the voxels of a batch): every voxel
@@ -24,13 +25,10 @@ from typing import NamedTuple
 
 import numpy as np
 
+from . import candidate_decision as _decide
 from ._jit import jit, jit_parallel, prange
+from .candidate_decision import HEAT_BATH, METROPOLIS, ML_H1A, ML_H1B, ML_H2B, value_prior
 from .kcoherence import mix, value_bin
-
-#: The solver's rule among a voxel's heaviest votes (:func:`solve`'s ``likelihood``): the
-#: configuration's own (medoid or mean), or the NP-MRF score with the views' Parzen estimates
-#: combined by the product (ML_H2b) or the minimum (ML_H2a).
-OWN_SOLVER, ML_H2B, ML_H2A = 0, 1, 2
 
 
 class PackedViews(NamedTuple):
@@ -89,9 +87,11 @@ class SolverRule(NamedTuple):
     medoid : int, 0 = the voted texel nearest the weighted mean, else the candidates are the
         texels of the ``medoid`` heaviest votes
     balance : bool, every view's votes of a voxel weigh the same in total
-    likelihood : int, :data:`OWN_SOLVER` (a weighted medoid), :data:`ML_H2B` or :data:`ML_H2A`
+    likelihood : int, a code of :mod:`npmrf3d._kernels.candidate_decision`: ``OWN_SOLVER`` (a
+        weighted medoid), ``ML_H2B``, ``ML_H2A``, ``ML_H1A`` or ``ML_H1B``
     h2c, outlier : float, the NP-MRF rule's centre kernel ``2 h_c^2`` and outlier share
     temperature, salt : float and int, the annealed draw (temperature 0: the highest score)
+    sampler : int, the annealed draw's rule, ``HEAT_BATH`` or ``METROPOLIS``
     """
 
     medoid: int
@@ -101,20 +101,7 @@ class SolverRule(NamedTuple):
     outlier: float
     temperature: float
     salt: int
-
-
-@jit
-def value_prior(ex_bins, g, val_hist, val_target, val_unit, kappa):
-    """Histogram prior of copying texel ``g``: ``kappa * sum_c log((T_c(b) + e) / (H_c(b) + e))`` over its
-    bins ``b = ex_bins[g, c]`` (``H`` the volume's, ``T`` the exemplars' histogram in units of an
-    even bin, ``e = 1 / val_unit``: one voxel). Positive for under-represented values, zero when
-    the histograms agree."""
-    e = 1.0 / val_unit
-    prior = 0.0
-    for ch in range(ex_bins.shape[1]):
-        b = ex_bins[g, ch]
-        prior += kappa * np.log((val_target[ch, b] + e) / (max(val_hist[ch, b], 0.0) + e))
-    return prior
+    sampler: int = HEAT_BATH
 
 
 @jit
@@ -253,12 +240,19 @@ def solve(volume, src, assign, omega, views, hist, rule, order, batch_bounds, ch
     histograms ``pos_hist`` (packed per view at ``hist_off``, counts of voxels per source pixel)
     move from the old sources to the new ones. Returns the number of voxels whose colour changed.
 
-    With ``likelihood`` :data:`ML_H2B` or :data:`ML_H2A` the candidates of the ``medoid`` heaviest votes
-    are scored instead by the NP-MRF rule (the coherent NP-MRF sampler, :mod:`npmrf3d.methods.npmrf_coherent`):
-    per view, a Parzen estimate of the candidate colour's probability from that view's votes,
+    With an NP-MRF ``likelihood`` (the codes of :mod:`npmrf3d._kernels.candidate_decision`) the
+    candidates of the ``medoid`` heaviest votes are judged instead by the NP-MRF rule (the
+    coherent NP-MRF sampler, :mod:`npmrf3d.methods.npmrf_coherent`): per view, a Parzen estimate
+    of the candidate colour's probability from that view's votes,
     ``L_v(p) = sum_{q in v} w_q exp(-||e_p - e_q||^2 / h2c) / sum_{q in v} w_q``, mixed with an
-    ``outlier`` share; the views are combined by the product (ML_H2b) or the minimum (ML_H2a) and the
-    highest score wins (first on ties).
+    ``outlier`` share. ML_H2b and ML_H2a combine the views by the product or the minimum and the
+    highest score wins (first on ties). ML_H1a and ML_H1b (Urs et al. 2014's per-view argmax
+    rules) let each view with votes pick its candidate of highest ``L_v`` (first on ties); ML_H1a
+    copies the pick whose own ``L_v`` is the lowest (the least confident view decides, first view
+    on ties), ML_H1b gives the voxel the **mean of the picks' colours** -- generally not an
+    exemplar colour, the averaging artefact the paper shows -- and each view's source becomes
+    its own pick (:func:`npmrf3d._kernels.candidate_decision.winner_sources`). Both ignore
+    ``temperature`` (they have no objective to anneal).
 
     Value histograms (``val_weight > 0``): ``val_hist`` (C, bins) holds the volume's per-channel
     histogram in units of ``val_unit`` voxels (an even bin's share), ``val_target`` the
@@ -267,22 +261,27 @@ def solve(volume, src, assign, omega, views, hist, rule, order, batch_bounds, ch
     their texel's bins (:func:`_votes`) and ``val_hist`` follows the changed voxels between
     batches, so the volume's histogram is pulled towards the exemplars'. With the NP-MRF rule the
     score of a candidate also gets the histogram prior :func:`value_prior` with strength
-    ``val_prior`` (0 = off; added to the ML_H2b
-    log-score, a factor ``exp(prior)`` on the ML_H2a score), which vanishes when the histograms
-    agree.
+    ``val_prior`` (0 = off; added to the ML_H2b log-score, a factor ``exp(prior)`` on the ML_H2a
+    score and on every view's estimate for ML_H1a and ML_H1b), which vanishes when the
+    histograms agree.
 
     Annealing (``temperature > 0``, NP-MRF rule only): instead of the highest score, the voxel
     draws candidate ``a`` with probability proportional to ``exp(l_a / temperature)`` (a
     heat-bath step over its candidates; ``l_a`` the ML_H2b log-score, or the log of the ML_H2a
     score), from the uniform ``(mix(salt * n_voxels + flat) + 0.5) / 2**31`` -- a hash of the
-    voxel, so the draw depends on no thread count (``salt < 2**31``).
+    voxel, so the draw depends on no thread count (``salt < 2**31``). With ``sampler``
+    ``METROPOLIS`` the voxel instead proposes one candidate drawn uniformly from the same hash and
+    accepts it by the Metropolis rule against its current colour's log-score, computed by the
+    same estimate from the same votes (:func:`npmrf3d._kernels.candidate_decision.metropolis`);
+    a rejected voxel keeps its colour and sources.
     """
     ex_flat, ex_off = views.texels, views.offsets
     pos_hist, hist_off = hist.positions, hist.position_offsets
     ex_bins, val_hist, val_target, val_unit = hist.texel_bins, hist.values, hist.value_target, hist.value_unit
     val_prior, val_lo, val_scale = hist.value_prior, hist.value_lo, hist.value_scale
     medoid, balance, likelihood, h2c = rule.medoid, rule.balance, rule.likelihood, rule.h2c
-    outlier, temperature, salt = rule.outlier, rule.temperature, rule.salt
+    outlier, temperature, salt, sampler = rule.outlier, rule.temperature, rule.salt, rule.sampler
+    hist_args = (val_hist, val_target, val_unit, val_prior, val_lo, val_scale)
     n_views = assign.shape[0]
     n0, n1, n2, channels = volume.shape
     n_vox = n0 * n1 * n2
@@ -312,6 +311,10 @@ def solve(volume, src, assign, omega, views, hist, rule, order, batch_bounds, ch
             tops = np.empty(max(medoid, 1), dtype=np.int64)
             lik = np.empty(n_views, dtype=np.float64)
             scores = np.empty(max(medoid, 1), dtype=np.float64)
+            table = np.empty((max(medoid, 1), n_views), dtype=np.float64)
+            winners = np.empty(n_views, dtype=np.int64)
+            colour = np.empty(channels, dtype=np.float32)
+            bins = np.empty(channels, dtype=np.int64)
             for t in range(c * chunk, min(m, (c + 1) * chunk)):
                 flat = order[start + t]
                 p0 = flat // (n1 * n2)
@@ -360,24 +363,16 @@ def solve(volume, src, assign, omega, views, hist, rule, order, batch_bounds, ch
                     for a in range(n_try):
                         ga = ug[tops[a]]
                         if likelihood:
-                            for v in range(n_views):
-                                lik[v] = 0.0
-                            for q2 in range(u):
-                                dd = 0.0
-                                for ch in range(channels):
-                                    diff = ex_flat[ga, ch] - ex_flat[ug[q2], ch]
-                                    dd += diff * diff
-                                lik[uv[q2]] += uw[q2] * np.exp(-dd / h2c)
-                            score = 0.0 if likelihood == ML_H2B else np.inf
-                            for v in range(n_views):
-                                lv = (1.0 - outlier) * lik[v] / vsum[v] + outlier if vsum[v] > 0.0 else outlier
-                                if likelihood == ML_H2B:
-                                    score += np.log(lv)
-                                else:
-                                    score = min(score, lv)
+                            _decide.view_likelihoods(ex_flat[ga], ex_flat, ug, uv, uw, u, vsum, h2c, outlier, lik)
+                            prior = 0.0
                             if val_prior > 0.0:
-                                prior = value_prior(ex_bins, ga, val_hist, val_target, val_unit, val_prior)
-                                score = score + prior if likelihood == ML_H2B else score * np.exp(prior)
+                                prior = value_prior(ex_bins[ga], val_hist, val_target, val_unit, val_prior)
+                            if likelihood >= ML_H1A:
+                                # per-view rules: each view's estimate, times the prior's factor
+                                for v in range(n_views):
+                                    table[a, v] = lik[v] * np.exp(prior)
+                                continue
+                            score = _decide.objective(lik, likelihood, prior)
                             scores[a] = score if likelihood == ML_H2B else np.log(score)
                             if -score < best_e:
                                 best_e = -score
@@ -391,11 +386,29 @@ def solve(volume, src, assign, omega, views, hist, rule, order, batch_bounds, ch
                                 dd += diff * diff
                             e_sum += uw[q2] * np.sqrt(dd)
                         if val_prior > 0.0:
-                            e_sum *= np.exp(-value_prior(ex_bins, ga, val_hist, val_target, val_unit, val_prior))
+                            e_sum *= np.exp(-value_prior(ex_bins[ga], val_hist, val_target, val_unit, val_prior))
                         if e_sum < best_e:
                             best_e = e_sum
                             best = uarg[tops[a]]
-                    if likelihood and temperature > 0.0 and n_try > 1:
+                    if likelihood >= ML_H1A:
+                        _decide.view_winners(table, n_try, vsum, winners)
+                        if winners.max() < 0:
+                            continue
+                        if likelihood == ML_H1B:
+                            _decide.mean_of_winners(colour, winners, tops, ug, ex_flat)
+                            flags[t] = _decide.write_colour(volume, p0, p1, p2, colour, hist_args, old_bins[t],
+                                                            new_bins[t])
+                            _decide.winner_sources(winners, tops, ug, uv, u, ex_flat, ex_off, new_src[t])
+                            continue
+                        best = uarg[tops[_decide.least_confident(table, winners)]]
+                    elif likelihood and temperature > 0.0 and sampler == METROPOLIS:
+                        current = _decide.colour_score(volume[p0, p1, p2], ex_flat, ug, uv, uw, u, vsum, h2c,
+                                                       outlier, likelihood, hist_args, bins, lik)
+                        pick = _decide.metropolis(scores, n_try, current, temperature, salt * n_vox + flat)
+                        if pick < 0:
+                            continue
+                        best = uarg[tops[pick]]
+                    elif likelihood and temperature > 0.0 and n_try > 1:
                         top_l = scores[0]
                         for a in range(1, n_try):
                             top_l = max(top_l, scores[a])
@@ -446,18 +459,7 @@ def solve(volume, src, assign, omega, views, hist, rule, order, batch_bounds, ch
                     if v == vv[best]:
                         new_src[t, v] = g - ex_off[v]
                         continue
-                    near = -1
-                    near_d = np.inf
-                    for q in range(u):
-                        if uv[q] != v:
-                            continue
-                        dd = 0.0
-                        for ch in range(channels):
-                            diff = ex_flat[ug[q], ch] - ex_flat[g, ch]
-                            dd += diff * diff
-                        if dd < near_d:
-                            near_d = dd
-                            near = q
+                    near = _decide.nearest_vote(v, g, ug, uv, u, ex_flat)
                     if near >= 0:
                         new_src[t, v] = ug[near] - ex_off[v]
         # sequential, fixed order: histograms follow the new sources

@@ -17,8 +17,10 @@ FIELD_HELP = {
     "window": "window side per level, coarsest first: one number or one per level",
     "levels": "resolution levels, coarse to fine",
     "iterations": "search + decision iterations per level: one number or one per level, coarsest first",
-    "heuristic": "how the views' Parzen estimates rank a candidate colour: ML_H2b (product) or "
-                 "ML_H2a (minimum)",
+    "heuristic": "how the views' Parzen estimates decide among the candidates: ML_H2b (product) or "
+                 "ML_H2a (minimum) of the views' estimates; ML_H1a (each view picks its best, the least "
+                 "confident view's pick wins) or ML_H1b (the mean of the views' picks: makes colours the "
+                 "exemplar lacks), both ICM only (--t0 0)",
     "centre_bandwidth": "width of the Parzen kernel on candidate colours, as a factor of the exemplar's "
                         "standard deviation, > 0",
     "outlier": "share of a uniform term mixed into each view's estimate before the views combine, in [0, 1)",
@@ -34,6 +36,9 @@ FIELD_HELP = {
     "t_end": "annealing: last temperature of each level, in (0, t0] (geometric) or [0, t0] (linear)",
     "schedule": "annealing: how the temperature falls from --t0 to --t-end over a level's iterations "
                 "(geometric or linear)",
+    "sampler": "annealing: heat-bath (draw among the candidates ~ exp(score / T)) or metropolis (propose "
+               "one candidate uniformly, accept it if it scores at least the current colour, else with "
+               "probability exp(score difference / T))",
 }
 
 
@@ -45,8 +50,9 @@ def register(commands, formatter_class) -> None:
         description=(
             "The coherent NP-MRF sampler: each view's Parzen estimate sums over the coherent\n"
             "candidates of every neighbourhood that contains a voxel (Chen & Wang's search,\n"
-            "votes and histograms), the views combine by ML_H2b or ML_H2a, and the voxel copies\n"
-            "the best-scoring exemplar texel. Colours are exemplar colours.\n\n"
+            "votes and histograms), the views combine by a heuristic (ML_H2b, ML_H2a, ML_H1a or\n"
+            "ML_H1b), and the voxel copies the chosen exemplar texel. Colours are exemplar\n"
+            "colours, except ML_H1b's means of the views' picks.\n\n"
             "examples:\n"
             "  npmrf3d coherent bundled:gravel --size 64\n"
             "  npmrf3d coherent wood.png --size 128 --out wood"

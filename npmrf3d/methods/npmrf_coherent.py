@@ -1,7 +1,7 @@
-"""The coherent NP-MRF sampler (issue 12): the NP-MRF likelihood decided over coherent candidates.
+"""The coherent NP-MRF sampler: the NP-MRF likelihood decided over coherent candidates.
 
-The paper's model (SPEC.md sections 2-3) sums each view's Parzen estimate over *all* exemplar
-patches; measured on real photographs that makes speckle or blobs (SPEC.md section 4). Here each
+The paper's model (docs/model.md, sections 2-3) sums each view's Parzen estimate over *all*
+exemplar patches; measured on real photographs that makes speckle or blobs (docs/quality.md). Here each
 view's estimate sums over the **coherent candidates** instead: every voxel keeps, per view, the
 exemplar position it was copied from (:mod:`npmrf3d.model.kcoherence`); each view's neighbourhoods find
 their best match among the neighbours' coherent shifts and k-coherence sets (Tong et al. 2002;
@@ -11,17 +11,24 @@ weight and the position histogram. Among the texels of the heaviest votes the vo
 one with the highest NP-MRF score: per view the Parzen estimate of that colour from the view's
 votes (centre kernel ``centre_bandwidth`` times the exemplar's standard deviation, mixed with an
 ``outlier`` share), combined over views by the heuristic (ML_H2b: product; ML_H2a: minimum).
+Urs et al. 2014's per-view argmax heuristics are there too, ICM only: ML_H1a (each view picks
+its best candidate; the least confident view's pick is copied) and ML_H1b (the voxel takes the
+mean of the views' picks -- a colour the exemplar generally does not have, the averaging
+artefact the paper shows; the only rule whose colours are not exemplar colours).
 
-With ``t0 > 0`` the decision is **annealed** (issue 14, item 2): each voxel draws among its
-candidates with probability proportional to ``exp(score / T)`` (a heat-bath step over the
-candidates; ``score`` the ML_H2b log-score with the histogram prior), ``T`` falling from ``t0``
-to ``t_end`` over each level's iterations; ``T -> 0`` is the highest score again.
+With ``t0 > 0`` the decision is **annealed**: by default (``sampler="heat-bath"``) each voxel
+draws among its candidates with probability proportional to ``exp(score / T)`` (``score`` the
+ML_H2b log-score with the histogram prior, or the log of ML_H2a's); with
+``sampler="metropolis"`` it proposes one candidate uniformly and accepts it if its score is at
+least the current colour's, else with probability ``exp((score_new - score_current) / T)``
+(docs/model.md, section 5). ``T`` falls from ``t0`` to ``t_end`` over each level's iterations;
+``T -> 0`` is the highest score again.
 
 The search, votes, histograms and level loop are Chen–Wang's (the k-coherence engine,
 :mod:`npmrf3d.model.kcoherence_engine`); only the decision differs
 (:class:`npmrf3d.model.kcoherence_engine.CandidateDecision`), so a voxel copies an exemplar
-texel (colour and source) and the volume's colours are exemplar colours. Results depend only on the seed, never on the thread
-count.
+texel (colour and source) and the volume's colours are exemplar colours (except ML_H1b's).
+Results depend only on the seed, never on the thread count.
 """
 
 from __future__ import annotations
@@ -37,7 +44,14 @@ import numpy as np
 from .. import _validation as check
 from ..analysis.metrics import two_point_shape_error
 from ..config import DEFAULT_SIZE, SynthesisMethod, SynthesisResult
-from ..model.kcoherence_engine import CANDIDATE_HEURISTICS, CandidateDecision, KCoherenceLevels
+from ..model.kcoherence_engine import (
+    CANDIDATE_HEURISTICS,
+    CANDIDATE_SAMPLERS,
+    COHERENT_HEURISTICS,
+    PER_VIEW_HEURISTICS,
+    CandidateDecision,
+    KCoherenceLevels,
+)
 from ..model.neighbourhood import VIEWS
 from ..model.pyramid import run_pyramid
 from ..model.relax.anneal import SCHEDULES
@@ -45,7 +59,7 @@ from ..resources import coherent_estimate
 from . import chen_wang
 from ._api import prepare
 
-__all__ = ["CANDIDATE_HEURISTICS", "METHOD", "SEGMENTED", "SEGMENTED_MAX_VALUES", "CoherentConfig", "SegmentedPreset",
+__all__ = ["CANDIDATE_HEURISTICS", "CANDIDATE_SAMPLERS", "COHERENT_HEURISTICS", "METHOD", "SEGMENTED", "SEGMENTED_MAX_VALUES", "CoherentConfig", "SegmentedPreset",
            "best_of_pyramids", "coherent_synthesize", "is_segmented", "make_coherent_config", "run",
            "temperatures", "trial_checkpoint"]
 
@@ -133,10 +147,11 @@ class CoherentConfig:
     value_prior: float = 5.0
     value_bins: int = _CW.value_bins
     phase_weight: float = 0.0
-    # annealing over the candidates (issue 14, item 2): t0 = 0 decides by the highest score (ICM)
+    # annealing over the candidates: t0 = 0 decides by the highest score (ICM)
     t0: float = 0.0
     t_end: float = 0.05
     schedule: str = "geometric"
+    sampler: str = "heat-bath"
     seed: int | None = None
 
     def to_dict(self) -> dict:
@@ -158,25 +173,31 @@ def make_coherent_config(
     position_boost=DEFAULTS.position_boost, random_candidates=DEFAULTS.random_candidates,
     global_share=DEFAULTS.global_share, coherence_bias=DEFAULTS.coherence_bias,
     value_weight=DEFAULTS.value_weight, value_prior=DEFAULTS.value_prior, value_bins=DEFAULTS.value_bins,
-    phase_weight=DEFAULTS.phase_weight, t0=DEFAULTS.t0, t_end=DEFAULTS.t_end, schedule=DEFAULTS.schedule, seed=None,
+    phase_weight=DEFAULTS.phase_weight, t0=DEFAULTS.t0, t_end=DEFAULTS.t_end, schedule=DEFAULTS.schedule,
+    sampler=DEFAULTS.sampler, seed=None,
 ) -> CoherentConfig:
     """Validate plain keyword arguments into a frozen :class:`CoherentConfig` (the shared
-    coherence fields are validated as Chen–Wang's)."""
+    coherence fields are validated as Chen–Wang's). ML_H1a and ML_H1b are ICM-only: with
+    ``t0 > 0`` they are refused."""
     cw = chen_wang.make_chen_wang_config(
         size=size, window=window, levels=levels, views=views, iterations=iterations, k=k,
         index_weight=index_weight, position_weight=position_weight, position_boost=position_boost,
         random_candidates=random_candidates, global_share=global_share,
         coherence_bias=coherence_bias, value_weight=value_weight, value_prior=value_prior,
         value_bins=value_bins, phase_weight=phase_weight, seed=seed)
-    heuristic = check.choice("heuristic", heuristic, tuple(CANDIDATE_HEURISTICS))
+    heuristic = check.choice("heuristic", heuristic, tuple(COHERENT_HEURISTICS))
     centre_bandwidth = check.real("centre_bandwidth", centre_bandwidth, low=0.0, low_open=True)
     outlier = check.real("outlier", outlier, low=0.0, high=1.0, high_open=True)
     t0 = check.real("t0", t0, low=0.0)
+    if t0 > 0.0 and heuristic in PER_VIEW_HEURISTICS:
+        check.fail(f"heuristic {heuristic} cannot be annealed (t0 > 0): ML_H1a and ML_H1b are ICM-only "
+                   f"per-view argmax rules with no score to draw by; use t0 = 0, or ML_H2b or ML_H2a")
     schedule = check.choice("schedule", schedule, tuple(SCHEDULES))
+    sampler = check.choice("sampler", sampler, tuple(CANDIDATE_SAMPLERS))
     if t0 > 0.0:
         t_end = check.real("t_end", t_end, low=0.0, low_open=schedule == "geometric", high=t0)
     return CoherentConfig(heuristic=heuristic, centre_bandwidth=centre_bandwidth, outlier=outlier,
-                          t0=t0, t_end=float(t_end), schedule=schedule,
+                          t0=t0, t_end=float(t_end), schedule=schedule, sampler=sampler,
                           **{name: getattr(cw, name) for name in _SHARED})
 
 
@@ -206,7 +227,7 @@ def run(config: CoherentConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
     by the NP-MRF rule; the signature of a registered method."""
     t_start = time.perf_counter() if t_start is None else t_start
     decision = CandidateDecision(config.heuristic, config.centre_bandwidth, config.outlier,
-                                 temperatures(config))
+                                 temperatures(config), config.sampler)
     levels = KCoherenceLevels("coherent", _chen_wang_config(config), per_view_exemplars, decision)
     out = run_pyramid(levels, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
     return SynthesisResult(volume=out.state.volume, history=out.history, config=config,

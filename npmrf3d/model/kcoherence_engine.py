@@ -30,6 +30,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from .._kernels import candidate_decision as _decide
 from .._kernels import kcoherence as _search
 from .._kernels import kcoherence_solver as _solver
 from ..io.checkpoints import run_key
@@ -39,12 +40,20 @@ from .neighbourhood import VIEW_AXES
 from .phases import PhaseControl, bin_phase_error, bin_phases, phase_prior_target
 from .pyramid import Levels
 
-__all__ = ["CANDIDATE_HEURISTICS", "CandidateDecision", "CoherentState", "KCoherenceLevels", "ValueHistogram",
+__all__ = ["CANDIDATE_HEURISTICS", "CANDIDATE_SAMPLERS", "COHERENT_HEURISTICS", "PER_VIEW_HEURISTICS",
+           "CandidateDecision", "CoherentState", "KCoherenceLevels", "ValueHistogram",
            "initial_colours", "pack_exemplars", "position_histogram", "value_counts", "value_scale"]
 
-#: The NP-MRF heuristics the solver can rank candidates by (SPEC.md section 3), and the
-#: solver kernel's code of each (:mod:`npmrf3d._kernels.kcoherence_solver`).
-CANDIDATE_HEURISTICS = {"ML_H2b": _solver.ML_H2B, "ML_H2a": _solver.ML_H2A}
+#: The NP-MRF heuristics with an objective, which rank candidates by a score and can be
+#: annealed (docs/model.md, section 3), and the solver kernel's code of each
+#: (:mod:`npmrf3d._kernels.candidate_decision`).
+CANDIDATE_HEURISTICS = {"ML_H2b": _decide.ML_H2B, "ML_H2a": _decide.ML_H2A}
+#: Urs et al. 2014's per-view argmax heuristics over the candidates: no objective, ICM only.
+PER_VIEW_HEURISTICS = {"ML_H1a": _decide.ML_H1A, "ML_H1b": _decide.ML_H1B}
+#: Every heuristic the solver decides among candidates by.
+COHERENT_HEURISTICS = {**CANDIDATE_HEURISTICS, **PER_VIEW_HEURISTICS}
+#: The annealed draws among the candidates, and the solver kernel's code of each.
+CANDIDATE_SAMPLERS = {"heat-bath": _decide.HEAT_BATH, "metropolis": _decide.METROPOLIS}
 #: The medoid solver tries the heaviest (merged) votes only; the energy sums over all votes.
 MEDOID_CANDIDATES = 8
 #: Voxels per parallel work item of the solver (any value gives the same result).
@@ -57,10 +66,13 @@ class CandidateDecision:
 
     Attributes
     ----------
-    heuristic : {"ML_H2b", "ML_H2a"} or None
-        None: the configuration's own solver (Chen–Wang's medoid or mean). A heuristic: the
-        candidate with the highest NP-MRF score, per view a Parzen estimate of its colour from
-        the view's votes, combined over views by the product (ML_H2b) or the minimum (ML_H2a).
+    heuristic : {"ML_H2b", "ML_H2a", "ML_H1a", "ML_H1b"} or None
+        None: the configuration's own solver (Chen–Wang's medoid or mean). A heuristic: per view
+        a Parzen estimate of each candidate's colour from the view's votes; ML_H2b and ML_H2a take
+        the candidate of the highest product or minimum over views; ML_H1a lets each view pick
+        its best candidate and copies the pick of the least confident view; ML_H1b gives the
+        voxel the mean of the views' picks (a colour the exemplar generally does not have:
+        Urs et al. 2014's averaging artefact). ML_H1a and ML_H1b are ICM only.
     centre_bandwidth : float
         Width of the Parzen estimate's kernel, times the exemplars' standard deviation.
     outlier : float
@@ -69,12 +81,17 @@ class CandidateDecision:
         Per level (coarsest first), one temperature per iteration: a heat-bath draw among the
         candidates with probability proportional to ``exp(score / T)``; 0 or None: the highest
         score.
+    sampler : {"heat-bath", "metropolis"}
+        The annealed draw: the heat-bath step above, or a Metropolis step -- one candidate
+        proposed uniformly, accepted if its score is at least the current colour's, else with
+        probability ``exp((score_new - score_current) / T)``.
     """
 
     heuristic: str | None = None
     centre_bandwidth: float = 0.0
     outlier: float = 0.0
     temperatures: tuple[tuple[float, ...], ...] | None = None
+    sampler: str = "heat-bath"
 
     def temperature(self, level_index: int, iteration: int) -> float:
         """The temperature of an iteration of the level ``level_index`` (0 = the coarsest)."""
@@ -296,7 +313,7 @@ class KCoherenceLevels(Levels):
         n_iter = config.iterations[li]
         n_vox = shape[0] * shape[1] * shape[2]
         bounds = np.linspace(0, n_vox, min(config.batches, n_vox) + 1).astype(np.int64)
-        likelihood = _solver.OWN_SOLVER if decision.heuristic is None else CANDIDATE_HEURISTICS[decision.heuristic]
+        likelihood = _decide.OWN_SOLVER if decision.heuristic is None else COHERENT_HEURISTICS[decision.heuristic]
         medoid = MEDOID_CANDIDATES if config.solver == "medoid" or decision.heuristic is not None else 0
         h2c = 2.0 * (decision.centre_bandwidth * self.sigma) ** 2 or 1.0
         level_history, changed, global_counts = [], [], []
@@ -341,7 +358,7 @@ class KCoherenceLevels(Levels):
                 # and the votes, so visiting a batch in memory order gives the same volume faster
                 order[bounds[b]:bounds[b + 1]].sort()
             rule = _solver.SolverRule(medoid, config.balance_views, likelihood, h2c, decision.outlier,
-                                      temperature, salt)
+                                      temperature, salt, CANDIDATE_SAMPLERS[decision.sampler])
             changed.append(int(_solver.solve(volume, src, assign, omega, packed,
                                              histograms._replace(value_target=target), rule, order, bounds,
                                              SOLVE_CHUNK)))

@@ -1,0 +1,214 @@
+"""Compiled NP-MRF decisions among a voxel's candidates (the coherent NP-MRF sampler).
+
+Private helpers of :func:`npmrf3d._kernels.kcoherence_solver.solve`: the per-view Parzen
+estimate of a colour from a voxel's merged votes, the heuristics of Urs, Da Costa and Germain
+2014 (docs/model.md, section 3) over the candidates, and the Metropolis step of an annealed
+decision (docs/model.md, section 5). Each is a plain function of its arguments, so the solver
+stays parallel over voxels and a result depends on no thread count: random numbers are hashes
+of a salt and the voxel (:func:`npmrf3d._kernels.kcoherence.mix`).
+
+The codes below are the solver's ``likelihood`` (the rule) and ``sampler`` (the annealed draw).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._jit import jit
+from .kcoherence import mix, value_bin
+
+#: The solver's rule among a voxel's heaviest votes (``SolverRule.likelihood``): the
+#: configuration's own (medoid or mean), or an NP-MRF heuristic over the views' Parzen
+#: estimates -- the product (ML_H2b), the minimum (ML_H2a), the least confident view's best
+#: candidate (ML_H1a) or the mean of the views' best candidates (ML_H1b).
+OWN_SOLVER, ML_H2B, ML_H2A, ML_H1A, ML_H1B = 0, 1, 2, 3, 4
+#: The annealed draw of the NP-MRF rules with an objective (``SolverRule.sampler``): a
+#: heat-bath step over the candidates, or a Metropolis step from the current colour.
+HEAT_BATH, METROPOLIS = 0, 1
+
+_TWO_31 = 2147483648.0
+
+
+@jit
+def value_prior(bins, val_hist, val_target, val_unit, kappa):
+    """Histogram prior of a colour whose value bins are ``bins`` (C,):
+    ``kappa * sum_c log((T_c(b_c) + e) / (H_c(b_c) + e))`` (``H`` the volume's, ``T`` the
+    exemplars' histogram in units of an even bin, ``e = 1 / val_unit``: one voxel). Positive for
+    under-represented values, zero when the histograms agree."""
+    e = 1.0 / val_unit
+    prior = 0.0
+    for ch in range(bins.shape[0]):
+        b = bins[ch]
+        prior += kappa * np.log((val_target[ch, b] + e) / (max(val_hist[ch, b], 0.0) + e))
+    return prior
+
+
+@jit
+def view_likelihoods(colour, ex_flat, ug, uv, uw, u, vsum, h2c, outlier, lik):
+    """Every view's Parzen estimate of ``colour`` (C,) float32 into ``lik`` (V,):
+    ``(1 - outlier) * sum_{q in v} uw[q] exp(-||colour - e_q||^2 / h2c) / vsum[v] + outlier``
+    over the ``u`` merged votes (texel ``ug[q]``, view ``uv[q]``, weight ``uw[q]``); ``outlier``
+    alone for a view without votes (``vsum[v] == 0``)."""
+    n_views = lik.shape[0]
+    for v in range(n_views):
+        lik[v] = 0.0
+    for q in range(u):
+        dd = 0.0
+        for ch in range(ex_flat.shape[1]):
+            diff = colour[ch] - ex_flat[ug[q], ch]
+            dd += diff * diff
+        lik[uv[q]] += uw[q] * np.exp(-dd / h2c)
+    for v in range(n_views):
+        lik[v] = (1.0 - outlier) * lik[v] / vsum[v] + outlier if vsum[v] > 0.0 else outlier
+
+
+@jit
+def objective(lik, likelihood, prior):
+    """The score of the rules with an objective from the views' estimates ``lik``: ML_H2b's
+    ``sum_v log L_v + prior``, or ML_H2a's ``min_v L_v * exp(prior)`` (``prior`` 0: none)."""
+    score = 0.0 if likelihood == ML_H2B else np.inf
+    for v in range(lik.shape[0]):
+        if likelihood == ML_H2B:
+            score += np.log(lik[v])
+        else:
+            score = min(score, lik[v])
+    if prior != 0.0:
+        score = score + prior if likelihood == ML_H2B else score * np.exp(prior)
+    return score
+
+
+@jit
+def colour_score(colour, ex_flat, ug, uv, uw, u, vsum, h2c, outlier, likelihood, hist_args, bins, lik):
+    """Log-score of any colour (C,) float32 -- the voxel's current one for a Metropolis step --
+    by the same Parzen estimate against the same votes as a candidate (:func:`view_likelihoods`,
+    :func:`objective`, the log of ML_H2a's), with the histogram prior of the colour's value bins
+    (``hist_args`` = ``(val_hist, val_target, val_unit, val_prior, val_lo, val_scale)``;
+    ``bins`` (C,) int64 scratch)."""
+    val_hist, val_target, val_unit, val_prior, val_lo, val_scale = hist_args
+    view_likelihoods(colour, ex_flat, ug, uv, uw, u, vsum, h2c, outlier, lik)
+    prior = 0.0
+    if val_prior > 0.0:
+        for ch in range(colour.shape[0]):
+            bins[ch] = value_bin(colour[ch], val_lo[ch], val_scale[ch], val_hist.shape[1])
+        prior = value_prior(bins, val_hist, val_target, val_unit, val_prior)
+    score = objective(lik, likelihood, prior)
+    return score if likelihood == ML_H2B else np.log(score)
+
+
+@jit
+def metropolis(scores, n_try, current, temperature, key):
+    """A Metropolis step among ``n_try`` candidates of log-scores ``scores``: the proposal ``a``
+    is drawn uniformly from ``(mix(key) + 0.5) / 2**31``; it is accepted when its score is at
+    least the ``current`` colour's, else with probability ``exp((scores[a] - current) /
+    temperature)`` against ``(mix(mix(key) + 2**31) + 0.5) / 2**31`` (a second hash of the same
+    counter). Returns ``a``, or -1 when the voxel keeps its colour."""
+    h = mix(key)
+    a = min(int((h + 0.5) / _TWO_31 * n_try), n_try - 1)
+    gap = scores[a] - current
+    if gap >= 0.0:
+        return a
+    x = (mix(h + 2147483648) + 0.5) / _TWO_31
+    return a if x < np.exp(gap / temperature) else -1
+
+
+@jit
+def view_winners(table, n_try, vsum, winners):
+    """ML_H1's per-view searches: ``winners[v]`` the candidate with the highest estimate
+    ``table[a, v]`` in view ``v`` (first on ties), -1 for a view without votes (it proposes
+    nothing)."""
+    for v in range(table.shape[1]):
+        winners[v] = -1
+        if vsum[v] <= 0.0:
+            continue
+        for a in range(n_try):
+            if winners[v] < 0 or table[a, v] > table[winners[v], v]:
+                winners[v] = a
+
+
+@jit
+def least_confident(table, winners):
+    """ML_H1a: among the views' winners, the one whose own view's estimate is the lowest (the
+    least confident view decides; first view on ties). Returns the candidate, -1 when no view
+    proposes."""
+    pick = -1
+    low = np.inf
+    for v in range(winners.shape[0]):
+        a = winners[v]
+        if a >= 0 and table[a, v] < low:
+            low = table[a, v]
+            pick = a
+    return pick
+
+
+@jit
+def mean_of_winners(colour, winners, tops, ug, ex_flat):
+    """ML_H1b: the mean of the views' winning colours into ``colour`` (C,) float32 (float64 sums
+    over the views that propose, in view order). Generally not an exemplar colour: Urs et al.
+    2014's averaging artefact."""
+    n = 0
+    for ch in range(colour.shape[0]):
+        colour[ch] = 0.0
+    acc = np.zeros(colour.shape[0], dtype=np.float64)
+    for v in range(winners.shape[0]):
+        if winners[v] < 0:
+            continue
+        n += 1
+        for ch in range(colour.shape[0]):
+            acc[ch] += ex_flat[ug[tops[winners[v]]], ch]
+    for ch in range(colour.shape[0]):
+        colour[ch] = acc[ch] / n
+
+
+@jit
+def winner_sources(winners, tops, ug, uv, u, ex_flat, ex_off, new_src_t):
+    """ML_H1b's sources: each proposing view's source becomes its own winner -- the winning
+    texel when it is that view's vote, else that view's voted texel nearest to the winner's
+    colour (first on ties). ``new_src_t`` (V,) is written for the proposing views only."""
+    for v in range(winners.shape[0]):
+        if winners[v] < 0:
+            continue
+        g = ug[tops[winners[v]]]
+        if uv[tops[winners[v]]] == v:
+            new_src_t[v] = g - ex_off[v]
+            continue
+        near = nearest_vote(v, g, ug, uv, u, ex_flat)
+        if near >= 0:
+            new_src_t[v] = ug[near] - ex_off[v]
+
+
+@jit
+def nearest_vote(v, g, ug, uv, u, ex_flat):
+    """The merged vote of view ``v`` whose texel is nearest in colour to texel ``g`` (first on
+    ties), -1 when the view has none."""
+    near = -1
+    near_d = np.inf
+    for q in range(u):
+        if uv[q] != v:
+            continue
+        dd = 0.0
+        for ch in range(ex_flat.shape[1]):
+            diff = ex_flat[ug[q], ch] - ex_flat[g, ch]
+            dd += diff * diff
+        if dd < near_d:
+            near_d = dd
+            near = q
+    return near
+
+
+@jit
+def write_colour(volume, p0, p1, p2, colour, hist_args, old_bins_t, new_bins_t):
+    """Give voxel ``(p0, p1, p2)`` the colour ``colour`` (C,) float32 (ML_H1b's mean, no texel);
+    when it changes, its old and new value bins go to ``old_bins_t`` and ``new_bins_t`` (C,) for
+    the solver's histogram update. Returns 1 if the colour changed, else 0."""
+    val_hist, val_lo, val_scale = hist_args[0], hist_args[4], hist_args[5]
+    flag = 0
+    for ch in range(colour.shape[0]):
+        if volume[p0, p1, p2, ch] != colour[ch]:
+            flag = 1
+    if flag:
+        for ch in range(colour.shape[0]):
+            old_bins_t[ch] = value_bin(volume[p0, p1, p2, ch], val_lo[ch], val_scale[ch], val_hist.shape[1])
+            new_bins_t[ch] = value_bin(colour[ch], val_lo[ch], val_scale[ch], val_hist.shape[1])
+    for ch in range(colour.shape[0]):
+        volume[p0, p1, p2, ch] = colour[ch]
+    return flag
