@@ -38,15 +38,16 @@ from .. import _validation as check
 from ..analysis.metrics import two_point_shape_error
 from ..config import DEFAULT_SIZE, SynthesisMethod, SynthesisResult
 from ..model.kcoherence_engine import CANDIDATE_HEURISTICS, CandidateDecision, KCoherenceLevels
+from ..model.kcoherence_icm import IcmSchedule
 from ..model.neighbourhood import VIEWS
-from ..model.pyramid import run_pyramid
+from ..model.pyramid import INHERIT, LABEL_UPSAMPLING, run_pyramid
 from ..model.relax.anneal import SCHEDULES
 from ..resources import coherent_estimate
 from . import chen_wang
 from ._api import prepare
 
 __all__ = ["CANDIDATE_HEURISTICS", "METHOD", "SEGMENTED", "SEGMENTED_MAX_VALUES", "CoherentConfig", "SegmentedPreset",
-           "best_of_pyramids", "coherent_synthesize", "is_segmented", "make_coherent_config", "run",
+           "best_of_pyramids", "coherent_synthesize", "icm_schedule", "is_segmented", "make_coherent_config", "run",
            "temperatures", "trial_checkpoint"]
 
 _CW = chen_wang.DEFAULTS
@@ -137,6 +138,14 @@ class CoherentConfig:
     t0: float = 0.0
     t_end: float = 0.05
     schedule: str = "geometric"
+    # ICM with per-voxel temperatures (Urs et al. 2014; model.kcoherence_icm) instead of the
+    # fixed iterations (then unused): a level's sweeps stop by `stop` or `max_sweeps`
+    icm: bool = False
+    xi: float = IcmSchedule.xi
+    stop: float = IcmSchedule.stop
+    max_sweeps: int = IcmSchedule.max_sweeps
+    upsample: str = IcmSchedule.upsample
+    inherit: str = IcmSchedule.inherit
     seed: int | None = None
 
     def to_dict(self) -> dict:
@@ -158,10 +167,12 @@ def make_coherent_config(
     position_boost=DEFAULTS.position_boost, random_candidates=DEFAULTS.random_candidates,
     global_share=DEFAULTS.global_share, coherence_bias=DEFAULTS.coherence_bias,
     value_weight=DEFAULTS.value_weight, value_prior=DEFAULTS.value_prior, value_bins=DEFAULTS.value_bins,
-    phase_weight=DEFAULTS.phase_weight, t0=DEFAULTS.t0, t_end=DEFAULTS.t_end, schedule=DEFAULTS.schedule, seed=None,
+    phase_weight=DEFAULTS.phase_weight, t0=DEFAULTS.t0, t_end=DEFAULTS.t_end, schedule=DEFAULTS.schedule,
+    icm=DEFAULTS.icm, xi=DEFAULTS.xi, stop=DEFAULTS.stop, max_sweeps=DEFAULTS.max_sweeps,
+    upsample=DEFAULTS.upsample, inherit=DEFAULTS.inherit, seed=None,
 ) -> CoherentConfig:
     """Validate plain keyword arguments into a frozen :class:`CoherentConfig` (the shared
-    coherence fields are validated as Chen–Wang's)."""
+    coherence fields are validated as Chen–Wang's, the ICM ones as the NP-MRF sampler's)."""
     cw = chen_wang.make_chen_wang_config(
         size=size, window=window, levels=levels, views=views, iterations=iterations, k=k,
         index_weight=index_weight, position_weight=position_weight, position_boost=position_boost,
@@ -175,8 +186,18 @@ def make_coherent_config(
     schedule = check.choice("schedule", schedule, tuple(SCHEDULES))
     if t0 > 0.0:
         t_end = check.real("t_end", t_end, low=0.0, low_open=schedule == "geometric", high=t0)
+    icm = check.boolean("icm", icm)
+    upsample = check.choice("upsample", upsample, LABEL_UPSAMPLING)
+    inherit = check.choice("inherit", inherit, INHERIT)
+    xi = check.real("xi", xi, high=0.0, high_open=True)
+    stop = check.real("stop", stop, low=0.0, high=1.0, low_open=True)
+    max_sweeps = check.integer("max_sweeps", max_sweeps, low=1)
+    if icm and t0 > 0.0:
+        check.fail(f"icm=True and t0={t0:g} are two relaxations: ICM decides by the highest score "
+                   "(set t0=0), annealing runs the fixed iterations (set icm=False)")
     return CoherentConfig(heuristic=heuristic, centre_bandwidth=centre_bandwidth, outlier=outlier,
-                          t0=t0, t_end=float(t_end), schedule=schedule,
+                          t0=t0, t_end=float(t_end), schedule=schedule, icm=icm, xi=xi, stop=stop,
+                          max_sweeps=max_sweeps, upsample=upsample, inherit=inherit,
                           **{name: getattr(cw, name) for name in _SHARED})
 
 
@@ -199,6 +220,13 @@ def temperatures(config: CoherentConfig) -> tuple[tuple[float, ...], ...]:
                  for n in config.iterations)
 
 
+def icm_schedule(config: CoherentConfig) -> IcmSchedule | None:
+    """The ICM options of a run with ``icm=True``; None without."""
+    if not config.icm:
+        return None
+    return IcmSchedule(config.xi, config.stop, config.max_sweeps, config.upsample, config.inherit)
+
+
 def run(config: CoherentConfig, per_view_exemplars: Mapping[str, np.ndarray], rng: np.random.Generator, *,
         progress=None, checkpoint: str | Path | None = None, t_start: float | None = None) -> SynthesisResult:
     """Run a validated configuration on validated float32 ``(H, W, C)`` exemplars (one per view):
@@ -206,8 +234,9 @@ def run(config: CoherentConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
     by the NP-MRF rule; the signature of a registered method."""
     t_start = time.perf_counter() if t_start is None else t_start
     decision = CandidateDecision(config.heuristic, config.centre_bandwidth, config.outlier,
-                                 temperatures(config))
-    levels = KCoherenceLevels("coherent", _chen_wang_config(config), per_view_exemplars, decision)
+                                 None if config.icm else temperatures(config))
+    levels = KCoherenceLevels("coherent", _chen_wang_config(config), per_view_exemplars, decision,
+                              icm_schedule(config))
     out = run_pyramid(levels, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
     return SynthesisResult(volume=out.state.volume, history=out.history, config=config,
                            timings=out.timings, labels=levels.labels, stats=out.stats)
