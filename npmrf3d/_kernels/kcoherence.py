@@ -101,16 +101,14 @@ def mix(x):
 
 
 @jit
-def project(volume, ra, ca, n, u_r, u_c, window, anchor, mean, basis, vec, y):
-    """PCA projection of the neighbourhood of the site at plane position ``(u_r, u_c)`` of
-    slice ``n`` (view axes ``ra``, ``ca``; toroidal volume) into ``y`` (``vec``: scratch of
-    ``window**2 * C``). The neighbourhood is read in (row, column, channel) order minus ``mean``,
-    then ``y = vec @ basis`` accumulated in that order."""
+def gather(volume, ra, ca, n, u_r, u_c, window, anchor, trust, vec, weights):
+    """The neighbourhood of the site at plane position ``(u_r, u_c)`` of slice ``n`` (view axes
+    ``ra``, ``ca``; toroidal volume) into ``vec`` (``window**2 * C``, in (row, column, channel)
+    order) and, when ``trust`` is not empty, each pixel's trust into ``weights`` (``window**2``)."""
     na = 3 - ra - ca
     nr = volume.shape[ra]
     nc = volume.shape[ca]
     channels = volume.shape[3]
-    dims = basis.shape[1]
     m = 0
     for wr in range(window):
         x_r = (u_r - anchor + wr) % nr
@@ -119,9 +117,23 @@ def project(volume, ra, ca, n, u_r, u_c, window, anchor, mean, basis, vec, y):
             q0 = n if na == 0 else (x_r if ra == 0 else x_c)
             q1 = n if na == 1 else (x_r if ra == 1 else x_c)
             q2 = n if na == 2 else (x_r if ra == 2 else x_c)
+            if trust.shape[0] > 0:
+                weights[wr * window + wc] = trust[q0, q1, q2]
             for ch in range(channels):
-                vec[m] = volume[q0, q1, q2, ch] - mean[m]
+                vec[m] = volume[q0, q1, q2, ch]
                 m += 1
+
+
+@jit
+def project(volume, ra, ca, n, u_r, u_c, window, anchor, mean, basis, vec, y):
+    """PCA projection of the neighbourhood of the site at plane position ``(u_r, u_c)`` of
+    slice ``n`` (view axes ``ra``, ``ca``; toroidal volume) into ``y`` (``vec``: scratch of
+    ``window**2 * C``). The neighbourhood is read in (row, column, channel) order (:func:`gather`)
+    minus ``mean``, then ``y = vec @ basis`` accumulated in that order."""
+    dims = basis.shape[1]
+    gather(volume, ra, ca, n, u_r, u_c, window, anchor, NO_TRUST, vec, vec)
+    for m in range(vec.shape[0]):
+        vec[m] -= mean[m]
     for j in range(dims):
         y[j] = 0.0
     for m in range(vec.shape[0]):
@@ -233,32 +245,25 @@ def candidates(src_v, ra, ca, pos0, pos1, pos2, exemplar, out):
 
 
 @jit
-def trusted_distance(volume, ra, ca, n, u_r, u_c, exemplar, e, trust):
-    """Squared distance of the neighbourhood of the site at plane position ``(u_r, u_c)`` of
-    slice ``n`` to the exemplar neighbourhood centred at ``e``, each pixel's term weighted by its
-    trust ``trust[x]`` (``1 - t_x``, Urs et al. 2014): summed over rows, columns, channels."""
-    na = 3 - ra - ca
-    nr = volume.shape[ra]
-    nc = volume.shape[ca]
-    channels = volume.shape[3]
+def trusted_distance(vec, weights, exemplar, e):
+    """Squared distance of a neighbourhood gathered by :func:`gather` (values ``vec``, trusts
+    ``weights``) to the exemplar neighbourhood centred at ``e``, each pixel's term weighted by
+    its trust ``1 - t`` (Urs et al. 2014): summed over rows, columns, channels."""
     window, anchor, width, texels = exemplar.window, exemplar.anchor, exemplar.width, exemplar.texels
+    channels = texels.shape[1]
     er = e // width - anchor
     ec = e % width - anchor
     d2 = 0.0
     for wr in range(window):
-        x_r = (u_r - anchor + wr) % nr
         for wc in range(window):
-            x_c = (u_c - anchor + wc) % nc
-            q0 = n if na == 0 else (x_r if ra == 0 else x_c)
-            q1 = n if na == 1 else (x_r if ra == 1 else x_c)
-            q2 = n if na == 2 else (x_r if ra == 2 else x_c)
-            weight = np.float64(trust[q0, q1, q2])
+            weight = np.float64(weights[wr * window + wc])
             if weight == 0.0:
                 continue
             g = (er + wr) * width + ec + wc
+            m = (wr * window + wc) * channels
             part = 0.0
             for ch in range(channels):
-                diff = np.float64(volume[q0, q1, q2, ch]) - np.float64(texels[g, ch])
+                diff = vec[m + ch] - np.float64(texels[g, ch])
                 part += diff * diff
             d2 += weight * part
     return d2
@@ -308,6 +313,7 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
             vec = np.empty(d, dtype=np.float64)
             y = np.empty(dims, dtype=np.float64)
             cand = np.empty(cap, dtype=np.int64)
+            weights = np.empty(window * window, dtype=np.float32)
             acc = 0.0
             for ar in range(gr):
                 u_r = ar * grid
@@ -316,7 +322,9 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
                     p0 = n if na == 0 else (u_r if ra == 0 else u_c)
                     p1 = n if na == 1 else (u_r if ra == 1 else u_c)
                     p2 = n if na == 2 else (u_r if ra == 2 else u_c)
-                    if not weighted:
+                    if weighted:
+                        gather(volume, ra, ca, n, u_r, u_c, window, anchor, trust, vec, weights)
+                    else:
                         project(volume, ra, ca, n, u_r, u_c, window, anchor, mean, basis, vec, y)
                     count = candidates(src_v, ra, ca, p0, p1, p2, exemplar, cand)
                     if n_random > 0:
@@ -329,7 +337,7 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
                         e = cand[t2]
                         d2 = 0.0
                         if weighted:
-                            d2 = trusted_distance(volume, ra, ca, n, u_r, u_c, exemplar, e, trust)
+                            d2 = trusted_distance(vec, weights, exemplar, e)
                         else:
                             for j in range(dims):
                                 diff = y[j] - proj[e, j]

@@ -17,6 +17,11 @@ candidates with probability proportional to ``exp(score / T)`` (a heat-bath step
 candidates; ``score`` the ML_H2b log-score with the histogram prior), ``T`` falling from ``t0``
 to ``t_end`` over each level's iterations; ``T -> 0`` is the highest score again.
 
+With ``icm=True`` a level runs ICM with per-voxel temperatures instead of ``iterations`` (Urs et
+al. 2014; :mod:`npmrf3d.model.kcoherence_icm`): trust-weighted search and votes, only warm
+voxels re-decided, cooling by ``xi`` until ``stop`` or ``max_sweeps``, ``upsample`` 1/8 or 8/8 and
+``inherit`` as the NP-MRF sampler's.
+
 The search, votes, histograms and level loop are Chen–Wang's (the k-coherence engine,
 :mod:`npmrf3d.model.kcoherence_engine`); only the decision differs
 (:class:`npmrf3d.model.kcoherence_engine.CandidateDecision`), so a voxel copies an exemplar
