@@ -442,8 +442,10 @@ def naive_random_centres(salt, site_flat, n_random, bounds, ewidth):
 
 
 def naive_search_view(volume, src_v, view, model, *, grid, batches, index_hist, phi, index_weight,
-                      r, floor, assign_v, n_random=0, salt=0):
-    """Literal search phase of one view; returns (assign, omega, energy per slice, index_hist)."""
+                      r, floor, assign_v, n_random=0, salt=0, trust=None):
+    """Literal search phase of one view; returns (assign, omega, energy per slice, index_hist).
+    ``trust`` (N0, N1, N2): the full-dimensional distances with every pixel's term weighted by
+    its trust, instead of the PCA ones (Urs et al. 2014)."""
     ra, ca = NAIVE_VIEW_AXES[view]
     na = 3 - ra - ca
     ex = model.exemplar
@@ -459,13 +461,19 @@ def naive_search_view(volume, src_v, view, model, *, grid, batches, index_hist, 
             for row in range(0, volume.shape[ra], grid):
                 for col in range(0, volume.shape[ca], grid):
                     site = naive_site(view, n, row, col)
-                    y = (naive_volume_patch(volume, view, site, window) - model.mean) @ model.basis.astype(np.float64)
+                    patch = naive_volume_patch(volume, view, site, window)
+                    y = (patch - model.mean) @ model.basis.astype(np.float64)
                     best, best_cost, best_d2 = None, np.inf, 0.0
                     cands = naive_candidate_list(src_v, view, site, w, model.bounds, model.kcoh)
                     flat = (site[0] * volume.shape[1] + site[1]) * volume.shape[2] + site[2]
                     cands += naive_random_centres(salt, flat, n_random, model.bounds, w)
                     for e in cands:
                         d2 = float(((y - model.proj[e].astype(np.float64)) ** 2).sum())
+                        if trust is not None:
+                            weights = np.repeat(naive_volume_patch(trust[..., None], view, site, window),
+                                                ex.shape[2])
+                            ex_patch = naive_exemplar_patch(ex, e // w, e % w, window)
+                            d2 = float((weights * (patch - ex_patch) ** 2).sum())
                         cost = d2 * (1.0 + index_weight * max(0.0, hist[e] / phi - 1.0))
                         if cost < best_cost:
                             best, best_cost, best_d2 = e, cost, d2
@@ -487,8 +495,10 @@ def naive_value_bin(x, lo, scale, bins):
 
 
 def naive_votes(site, views, assign, omega, exemplars, window, grid, pos_hist, theta, position_weight,
-                position_boost=0.0, values=None):
+                position_boost=0.0, values=None, trust=None):
     """Votes (texel colour, view, local texel index, weight) for one voxel, in the kernel's order.
+    ``trust`` (N0, N1, N2): each weight times the mean trust of the neighbourhood's pixels other
+    than the voxel; a neighbourhood without any trusted one does not vote.
     ``values``: None, or a dict with the value histogram (``hist``, ``target`` per channel and
     bin, ``weight``, ``lo``, ``scale``) that divides each weight by
     ``1 + weight * sum_c max(0, hist[c][b_c] - target[c][b_c])``."""
@@ -507,6 +517,12 @@ def naive_votes(site, views, assign, omega, exemplars, window, grid, pos_hist, t
                 e = int(assign[vi][tuple(u)])
                 if e < 0:
                     continue
+                share = 1.0
+                if trust is not None:
+                    window_sum = naive_volume_patch(trust[..., None], view, tuple(u), window).sum()
+                    share = (window_sum - float(trust[site])) / (window * window - 1)
+                    if share <= 0:
+                        continue
                 local = (e // w + orow) * w + (e % w + ocol)
                 excess = pos_hist[vi][local] / theta[vi] - 1.0
                 weight = float(omega[vi][tuple(u)])
@@ -522,7 +538,7 @@ def naive_votes(site, views, assign, omega, exemplars, window, grid, pos_hist, t
                                             len(values["hist"][ch]))
                         over += max(0.0, values["hist"][ch][b] - values["target"][ch][b])
                     weight /= 1.0 + values["weight"] * over
-                votes.append([colour, vi, local, weight])
+                votes.append([colour, vi, local, weight * share])
     return votes
 
 
@@ -564,7 +580,7 @@ def naive_score(per_view, prior, likelihood, has_prior):
 
 def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, order, bounds,
                 pos_hist, theta, position_weight, position_boost=0.0, medoid=0, balance=False,
-                likelihood=0, h2c=1.0, outlier=0.0, values=None, temperature=0.0, salt=0, sampler=0):
+                likelihood=0, h2c=1.0, outlier=0.0, values=None, temperature=0.0, salt=0, sampler=0, trust=None):
     """Literal discrete solver; returns (volume, src, pos_hist, changed). ``likelihood`` 1 or 2:
     the coherent NP-MRF decision (per-view Parzen estimate of each candidate's colour, product or
     minimum over views) instead of the medoid; with ``temperature > 0`` a heat-bath draw among the
@@ -578,7 +594,8 @@ def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, o
     ties), ML_H1b takes the mean of the picks' colours and each view's source becomes its pick
     (its nearest own vote when the pick is another view's). ``values`` (see
     :func:`naive_votes`, plus ``unit``): the value histogram, which follows every changed voxel
-    between batches (updated in place)."""
+    between batches (updated in place).
+    ``trust``: see :func:`naive_votes`."""
     volume = volume.copy()
     src = src.copy()
     pos_hist = [h.astype(np.float64).copy() for h in pos_hist]
@@ -590,7 +607,7 @@ def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, o
         for flat in order[bounds[b]:bounds[b + 1]]:
             site = (flat // (n1 * n2), (flat // n2) % n1, flat % n2)
             votes = naive_votes(site, views, assign, omega, exemplars, window, grid, pos_hist, theta,
-                                position_weight, position_boost, values)
+                                position_weight, position_boost, values, trust)
             new = [int(src[vi][site]) for vi in range(len(views))]
             if not votes:
                 updates.append((site, new, False))
@@ -942,3 +959,26 @@ def naive_copy_repetition(coords: np.ndarray, min_shift: int, tolerance: int) ->
         count = int((np.abs(moved - coords).max(axis=-1) <= tolerance).sum())
         best = max(best, count)
     return best / int(np.prod(shape))
+
+
+def naive_cool(temps, visited, inherited, xi):
+    """ICM cooling (Urs et al. 2014) over the 6 face neighbours, every new value from the old
+    temperatures: ``max(0, (xi + sum of the neighbours' t) / 6)`` for visited, not inherited voxels."""
+    out = temps.astype(np.float64).copy()
+    n = temps.shape
+    for p in itertools.product(*(range(m) for m in n)):
+        if not visited[p] or inherited[p]:
+            continue
+        total = 0.0
+        for axis in range(3):
+            for step in (-1, 1):
+                q = list(p)
+                q[axis] = (q[axis] + step) % n[axis]
+                total += float(temps[tuple(q)])
+        out[p] = max(0.0, (xi + total) / 6.0)
+    return out
+
+
+def naive_window_trust(trust, view, site, window):
+    """Sum of ``trust`` over the window of ``view`` at ``site``."""
+    return float(naive_volume_patch(trust[..., None], view, site, window).sum())

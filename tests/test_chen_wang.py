@@ -172,7 +172,7 @@ def test_search_view_matches_twin(rng, view, window, channels, grid, batches, n_
     energy = np.zeros(vol.shape[na])
     _k.search_view(vol, src, ra, ca, coh.search_exemplar(m),
                    _k.SearchRule(grid, batches, phi, 2.0, 0.8, 1e-3, n_random, 123456789), got_hist, got_assign,
-                   np.empty(vol.shape[:3], dtype=np.int32), omega, energy)
+                   np.empty(vol.shape[:3], dtype=np.int32), omega, energy, _k.NO_TRUST)
     np.testing.assert_array_equal(got_assign, want_assign)
     np.testing.assert_allclose(omega, want_omega, rtol=1e-4)
     np.testing.assert_allclose(energy, want_energy, rtol=1e-6)
@@ -195,7 +195,7 @@ def test_volume_patch_projection_is_the_models(rng):
     assign = np.full((8, 8, 2), -1, dtype=np.int32)
     omega = np.zeros((8, 8, 2), dtype=np.float32)
     _k.search_view(vol, src, 0, 1, coh.search_exemplar(m), _k.SearchRule(1, 1, 1.0, 0.0, 0.8, 1e-6, 0, 0),
-                   np.zeros(m.pixels), assign, np.empty_like(assign), omega, np.zeros(2))
+                   np.zeros(m.pixels), assign, np.empty_like(assign), omega, np.zeros(2), _k.NO_TRUST)
     assert assign[3, 3, 0] == 6 * 16 + 7  # interior site: the exact copy
 
 
@@ -293,7 +293,7 @@ def test_value_histogram_pulls_the_solver_towards_the_exemplars_histogram(weight
         _s.solve(vol, src, assign, np.ones((1, *shape), dtype=np.float32),
                  _packed([[0, 1]], ex.reshape(-1, 1), [0], [12], 4, m.anchor, 1),
                  _histograms(hist, [0], [n / 144.0], 0.0, 0.0, ex.reshape(-1, 1), vh, w, prior if w else 0.0),
-                 _s.SolverRule(8, False, likelihood, 0.01, 0.01, 0.0, 0),
+                 _s.NO_TRUST, _s.SolverRule(8, False, likelihood, 0.01, 0.01, 0.0, 0),
                  gen.permutation(n).astype(np.int64), np.linspace(0, n, 17).astype(np.int64), 16)
         share[w] = float((vol > 0.5).mean())
         np.testing.assert_allclose(vh.hist[0] * vh.unit, [np.sum(vol < 0.5), 0, 0, np.sum(vol > 0.5)])
@@ -407,8 +407,8 @@ def _check_solve_against_twin(rng, views, medoid, balance, boost, likelihood, va
                        _packed([VIEW_AXES[v] for v in views], packed, ex_off, [10] * len(views), window,
                                coh.anchor(window), grid),
                        _histograms(got_hist, hist_off, theta, 3.0, boost, packed, vh, value_weight, values["prior"]),
-                       _s.SolverRule(medoid, balance, likelihood, 0.05, 0.01, temperature, 12345, sampler), order,
-                       bounds, 7)
+                       _s.NO_TRUST, _s.SolverRule(medoid, balance, likelihood, 0.05, 0.01, temperature, 12345, sampler),
+                       order, bounds, 7)
     np.testing.assert_array_equal(got_vol, want_vol)
     np.testing.assert_allclose(vh.hist, np.array(values["hist"]), atol=1e-12)
     np.testing.assert_array_equal(got_src, want_src)
@@ -423,7 +423,7 @@ def test_solve_copies_only_voted_exemplar_texels(rng):
     n = volume.shape[0] * volume.shape[1] * volume.shape[2]
     hist = np.concatenate([np.bincount(s.ravel(), minlength=110) for s in src]).astype(np.float64)
     _s.solve(volume, src, assign, omega, _packed([VIEW_AXES[v] for v in views], packed, ex_off, [10] * 3, 4, 1, 1),
-             _histograms(hist, hist_off, [n / 110] * 3, 1.0, 0.0, packed), _s.SolverRule(0, False, 0, 1.0, 0.0, 0.0, 0),
+             _histograms(hist, hist_off, [n / 110] * 3, 1.0, 0.0, packed), _s.NO_TRUST, _s.SolverRule(0, False, 0, 1.0, 0.0, 0.0, 0),
              np.arange(n, dtype=np.int64), np.array([0, n]), 64)
     colours = {tuple(c) for c in exemplars[0].reshape(-1, 3).tolist()}
     assert {tuple(c) for c in volume.reshape(-1, 3).tolist()} <= colours
@@ -451,7 +451,7 @@ def test_position_histogram_flattens_a_skewed_usage(medoid):
         hist = np.bincount(src.ravel(), minlength=100).astype(np.float64)
         texels = m.exemplar.reshape(-1, 1)
         _s.solve(vol, src, assign, omega, _packed([[0, 1]], texels, [0], [10], 4, m.anchor, 1),
-                 _histograms(hist, [0], [n / 100.0], weight, 0.0, texels), _s.SolverRule(medoid, False, 0, 1.0, 0.0, 0.0, 0),
+                 _histograms(hist, [0], [n / 100.0], weight, 0.0, texels), _s.NO_TRUST, _s.SolverRule(medoid, False, 0, 1.0, 0.0, 0.0, 0),
                  order, np.linspace(0, n, 65).astype(np.int64), 16)
         counts = np.bincount(src.ravel(), minlength=100)
         used[weight] = (int((counts > 0).sum()), int(counts.max()))
@@ -640,7 +640,7 @@ def test_solve_does_not_depend_on_the_order_within_a_batch(rng):
         vol, s = volume.copy(), src.copy()
         hist = np.concatenate([np.bincount(x.ravel(), minlength=110) for x in src]).astype(np.float64)
         _s.solve(vol, s, assign, omega, _packed([VIEW_AXES[v] for v in views], packed, ex_off, [10] * 3, 4, 1, 1),
-                 _histograms(hist, hist_off, [n / 110] * 3, 3.0, 4.0, packed), _s.SolverRule(8, False, 0, 1.0, 0.0, 0.0, 0),
+                 _histograms(hist, hist_off, [n / 110] * 3, 3.0, 4.0, packed), _s.NO_TRUST, _s.SolverRule(8, False, 0, 1.0, 0.0, 0.0, 0),
                  o, bounds, 16)
         out.append((vol, s, hist))
     for a, b in zip(*out):

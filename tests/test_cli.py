@@ -16,7 +16,7 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from npmrf3d import cli, io
+from npmrf3d import cli
 from npmrf3d.errors import ParameterError
 from npmrf3d.io import runs
 

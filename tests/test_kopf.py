@@ -28,7 +28,6 @@ from npmrf3d.methods.kopf import KopfConfig, kopf_synthesize
 from npmrf3d.model.kcoherence import centre_patches
 from tests.naive import (
     NAIVE_VIEW_AXES,
-    naive_bin,
     naive_kopf_neighbourhood,
     naive_kopf_patches,
     naive_kopf_update,

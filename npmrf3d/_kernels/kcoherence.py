@@ -44,6 +44,8 @@ class SearchExemplar(NamedTuple):
     mean : (d,) float64, basis : (d, D) float64, the PCA of the neighbourhoods
     proj : (H * W, D) float64, the projection of every valid centre's neighbourhood
     kcoh : (H * W, k) int32, the k-coherence set of every valid centre
+    texels : (H * W, C) float32, the exemplar's pixels (the trust-weighted distances of
+        :func:`search_view` compare them in full)
     """
 
     window: int
@@ -57,6 +59,11 @@ class SearchExemplar(NamedTuple):
     basis: np.ndarray
     proj: np.ndarray
     kcoh: np.ndarray
+    texels: np.ndarray
+
+
+#: :func:`search_view`'s ``trust`` when every neighbour is trusted: PCA distances.
+NO_TRUST = np.zeros((0, 0, 0), dtype=np.float32)
 
 
 class SearchRule(NamedTuple):
@@ -94,16 +101,14 @@ def mix(x):
 
 
 @jit
-def project(volume, ra, ca, n, u_r, u_c, window, anchor, mean, basis, vec, y):
-    """PCA projection of the neighbourhood of the site at plane position ``(u_r, u_c)`` of
-    slice ``n`` (view axes ``ra``, ``ca``; toroidal volume) into ``y`` (``vec``: scratch of
-    ``window**2 * C``). The neighbourhood is read in (row, column, channel) order minus ``mean``,
-    then ``y = vec @ basis`` accumulated in that order."""
+def gather(volume, ra, ca, n, u_r, u_c, window, anchor, trust, vec, weights):
+    """The neighbourhood of the site at plane position ``(u_r, u_c)`` of slice ``n`` (view axes
+    ``ra``, ``ca``; toroidal volume) into ``vec`` (``window**2 * C``, in (row, column, channel)
+    order) and, when ``trust`` is not empty, each pixel's trust into ``weights`` (``window**2``)."""
     na = 3 - ra - ca
     nr = volume.shape[ra]
     nc = volume.shape[ca]
     channels = volume.shape[3]
-    dims = basis.shape[1]
     m = 0
     for wr in range(window):
         x_r = (u_r - anchor + wr) % nr
@@ -112,9 +117,23 @@ def project(volume, ra, ca, n, u_r, u_c, window, anchor, mean, basis, vec, y):
             q0 = n if na == 0 else (x_r if ra == 0 else x_c)
             q1 = n if na == 1 else (x_r if ra == 1 else x_c)
             q2 = n if na == 2 else (x_r if ra == 2 else x_c)
+            if trust.shape[0] > 0:
+                weights[wr * window + wc] = trust[q0, q1, q2]
             for ch in range(channels):
-                vec[m] = volume[q0, q1, q2, ch] - mean[m]
+                vec[m] = volume[q0, q1, q2, ch]
                 m += 1
+
+
+@jit
+def project(volume, ra, ca, n, u_r, u_c, window, anchor, mean, basis, vec, y):
+    """PCA projection of the neighbourhood of the site at plane position ``(u_r, u_c)`` of
+    slice ``n`` (view axes ``ra``, ``ca``; toroidal volume) into ``y`` (``vec``: scratch of
+    ``window**2 * C``). The neighbourhood is read in (row, column, channel) order (:func:`gather`)
+    minus ``mean``, then ``y = vec @ basis`` accumulated in that order."""
+    dims = basis.shape[1]
+    gather(volume, ra, ca, n, u_r, u_c, window, anchor, NO_TRUST, vec, vec)
+    for m in range(vec.shape[0]):
+        vec[m] -= mean[m]
     for j in range(dims):
         y[j] = 0.0
     for m in range(vec.shape[0]):
@@ -225,8 +244,33 @@ def candidates(src_v, ra, ca, pos0, pos1, pos2, exemplar, out):
     return count
 
 
+@jit
+def trusted_distance(vec, weights, exemplar, e):
+    """Squared distance of a neighbourhood gathered by :func:`gather` (values ``vec``, trusts
+    ``weights``) to the exemplar neighbourhood centred at ``e``, each pixel's term weighted by
+    its trust ``1 - t`` (Urs et al. 2014): summed over rows, columns, channels."""
+    window, anchor, width, texels = exemplar.window, exemplar.anchor, exemplar.width, exemplar.texels
+    channels = texels.shape[1]
+    er = e // width - anchor
+    ec = e % width - anchor
+    d2 = 0.0
+    for wr in range(window):
+        for wc in range(window):
+            weight = np.float64(weights[wr * window + wc])
+            if weight == 0.0:
+                continue
+            g = (er + wr) * width + ec + wc
+            m = (wr * window + wc) * channels
+            part = 0.0
+            for ch in range(channels):
+                diff = vec[m + ch] - np.float64(texels[g, ch])
+                part += diff * diff
+            d2 += weight * part
+    return d2
+
+
 @jit_parallel
-def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fresh_v, omega_v, energy):
+def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fresh_v, omega_v, energy, trust):
     """Search phase of one view (paper section 4.3 with eq. 5-6).
 
     Parameters
@@ -242,7 +286,12 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
     fresh_v : (N0, N1, N2) int32, scratch for the new assignments of a batch
     omega_v : (N0, N1, N2) float32, out: IRLS weight at every site
     energy : (N_normal,) float64, out: ``sum dist ** r`` over the sites of each slice
+    trust : (N0, N1, N2) float32 or :data:`NO_TRUST`
+        Every voxel's trust ``1 - t`` (ICM with per-voxel temperatures): the distances are then
+        the full-dimensional ones with each pixel's term weighted by its trust
+        (:func:`trusted_distance`) instead of the PCA ones.
     """
+    weighted = trust.shape[0] > 0
     window, anchor, mean, basis, proj = exemplar.window, exemplar.anchor, exemplar.mean, exemplar.basis, exemplar.proj
     grid, batches, phi, index_weight, r, floor = rule.grid, rule.batches, rule.phi, rule.index_weight, rule.r, rule.floor
     n_random, salt = rule.n_random, rule.salt
@@ -264,6 +313,7 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
             vec = np.empty(d, dtype=np.float64)
             y = np.empty(dims, dtype=np.float64)
             cand = np.empty(cap, dtype=np.int64)
+            weights = np.empty(window * window, dtype=np.float32)
             acc = 0.0
             for ar in range(gr):
                 u_r = ar * grid
@@ -272,7 +322,10 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
                     p0 = n if na == 0 else (u_r if ra == 0 else u_c)
                     p1 = n if na == 1 else (u_r if ra == 1 else u_c)
                     p2 = n if na == 2 else (u_r if ra == 2 else u_c)
-                    project(volume, ra, ca, n, u_r, u_c, window, anchor, mean, basis, vec, y)
+                    if weighted:
+                        gather(volume, ra, ca, n, u_r, u_c, window, anchor, trust, vec, weights)
+                    else:
+                        project(volume, ra, ca, n, u_r, u_c, window, anchor, mean, basis, vec, y)
                     count = candidates(src_v, ra, ca, p0, p1, p2, exemplar, cand)
                     if n_random > 0:
                         count = random_centres(salt, (p0 * shape[1] + p1) * shape[2] + p2, n_random,
@@ -283,9 +336,12 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
                     for t2 in range(count):
                         e = cand[t2]
                         d2 = 0.0
-                        for j in range(dims):
-                            diff = y[j] - proj[e, j]
-                            d2 += diff * diff
+                        if weighted:
+                            d2 = trusted_distance(vec, weights, exemplar, e)
+                        else:
+                            for j in range(dims):
+                                diff = y[j] - proj[e, j]
+                                d2 += diff * diff
                         excess = index_hist[e] / phi - 1.0
                         cost = d2 * (1.0 + index_weight * excess) if excess > 0.0 else d2
                         if cost < best_cost:

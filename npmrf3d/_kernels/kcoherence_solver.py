@@ -1,18 +1,19 @@
 """Compiled discrete solver of the k-coherence engine (Chen & Wang 2010, section 4.2).
 
-Why one module of ~490 lines: one kernel, :func:`solve`, whose decision rules (weighted mean,
+Why one module of ~520 lines: one kernel, :func:`solve`, whose decision rules (weighted mean,
 weighted medoid, the NP-MRF rules and their annealed draws, the latter's helpers in
-:mod:`npmrf3d._kernels.candidate_decision`) share the votes and their buffers, with its vote
-helpers and the three bundles of its arguments.
+:mod:`npmrf3d._kernels.candidate_decision`) share the votes and their buffers (trusted or not),
+with its vote helpers and the four bundles of its arguments.
 
 Private: called by :mod:`npmrf3d.model.kcoherence_engine` with validated arrays only; nothing
 here raises a user-facing error. :func:`solve` (parallel over the voxels of a batch): every voxel
 takes, among the texels voted by all overlapping neighbourhoods of all views, one texel, colour
 and source -- the one nearest to the votes' weighted mean (IRLS weights divided by the
 position-histogram factor), a weighted medoid, or the highest NP-MRF score. The histograms are
-frozen within a batch and updated (sequentially) between batches. Its arguments come in three
+frozen within a batch and updated (sequentially) between batches. Its arguments come in four
 bundles: the views' packed exemplars (:class:`PackedViews`), the histograms
-(:class:`SolverHistograms`) and the decision (:class:`SolverRule`).
+(:class:`SolverHistograms`), the votes' trust (:class:`VoteTrust`) and the decision
+(:class:`SolverRule`).
 
 Geometry as in :mod:`npmrf3d._kernels.kcoherence`. Results depend only on the inputs: parallel
 loops write only their own voxel, and every order-dependent step (histogram updates) runs in
@@ -104,8 +105,23 @@ class SolverRule(NamedTuple):
     sampler: int = HEAT_BATH
 
 
+class VoteTrust(NamedTuple):
+    """How much the votes are trusted (ICM with per-voxel temperatures, Urs et al. 2014;
+    :func:`_votes`); :data:`NO_TRUST` (empty arrays) trusts every vote fully.
+
+    voxels : (N0, N1, N2) float32, every voxel's trust ``1 - t``
+    windows : (V, N0, N1, N2) float32, per view the sum of ``voxels`` over the window of every site
+    """
+
+    voxels: np.ndarray
+    windows: np.ndarray
+
+
+NO_TRUST = VoteTrust(np.zeros((0, 0, 0), dtype=np.float32), np.zeros((0, 0, 0, 0), dtype=np.float32))
+
+
 @jit
-def _votes(p0, p1, p2, assign, omega, views, hist, out_g, out_v, out_w):
+def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w):
     """Texels voted for voxel ``(p0, p1, p2)`` by every overlapping neighbourhood of every view.
 
     A neighbourhood at site ``u`` matched with centre ``e`` votes for the texel ``e + (x - u)``
@@ -119,6 +135,11 @@ def _votes(p0, p1, p2, assign, omega, views, hist, out_g, out_v, out_w):
     ``x_r - u_r`` from ``-anchor`` to ``window - 1 - anchor``, then by column offset; texels are
     written as packed rows ``ex_off[v] + local``. Returns the number of votes.
 
+    With ``trust`` (:class:`VoteTrust`, not empty) a vote's weight is further multiplied by the
+    mean trust of its neighbourhood's pixels other than the voxel decided,
+    ``(windows[v, u] - voxels[x]) / (window**2 - 1)``: a hot neighbourhood says little, and one
+    with no trusted pixel does not vote.
+
     ``views`` (:class:`PackedViews`) holds ``view_axes`` (``axes``), ``ex_off`` (``offsets``),
     ``ewidth`` (``widths``), ``window``, ``anchor`` and ``grid``; ``hist``
     (:class:`SolverHistograms`) ``pos_hist`` (``positions``), ``hist_off``
@@ -131,6 +152,8 @@ def _votes(p0, p1, p2, assign, omega, views, hist, out_g, out_v, out_w):
     position_weight, position_boost = hist.position_weight, hist.position_boost
     ex_bins, val_hist, val_target, val_weight = hist.texel_bins, hist.values, hist.value_target, hist.value_weight
     shape = assign.shape
+    weighted = trust.voxels.shape[0] > 0
+    own = np.float64(trust.voxels[p0, p1, p2]) if weighted else 0.0
     count = 0
     for v in range(assign.shape[0]):
         ra = view_axes[v, 0]
@@ -166,6 +189,11 @@ def _votes(p0, p1, p2, assign, omega, views, hist, out_g, out_v, out_w):
                 e = assign[v, q0, q1, q2]
                 if e < 0:
                     continue
+                share = 1.0
+                if weighted:
+                    share = (np.float64(trust.windows[v, q0, q1, q2]) - own) / (window * window - 1)
+                    if share <= 0.0:
+                        continue
                 local = (e // w + orow) * w + (e % w + ocol)
                 excess = pos_hist[hist_off[v] + local] / theta[v] - 1.0
                 weight = omega[v, q0, q1, q2]
@@ -181,6 +209,8 @@ def _votes(p0, p1, p2, assign, omega, views, hist, out_g, out_v, out_w):
                         if gap > 0.0:
                             over += gap
                     weight = weight / (1.0 + val_weight * over)
+                if weighted:
+                    weight = weight * share
                 out_g[count] = ex_off[v] + local
                 out_v[count] = v
                 out_w[count] = weight
@@ -221,7 +251,7 @@ def _group_votes(vg, vv, vw, count, n_views, slot, ug, uv, uw, umax, uarg):
 
 
 @jit_parallel
-def solve(volume, src, assign, omega, views, hist, rule, order, batch_bounds, chunk):
+def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bounds, chunk):
     """Discrete solver (paper section 4.2 with eq. 4), one pass over all voxels.
 
     ``views`` (:class:`PackedViews`) holds the packed texels ``ex_flat`` and each view's offset
@@ -229,6 +259,9 @@ def solve(volume, src, assign, omega, views, hist, rule, order, batch_bounds, ch
     ``hist_off``) and the value histograms ``val_*`` with the texels' bins ``ex_bins``; ``rule``
     (:class:`SolverRule`) the decision. ``chunk`` voxels form one parallel work item (any value
     gives the same result).
+
+    ``trust`` (:class:`VoteTrust`) weighs the votes by their neighbourhoods' trust (:func:`_votes`;
+    :data:`NO_TRUST`: all trusted).
 
     Voxels are visited in ``order`` (flat indices), cut into batches at ``batch_bounds``. Within a
     batch every voxel (in parallel) gathers its votes (:func:`_votes`), computes their weighted
@@ -320,7 +353,7 @@ def solve(volume, src, assign, omega, views, hist, rule, order, batch_bounds, ch
                 p0 = flat // (n1 * n2)
                 p1 = (flat // n2) % n1
                 p2 = flat % n2
-                count = _votes(p0, p1, p2, assign, omega, views, hist, vg, vv, vw)
+                count = _votes(p0, p1, p2, assign, omega, views, hist, trust, vg, vv, vw)
                 for v in range(n_views):
                     new_src[t, v] = src[v, p0, p1, p2]
                 if count == 0:

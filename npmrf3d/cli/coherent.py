@@ -39,6 +39,15 @@ FIELD_HELP = {
     "sampler": "annealing: heat-bath (draw among the candidates ~ exp(score / T)) or metropolis (propose "
                "one candidate uniformly, accept it if it scores at least the current colour, else with "
                "probability exp(score difference / T))",
+    "icm": "ICM with per-voxel temperatures (Urs et al. 2014) instead of --iterations: trust-weighted "
+           "search and votes, warm voxels re-decided until the stop rule",
+    "xi": "icm: cooling step, a negative number (more negative cools faster)",
+    "stop": "icm: stop a level once the global temperature fell by this fraction, in (0, 1] (1 = down to 0)",
+    "max_sweeps": "icm: hard limit of sweeps per level, a positive integer",
+    "upsample": "icm: the 7 non-inherited children of a voxel copy its shifted source (8/8) or get random "
+                "sources (1/8)",
+    "inherit": "icm: inherited voxels may still change (resynth) or are frozen (fixed); their temperature "
+               "stays 0",
 }
 
 

@@ -24,6 +24,11 @@ least the current colour's, else with probability ``exp((score_new - score_curre
 (docs/model.md, section 5). ``T`` falls from ``t0`` to ``t_end`` over each level's iterations;
 ``T -> 0`` is the highest score again.
 
+With ``icm=True`` a level runs ICM with per-voxel temperatures instead of ``iterations`` (Urs et
+al. 2014; :mod:`npmrf3d.model.kcoherence_icm`): trust-weighted search and votes, only warm
+voxels re-decided, cooling by ``xi`` until ``stop`` or ``max_sweeps``, ``upsample`` 1/8 or 8/8 and
+``inherit`` as the NP-MRF sampler's.
+
 The search, votes, histograms and level loop are Chen–Wang's (the k-coherence engine,
 :mod:`npmrf3d.model.kcoherence_engine`); only the decision differs
 (:class:`npmrf3d.model.kcoherence_engine.CandidateDecision`), so a voxel copies an exemplar
@@ -52,15 +57,17 @@ from ..model.kcoherence_engine import (
     CandidateDecision,
     KCoherenceLevels,
 )
+from ..model.kcoherence_icm import IcmSchedule
 from ..model.neighbourhood import VIEWS
-from ..model.pyramid import run_pyramid
+from ..model.pyramid import INHERIT, LABEL_UPSAMPLING, run_pyramid
 from ..model.relax.anneal import SCHEDULES
 from ..resources import coherent_estimate
 from . import chen_wang
 from ._api import prepare
 
-__all__ = ["CANDIDATE_HEURISTICS", "CANDIDATE_SAMPLERS", "COHERENT_HEURISTICS", "METHOD", "SEGMENTED", "SEGMENTED_MAX_VALUES", "CoherentConfig", "SegmentedPreset",
-           "best_of_pyramids", "coherent_synthesize", "is_segmented", "make_coherent_config", "run",
+__all__ = ["CANDIDATE_HEURISTICS", "CANDIDATE_SAMPLERS", "COHERENT_HEURISTICS", "METHOD", "SEGMENTED",
+           "SEGMENTED_MAX_VALUES", "CoherentConfig", "SegmentedPreset",
+           "best_of_pyramids", "coherent_synthesize", "icm_schedule", "is_segmented", "make_coherent_config", "run",
            "temperatures", "trial_checkpoint"]
 
 _CW = chen_wang.DEFAULTS
@@ -152,6 +159,14 @@ class CoherentConfig:
     t_end: float = 0.05
     schedule: str = "geometric"
     sampler: str = "heat-bath"
+    # ICM with per-voxel temperatures (Urs et al. 2014; model.kcoherence_icm) instead of the
+    # fixed iterations (then unused): a level's sweeps stop by `stop` or `max_sweeps`
+    icm: bool = False
+    xi: float = IcmSchedule.xi
+    stop: float = IcmSchedule.stop
+    max_sweeps: int = IcmSchedule.max_sweeps
+    upsample: str = IcmSchedule.upsample
+    inherit: str = IcmSchedule.inherit
     seed: int | None = None
 
     def to_dict(self) -> dict:
@@ -174,11 +189,12 @@ def make_coherent_config(
     global_share=DEFAULTS.global_share, coherence_bias=DEFAULTS.coherence_bias,
     value_weight=DEFAULTS.value_weight, value_prior=DEFAULTS.value_prior, value_bins=DEFAULTS.value_bins,
     phase_weight=DEFAULTS.phase_weight, t0=DEFAULTS.t0, t_end=DEFAULTS.t_end, schedule=DEFAULTS.schedule,
-    sampler=DEFAULTS.sampler, seed=None,
+    sampler=DEFAULTS.sampler, icm=DEFAULTS.icm, xi=DEFAULTS.xi, stop=DEFAULTS.stop,
+    max_sweeps=DEFAULTS.max_sweeps, upsample=DEFAULTS.upsample, inherit=DEFAULTS.inherit, seed=None,
 ) -> CoherentConfig:
     """Validate plain keyword arguments into a frozen :class:`CoherentConfig` (the shared
-    coherence fields are validated as Chen–Wang's). ML_H1a and ML_H1b are ICM-only: with
-    ``t0 > 0`` they are refused."""
+    coherence fields are validated as Chen–Wang's, the ICM ones as the NP-MRF sampler's).
+    ML_H1a and ML_H1b are ICM-only: with ``t0 > 0`` they are refused."""
     cw = chen_wang.make_chen_wang_config(
         size=size, window=window, levels=levels, views=views, iterations=iterations, k=k,
         index_weight=index_weight, position_weight=position_weight, position_boost=position_boost,
@@ -196,8 +212,18 @@ def make_coherent_config(
     sampler = check.choice("sampler", sampler, tuple(CANDIDATE_SAMPLERS))
     if t0 > 0.0:
         t_end = check.real("t_end", t_end, low=0.0, low_open=schedule == "geometric", high=t0)
+    icm = check.boolean("icm", icm)
+    upsample = check.choice("upsample", upsample, LABEL_UPSAMPLING)
+    inherit = check.choice("inherit", inherit, INHERIT)
+    xi = check.real("xi", xi, high=0.0, high_open=True)
+    stop = check.real("stop", stop, low=0.0, high=1.0, low_open=True)
+    max_sweeps = check.integer("max_sweeps", max_sweeps, low=1)
+    if icm and t0 > 0.0:
+        check.fail(f"icm=True and t0={t0:g} are two relaxations: ICM decides by the highest score "
+                   "(set t0=0), annealing runs the fixed iterations (set icm=False)")
     return CoherentConfig(heuristic=heuristic, centre_bandwidth=centre_bandwidth, outlier=outlier,
-                          t0=t0, t_end=float(t_end), schedule=schedule, sampler=sampler,
+                          t0=t0, t_end=float(t_end), schedule=schedule, sampler=sampler, icm=icm, xi=xi,
+                          stop=stop, max_sweeps=max_sweeps, upsample=upsample, inherit=inherit,
                           **{name: getattr(cw, name) for name in _SHARED})
 
 
@@ -220,6 +246,13 @@ def temperatures(config: CoherentConfig) -> tuple[tuple[float, ...], ...]:
                  for n in config.iterations)
 
 
+def icm_schedule(config: CoherentConfig) -> IcmSchedule | None:
+    """The ICM options of a run with ``icm=True``; None without."""
+    if not config.icm:
+        return None
+    return IcmSchedule(config.xi, config.stop, config.max_sweeps, config.upsample, config.inherit)
+
+
 def run(config: CoherentConfig, per_view_exemplars: Mapping[str, np.ndarray], rng: np.random.Generator, *,
         progress=None, checkpoint: str | Path | None = None, t_start: float | None = None) -> SynthesisResult:
     """Run a validated configuration on validated float32 ``(H, W, C)`` exemplars (one per view):
@@ -227,8 +260,9 @@ def run(config: CoherentConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
     by the NP-MRF rule; the signature of a registered method."""
     t_start = time.perf_counter() if t_start is None else t_start
     decision = CandidateDecision(config.heuristic, config.centre_bandwidth, config.outlier,
-                                 temperatures(config), config.sampler)
-    levels = KCoherenceLevels("coherent", _chen_wang_config(config), per_view_exemplars, decision)
+                                 None if config.icm else temperatures(config), config.sampler)
+    levels = KCoherenceLevels("coherent", _chen_wang_config(config), per_view_exemplars, decision,
+                              icm_schedule(config))
     out = run_pyramid(levels, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
     return SynthesisResult(volume=out.state.volume, history=out.history, config=config,
                            timings=out.timings, labels=levels.labels, stats=out.stats)

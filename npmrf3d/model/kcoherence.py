@@ -280,9 +280,9 @@ def build_level_model(exemplar: np.ndarray, window: int, *, dims: int = 20, k: i
 
 def search_exemplar(model: LevelModel) -> _k.SearchExemplar:
     """The model as the compiled search reads it (:func:`npmrf3d._kernels.kcoherence.search_view`)."""
-    lo_r, hi_r, lo_c, hi_c = (int(b) for b in model.bounds)
-    return _k.SearchExemplar(int(model.window), int(model.anchor), int(model.exemplar.shape[1]),
-                             lo_r, hi_r, lo_c, hi_c, model.mean, model.basis, model.proj, model.kcoh)
+    (lo_r, hi_r, lo_c, hi_c), ex = (int(b) for b in model.bounds), np.asarray(model.exemplar, dtype=np.float32)
+    return _k.SearchExemplar(int(model.window), int(model.anchor), int(ex.shape[1]), lo_r, hi_r, lo_c, hi_c,
+                             model.mean, model.basis, model.proj, model.kcoh, ex.reshape(-1, ex.shape[2]))
 
 
 # --------------------------------------------------------------------------- source maps

@@ -17,6 +17,10 @@ sites (best candidate under the index histogram, then optionally a global search
 matched) and solves every voxel (copy one voted texel under the position and value
 histograms). The random numbers, per iteration: one salt per view's search, the solver's voxel
 order, and a salt for an annealed decision.
+
+Why one module of ~440 lines: :class:`KCoherenceLevels` is one level's search, solve and
+histogram bookkeeping, and the decision and histogram types it passes to the kernels belong with
+it; the ICM schedule (per-voxel temperatures) lives in :mod:`npmrf3d.model.kcoherence_icm`.
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ from .._kernels import kcoherence_solver as _solver
 from ..io.checkpoints import run_key
 from . import kcoherence as coh
 from .exemplar import pack_rows
+from .kcoherence_icm import IcmLevel, IcmSchedule, inherited_mask
 from .neighbourhood import VIEW_AXES
 from .phases import PhaseControl, bin_phase_error, bin_phases, phase_prior_target
 from .pyramid import Levels
@@ -100,11 +105,15 @@ class CandidateDecision:
 
 @dataclass
 class CoherentState:
-    """A level of the k-coherence engine: every voxel's colour and, per view, its source pixel."""
+    """A level of the k-coherence engine: every voxel's colour and, per view, its source pixel;
+    with ICM (:mod:`npmrf3d.model.kcoherence_icm`) its temperature and whether it is inherited
+    (without: all at 1, none inherited, every voxel re-decided in every iteration)."""
 
     volume: np.ndarray  # (N1, N2, N3, C) float32
     sources: np.ndarray  # (V, N1, N2, N3) int32 flat pixel indices into each view's exemplar
     widths: list[int]  # each view's exemplar width at this level (the sources' row stride)
+    temps: np.ndarray  # (N1, N2, N3) float32 temperatures in [0, 1], 0 = fully trusted
+    inherited: np.ndarray  # (N1, N2, N3) bool, the voxels at 2 * parent of a finer level
 
 
 def initial_colours(src: np.ndarray, exemplars) -> np.ndarray:
@@ -230,14 +239,18 @@ class KCoherenceLevels(Levels):
     per_view_exemplars : dict view -> (H, W, C) float32
     decision : CandidateDecision
         The solver's rule (default: the configuration's own solver).
+    icm : IcmSchedule, optional
+        ICM with per-voxel temperatures (:mod:`npmrf3d.model.kcoherence_icm`) instead of the
+        configuration's ``iterations``: sweeps until the stop rule, trusted search and votes,
+        and its up-sampling.
 
     The phase control (``phase_weight``) carries over from level to level; its state goes into
     the checkpoint with the level's.
     """
 
     def __init__(self, method: str, config: Any, per_view_exemplars: Mapping[str, np.ndarray],
-                 decision: CandidateDecision = CandidateDecision()):
-        self.config, self.decision = config, decision
+                 decision: CandidateDecision = CandidateDecision(), icm: IcmSchedule | None = None):
+        self.config, self.decision, self.icm = config, decision, icm
         self.size, self.levels = config.size, config.levels
         views = self.views = config.views
         self.per_view = {v: np.ascontiguousarray(per_view_exemplars[v], dtype=np.float32) for v in views}
@@ -249,7 +262,8 @@ class KCoherenceLevels(Levels):
         self.value_lo = pooled.min(axis=0).astype(np.float64)
         self.value_span = pooled.max(axis=0).astype(np.float64) - self.value_lo
         self.view_axes = np.array([VIEW_AXES[v] for v in views], dtype=np.int64)
-        self.key = run_key(method, config, self.per_view, decision=dataclasses.asdict(decision))
+        self.key = run_key(method, config, self.per_view, decision=dataclasses.asdict(decision),
+                           **({} if icm is None else {"icm": dataclasses.asdict(icm)}))
         self.phases = self.control = None
         if config.phase_weight > 0.0 and config.value_prior > 0.0:
             self.phases = bin_phases(value_counts(
@@ -273,15 +287,26 @@ class KCoherenceLevels(Levels):
         return self._state(src)
 
     def upsample(self, state, rng):
-        return self._state(np.stack([coh.upsample_sources(state.sources[vi], v, state.widths[vi],
-                                                          self.vmodels[vi].exemplar.shape)
-                                     for vi, v in enumerate(self.views)]))
+        src = np.stack([coh.upsample_sources(state.sources[vi], v, state.widths[vi], self.vmodels[vi].exemplar.shape)
+                        for vi, v in enumerate(self.views)])
+        if self.icm is None:
+            return self._state(src)
+        inherited = inherited_mask(src.shape[1:])
+        if self.icm.upsample == "1/8":
+            drawn = self.initial(src.shape[1:], rng).sources
+            src = np.where(inherited, src, drawn)
+        return self._state(src, np.where(inherited, 0.0, 1.0).astype(np.float32), inherited)
 
-    def _state(self, src):
+    def _state(self, src, temps=None, inherited=None):
+        shape = src.shape[1:]
         return CoherentState(initial_colours(src, [m.exemplar for m in self.vmodels]), src,
-                             [m.exemplar.shape[1] for m in self.vmodels])
+                             [m.exemplar.shape[1] for m in self.vmodels],
+                             np.ones(shape, dtype=np.float32) if temps is None else temps,
+                             np.zeros(shape, dtype=bool) if inherited is None else inherited)
 
     def start(self, level, state):
+        if self.icm is not None:
+            return self.icm.max_sweeps, float("nan")
         return self.config.iterations[self.config.levels - 1 - level], float("nan")
 
     def relax(self, level, state, rng, on_step):
@@ -310,8 +335,10 @@ class KCoherenceLevels(Levels):
         index_hist = [np.zeros(m.pixels, dtype=np.float64) for m in vmodels]
         d = window * window * volume.shape[3]
         floor = 1e-3 * self.sigma * math.sqrt(d)
-        n_iter = config.iterations[li]
         n_vox = shape[0] * shape[1] * shape[2]
+        icm = None if self.icm is None else IcmLevel(self.icm, state.temps, state.inherited, self.view_axes,
+                                                       window, int(vmodels[0].anchor))
+        n_iter = config.iterations[li] if icm is None else self.icm.max_sweeps
         bounds = np.linspace(0, n_vox, min(config.batches, n_vox) + 1).astype(np.int64)
         likelihood = _decide.OWN_SOLVER if decision.heuristic is None else COHERENT_HEURISTICS[decision.heuristic]
         medoid = MEDOID_CANDIDATES if config.solver == "medoid" or decision.heuristic is not None else 0
@@ -319,8 +346,10 @@ class KCoherenceLevels(Levels):
         level_history, changed, global_counts = [], [], []
         t_search = t_solve = 0.0
         sites = 0
-        for it in range(n_iter):
+        it = 0
+        while it < n_iter if icm is None else icm.warm(it):
             ts = time.perf_counter()
+            trust = _search.NO_TRUST if icm is None else icm.search_trust()
             energy_sum = 0.0
             sites = 0
             global_count = 0
@@ -334,7 +363,7 @@ class KCoherenceLevels(Levels):
                 rule = _search.SearchRule(config.grid, min(config.batches, shape[na]), phi, config.index_weight,
                                           config.r, floor, config.random_candidates, int(rng.integers(0, 2**31)))
                 _search.search_view(volume, src[vi], ra, ca, exemplars[vi], rule, index_hist[vi], assign[vi],
-                                    fresh, omega[vi], energy)
+                                    fresh, omega[vi], energy, trust)
                 energy_sum += float(energy.sum())
                 if config.global_share > 0.0:
                     n_global, change = coh.global_matches(
@@ -348,6 +377,9 @@ class KCoherenceLevels(Levels):
             t_search += time.perf_counter() - ts
             ts = time.perf_counter()
             order = rng.permutation(n_vox).astype(np.int64)
+            if icm is not None:
+                order = icm.visit(order)
+                bounds = np.linspace(0, len(order), min(config.batches, len(order)) + 1).astype(np.int64)
             temperature = decision.temperature(li, it)
             target = values.target if control is None else phase_prior_target(
                 values.target, phases, np.stack([c.phase_costs(config.phase_weight) for c in control]),
@@ -359,18 +391,24 @@ class KCoherenceLevels(Levels):
                 order[bounds[b]:bounds[b + 1]].sort()
             rule = _solver.SolverRule(medoid, config.balance_views, likelihood, h2c, decision.outlier,
                                       temperature, salt, CANDIDATE_SAMPLERS[decision.sampler])
+            votes_trust = _solver.NO_TRUST if icm is None else icm.vote_trust()
             changed.append(int(_solver.solve(volume, src, assign, omega, packed,
-                                             histograms._replace(value_target=target), rule, order, bounds,
-                                             SOLVE_CHUNK)))
+                                             histograms._replace(value_target=target), votes_trust, rule, order,
+                                             bounds, SOLVE_CHUNK)))
             t_solve += time.perf_counter() - ts
             if control is not None:
                 for c, e in zip(control, bin_phase_error(values.hist, values.target, phases)):
                     c.step(e)
             level_history.append(energy_sum / max(1, sites))
-            on_step(it + 1, level_history[-1])
+            it += 1
+            if icm is None:
+                on_step(it, level_history[-1])
+            else:
+                icm.cool()
+                on_step(it, level_history[-1], icm.expected() if icm.warm(it) else it)
         used = [float((pos_hist[hist_off[vi]:hist_off[vi] + m.pixels] > 0).mean()) for vi, m in enumerate(vmodels)]
         stats = {
-            "shape": list(shape), "window": window, "iterations": n_iter,
+            "shape": list(shape), "window": window, "iterations": it,
             "candidates_per_site": 9 * (1 + config.k) + config.random_candidates, "sites_per_iteration": sites,
             "pca_dims": {v: int(vmodels[vi].basis.shape[1]) for vi, v in enumerate(views)},
             "centres": {v: int(vmodels[vi].centres) for vi, v in enumerate(views)},
@@ -378,6 +416,8 @@ class KCoherenceLevels(Levels):
             "global_matches": global_counts,
             "exemplar_pixels_used": {v: used[vi] for vi, v in enumerate(views)},
         }
+        if icm is not None:
+            stats["temperature"], stats["updates"] = icm.history, icm.updates
         if control is not None:
             stats["phase_error"] = [c.last_error.tolist() for c in control]
             stats["phase_gain"] = [c.gain for c in control]
@@ -386,12 +426,16 @@ class KCoherenceLevels(Levels):
     def to_arrays(self, state):
         control = {} if self.control is None else {"phase_control": np.stack([c.to_array() for c in self.control])}
         return {"volume": state.volume, "sources": state.sources,
-                "widths": np.asarray(state.widths, dtype=np.int64), **control}
+                "widths": np.asarray(state.widths, dtype=np.int64), "temps": state.temps,
+                "inherited": state.inherited, **control}
 
     def from_arrays(self, arrays):
         if self.control is not None and "phase_control" in arrays:
             self.control = [PhaseControl.from_array(a, 2)
                             for a in np.asarray(arrays["phase_control"], dtype=np.float64)]
-        return CoherentState(np.ascontiguousarray(arrays["volume"], dtype=np.float32),
-                             np.ascontiguousarray(arrays["sources"], dtype=np.int32),
-                             [int(w) for w in np.atleast_1d(arrays["widths"])])
+        volume = np.ascontiguousarray(arrays["volume"], dtype=np.float32)
+        temps = arrays["temps"] if "temps" in arrays else np.ones(volume.shape[:3])  # no ICM: all hot
+        inherited = arrays["inherited"] if "inherited" in arrays else np.zeros(volume.shape[:3])
+        return CoherentState(volume, np.ascontiguousarray(arrays["sources"], dtype=np.int32),
+                             [int(w) for w in np.atleast_1d(arrays["widths"])],
+                             np.ascontiguousarray(temps, dtype=np.float32), np.asarray(inherited, dtype=bool))
