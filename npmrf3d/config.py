@@ -126,6 +126,7 @@ class SynthesisConfig:
     grey_levels: int | None = None
     palette: int | None = None
     toroidal_exemplar: bool = False
+    temperatures: bool = False
     seed: int | None = None
 
     def to_dict(self) -> dict:

@@ -12,7 +12,7 @@ import npmrf3d
 from npmrf3d import ParameterError
 from npmrf3d.config import SUPPORTS
 from npmrf3d.methods import npmrf
-from npmrf3d.methods.npmrf_options import APPLIES, make_config
+from npmrf3d.methods.npmrf_options import APPLIES, TEMPERATURE_OPTIONS, make_config
 
 
 @pytest.fixture(autouse=True)
@@ -260,9 +260,9 @@ def test_sample_decision_needs_an_objective(grey, heuristic):
     # the sharp variant samples: the same mistake without naming the decision
     with pytest.raises(ParameterError, match="decision 'sample'"):
         call(grey, heuristic=heuristic, variant="sharp")
-    # the coherent support (the default) ranks candidates by ML_H2b or ML_H2a
-    with pytest.raises(ParameterError, match="support 'coherent' ranks candidates by ML_H2b or ML_H2a"):
-        call(grey, heuristic=heuristic)
+    # the coherent support (the default) decides by the per-view rules with ICM, not with annealing
+    with pytest.raises(ParameterError, match=f"heuristic {heuristic} cannot drive annealing"):
+        call(grey, heuristic=heuristic, relaxation="anneal")
 
 
 def test_parameter_error_is_a_value_error():
@@ -274,7 +274,7 @@ NON_DEFAULT = {"xi": -5.0, "stop": 0.5, "max_sweeps": 3, "upsample": "8/8", "inh
                "sampler": "metropolis", "schedule": "linear", "t0": 2.0, "t_end": 0.1, "proposals": 3,
                "proposal": "labels", "preset": "paper", "bandwidth": 0.5, "adaptive": 0.1,
                "decision": "argmax", "tau": 0.5, "histogram_weight": 1.0, "toroidal_exemplar": True,
-               "segmented": "yes"}
+               "segmented": "yes", "temperatures": True}
 
 
 @pytest.mark.parametrize("name", sorted(APPLIES))
@@ -284,8 +284,10 @@ def test_an_option_is_refused_where_it_cannot_apply_and_accepted_where_it_can(na
             options = {"size": 16, "levels": 2, "support": support, "relaxation": relaxation,
                        name: NON_DEFAULT[name]}
             if (support, relaxation) in APPLIES[name]:
-                if name in ("sampler", "upsample") and support == "coherent":
-                    continue  # Metropolis and 1/8 over candidates: the coherent sampler's own tests
+                if support == "coherent" and relaxation == "icm" and name in TEMPERATURE_OPTIONS:
+                    with pytest.raises(ParameterError, match=f"option {name} needs per-voxel temperatures"):
+                        make_config(**options)
+                    options["temperatures"] = True
                 assert getattr(make_config(**options), name, None) in (NON_DEFAULT[name], None)
             else:
                 with pytest.raises(ParameterError, match=f"option {name} does not apply to support "

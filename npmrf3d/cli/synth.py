@@ -255,7 +255,16 @@ def register(commands, formatter_class) -> None:
     )
     views.add_argument(
         "--toroidal-exemplar", action="store_true",
-        help="let exemplar patches wrap around the exemplar's borders (for tileable exemplars)",
+        help="support full: let exemplar patches wrap around the exemplar's borders (for tileable "
+             "exemplars)",
+    )
+    method.add_argument(
+        "--temperatures", action="store_true", default=None,
+        help="support coherent, icm: per-voxel temperatures (Urs et al. 2014): trust-weighted "
+             "searches and votes, warm voxels re-decided until --stop or --max-sweeps, cooling by "
+             "--xi; needed there by --xi, --stop, --max-sweeps, --inherit and --upsample 1/8 "
+             "(default: none = on for support full with icm, where it is the only ICM; off for "
+             "support coherent, which re-decides every voxel in each of a level's iterations)",
     )
 
     add_run_options(synth, out="npmrf3d-out")
@@ -291,7 +300,8 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
         centre_bandwidth=args.centre_bandwidth, adaptive=args.adaptive, decision=args.decision,
         tau=args.tau, histogram_weight=args.histogram_weight, outlier=args.outlier,
         grey_levels=args.grey_levels,
-        palette=args.palette, toroidal_exemplar=args.toroidal_exemplar, seed=args.seed,
+        palette=args.palette, toroidal_exemplar=args.toroidal_exemplar, temperatures=args.temperatures,
+        seed=args.seed,
     )
     out, checkpoint, per_view, sources = prepare_run(args, METHOD, config)
     if args.dry_run:

@@ -273,9 +273,9 @@ def _coherent_options(config: SynthesisConfig, phases: bool, levels: int) -> npm
     every level (:data:`npmrf3d.methods.npmrf_coherent.SEGMENTED`'s window and histogram vote weighting for a
     segmented exemplar, ``phases`` = :func:`segmented`), ``levels`` levels, its views,
     heuristic, centre bandwidth and outlier share; with relaxation ``anneal`` its temperatures
-    ``t0`` to ``t_end`` by ``schedule`` over each level's iterations (a heat-bath draw among
-    the candidates; ``sampler``, ``proposals`` and ``proposal`` belong to the full-Parzen
-    annealer and are not used)."""
+    ``t0`` to ``t_end`` by ``schedule`` over ``proposals`` iterations per level (``sampler``'s
+    draw among the candidates); with ``temperatures`` its ICM with per-voxel temperatures
+    (``xi``, ``stop``, ``max_sweeps``, ``upsample``, ``inherit``)."""
     anneal = config.relaxation == "anneal"
     window = npmrf_coherent.SEGMENTED.window if phases else config.window
     value_weight = npmrf_coherent.SEGMENTED.value_weight if phases else npmrf_coherent.DEFAULTS.value_weight
@@ -283,8 +283,10 @@ def _coherent_options(config: SynthesisConfig, phases: bool, levels: int) -> npm
         size=config.size, window=(window,) * levels, levels=levels,
         views=config.views, heuristic=config.heuristic, centre_bandwidth=config.rule.centre_bandwidth,
         outlier=config.rule.outlier, value_weight=value_weight, t0=config.t0 if anneal else 0.0,
-        t_end=config.t_end, schedule=config.schedule, seed=config.seed,
-        **({"iterations": (config.proposals,) * levels} if anneal else {}))
+        t_end=config.t_end, schedule=config.schedule, sampler=config.sampler, seed=config.seed,
+        **({"iterations": (config.proposals,) * levels} if anneal else {}),
+        **({"icm": True, "xi": config.xi, "stop": config.stop, "max_sweeps": config.max_sweeps,
+            "upsample": config.upsample, "inherit": config.inherit} if config.temperatures else {}))
 
 
 def _coherent_runs(config: SynthesisConfig, phases: bool) -> list[npmrf_coherent.CoherentConfig]:

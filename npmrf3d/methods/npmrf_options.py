@@ -28,7 +28,6 @@ from ..model.neighbourhood import VIEWS
 from ..model.pyramid import INHERIT, UPSAMPLING
 from ..model.relax import RELAXATIONS
 from ..model.relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
-from . import npmrf_coherent
 
 __all__ = ["APPLIES", "DEFAULT_UPSAMPLE", "applies", "combination", "make_config"]
 
@@ -38,11 +37,12 @@ DEFAULT_UPSAMPLE = {"icm": "1/8", "anneal": "8/8"}
 #: The combinations (support, relaxation) that use an option, for the options that some
 #: combinations cannot use; every other option applies everywhere.
 APPLIES: dict[str, tuple[tuple[str, str], ...]] = {
-    "xi": (("full", "icm"),),
-    "stop": (("full", "icm"),),
-    "max_sweeps": (("full", "icm"),),
+    "xi": (("full", "icm"), ("coherent", "icm")),
+    "stop": (("full", "icm"), ("coherent", "icm")),
+    "max_sweeps": (("full", "icm"), ("coherent", "icm")),
+    "temperatures": (("full", "icm"), ("coherent", "icm")),
     "upsample": (("full", "icm"), ("full", "anneal"), ("coherent", "icm"), ("coherent", "anneal")),
-    "inherit": (("full", "icm"), ("full", "anneal")),
+    "inherit": (("full", "icm"), ("full", "anneal"), ("coherent", "icm")),
     "sampler": (("full", "anneal"), ("coherent", "anneal")),
     "schedule": (("full", "anneal"), ("coherent", "anneal")),
     "t0": (("full", "anneal"), ("coherent", "anneal")),
@@ -58,9 +58,9 @@ APPLIES: dict[str, tuple[tuple[str, str], ...]] = {
     "toroidal_exemplar": (("full", "icm"), ("full", "anneal")),
     "segmented": (("coherent", "icm"), ("coherent", "anneal")),
 }
-#: What the coherent support supports of each axis (the rest is refused with the reason).
-COHERENT_SAMPLERS = ("heat-bath",)
-COHERENT_UPSAMPLING = ("8/8",)
+#: The options that support ``coherent`` with ICM uses only with per-voxel temperatures (without
+#: them every voxel is re-decided in each of a level's iterations and children copy 8/8).
+TEMPERATURE_OPTIONS = ("xi", "stop", "max_sweeps", "inherit")
 
 _C = SynthesisConfig  # every default below is a field default of the configuration
 
@@ -115,14 +115,17 @@ def make_config(
     schedule=_C.schedule, t0=_C.t0, t_end=_C.t_end, proposals=_C.proposals, proposal=_C.proposal,
     variant=None, segmented=_C.segmented, bandwidth=None, centre_bandwidth=None, adaptive=None,
     decision=None, tau=None, histogram_weight=None, outlier=None, grey_levels=None, palette=None,
-    toroidal_exemplar=False, seed=None,
+    toroidal_exemplar=False, temperatures=None, seed=None,
 ) -> SynthesisConfig:
     """Validate plain keyword arguments into a frozen :class:`SynthesisConfig`.
 
     ``support`` (None: ``coherent``) and ``preset`` (None: ``tuned``; the full support's
     decision rule, :data:`npmrf3d.config.PRESETS`) may also be given together by the older name
     ``variant`` (:data:`npmrf3d.config.VARIANTS`). The rule arguments (``bandwidth`` ...
-    ``outlier``) override single fields of the support's rule when not None.
+    ``outlier``) override single fields of the support's rule when not None. ``temperatures``
+    (None: True for support ``full`` with ICM, False otherwise): ICM with per-voxel temperatures;
+    support ``coherent`` then weights its searches and votes by trust and re-decides warm voxels
+    only (``xi``, ``stop``, ``max_sweeps``, ``inherit`` and ``upsample`` 1/8 need it there).
     """
     levels = check.integer("levels", levels, low=1, high=8)
     window = check.window(window)
@@ -135,14 +138,14 @@ def make_config(
              "sampler": sampler, "schedule": schedule, "t0": t0, "t_end": t_end, "proposals": proposals,
              "proposal": proposal, "preset": preset if variant is None else None, "bandwidth": bandwidth,
              "adaptive": adaptive, "decision": decision, "tau": tau, "histogram_weight": histogram_weight,
-             "toroidal_exemplar": bool(toroidal_exemplar) or None,
+             "toroidal_exemplar": bool(toroidal_exemplar) or None, "temperatures": temperatures,
              "segmented": segmented if segmented == "yes" else None}
     if relaxation == "anneal" and not get_heuristic(heuristic).objective:
         check.fail(f"heuristic {heuristic} cannot drive annealing: annealing compares objective "
                    f"values, and {heuristic} is defined by per-view argmax searches with no "
                    f"objective; use ML_H2a or ML_H2b, or relaxation 'icm'")
     if upsample is None:
-        upsample = COHERENT_UPSAMPLING[0] if support == "coherent" else DEFAULT_UPSAMPLE[relaxation]
+        upsample = "8/8" if support == "coherent" else DEFAULT_UPSAMPLE[relaxation]
     upsample = check.choice("upsample", upsample, UPSAMPLING)
     inherit = check.choice("inherit", inherit, INHERIT)
     xi = check.real("xi", xi, high=0.0, high_open=True)
@@ -170,17 +173,22 @@ def make_config(
         overrides["decision"] = check.choice("decision", decision, DECISIONS)
     rule = dataclasses.replace(rule, **overrides)
     _refuse_unused(given, support, relaxation)  # after the values' own checks
-    if support == "coherent":
-        if heuristic not in npmrf_coherent.CANDIDATE_HEURISTICS:
-            check.fail(f"support 'coherent' ranks candidates by ML_H2b or ML_H2a so far; heuristic "
-                       f"{heuristic} runs with support 'full'")
-        if upsample not in COHERENT_UPSAMPLING:
-            check.fail(f"support 'coherent' up-samples {' or '.join(COHERENT_UPSAMPLING)} so far (every "
-                       f"child copies its parent's shifted sources); upsample {upsample!r} runs with "
-                       f"support 'full'")
-        if relaxation == "anneal" and sampler not in COHERENT_SAMPLERS:
-            check.fail(f"support 'coherent' anneals with sampler {' or '.join(COHERENT_SAMPLERS)} so "
-                       f"far; sampler {sampler!r} runs with support 'full'")
+    if temperatures is None:
+        temperatures = support == "full" and relaxation == "icm"
+    temperatures = check.boolean("temperatures", temperatures)
+    if support == "full" and relaxation == "icm" and not temperatures:
+        check.fail("support 'full' runs ICM with per-voxel temperatures only; drop temperatures=False")
+    if support == "coherent" and relaxation == "icm" and not temperatures:
+        for name in TEMPERATURE_OPTIONS:
+            if given[name] is not None and given[name] != getattr(_C, name):
+                check.fail(f"option {name} needs per-voxel temperatures with support 'coherent': "
+                           f"add temperatures=True (--temperatures), or drop it")
+        if upsample == "1/8":
+            check.fail("upsample '1/8' needs per-voxel temperatures with support 'coherent': add "
+                       "temperatures=True (--temperatures), or drop it")
+    if support == "coherent" and relaxation == "anneal" and upsample != "8/8":
+        check.fail(f"support 'coherent' anneals with 8/8 up-sampling (every child copies its "
+                   f"parent's shifted sources); upsample {upsample!r} runs with support 'full'")
     if rule.decision == "sample" and heuristic in ("ML_H1a", "ML_H1b"):
         check.fail(f"decision 'sample' needs a heuristic with an objective (ML_H2a, ML_H2b); "
                    f"{heuristic} is defined by per-view argmax searches: use decision='argmax'")
@@ -195,5 +203,6 @@ def make_config(
         views=views, upsample=upsample, inherit=inherit, xi=xi, stop=stop, max_sweeps=max_sweeps,
         sampler=sampler, schedule=schedule, t0=t0, t_end=t_end, proposals=proposals,
         proposal=proposal, support=support, preset=preset_name, segmented=segmented, rule=rule,
-        grey_levels=grey_levels, palette=palette, toroidal_exemplar=bool(toroidal_exemplar), seed=seed,
+        grey_levels=grey_levels, palette=palette, toroidal_exemplar=bool(toroidal_exemplar),
+        temperatures=temperatures, seed=seed,
     )
