@@ -1,6 +1,6 @@
-"""Parzen-window LCPDF of one site in one view (SPEC.md section 2).
+"""Parzen-window LCPDF of one site in one view (docs/model.md, section 2).
 
-Notation (SPEC.md section 2): for a site ``s`` of the volume, a view ``v`` with ``M = w*w - 1``
+Notation (docs/model.md, section 2): for a site ``s`` of the volume, a view ``v`` with ``M = w*w - 1``
 neighbour offsets, exemplar patches ``p = 0..n-1`` with neighbour vectors ``y_p`` and centre
 labels ``lab[p]``, and labels ``lam_k`` (rows of ``labels``)::
 
@@ -11,7 +11,7 @@ labels ``lab[p]``, and labels ``lam_k`` (rows of ``labels``)::
     log Z    = log sum_j W_j c_j,   c_j = sum_k exp(-||lam_j - lam_k||^2 / (2 h_c^2))
     log L(k) = log f(k) - log Z
 
-With ``h_c = h`` this is exactly the LCPDF of SPEC.md eq. for ``L_v`` (the common factor
+With ``h_c = h`` this is exactly the LCPDF ``L_v`` of docs/model.md, section 2 (the common factor
 ``exp(-D_min / 2h^2)`` cancels between numerator and normaliser). Patches whose log weight is
 more than ``prune`` below the best one are skipped (``prune = inf`` keeps all). With
 ``adapt_eps > 0`` the neighbour bandwidth is chosen per site: ``2 h^2 = max(adapt_eps * D_min,

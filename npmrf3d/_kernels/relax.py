@@ -11,7 +11,7 @@ threads), and computes its sites' neighbour distances by direct sums or matrix p
 update it takes. The arguments come in bundles (:class:`ViewModels`, :class:`LevelArrays`,
 :class:`npmrf3d._kernels.parzen.LcpdfOptions`, :class:`IcmRule`, :class:`AnnealRule`).
 
-Heuristic codes (SPEC.md section 3): 0 = ML_H1a, 1 = ML_H1b, 2 = ML_H2a, 3 = ML_H2b.
+Heuristic codes (docs/model.md, section 3): 0 = ML_H1a, 1 = ML_H1b, 2 = ML_H2a, 3 = ML_H2b.
 Decision codes: 0 = argmax (the paper's ICM), 1 = draw from ``exp(score / tau)`` with a
 pre-drawn uniform (this project's stochastic decision, see docs/quality.md).
 """
@@ -217,7 +217,7 @@ def metropolis_accept(delta, temperature, u):
 def cool_site(temps, i, j, k, union_offsets, xi):
     """The ICM temperature update of site ``(i, j, k)`` after its decision: the mean of ``xi``
     and its union neighbourhood's temperatures, ``max(0, (xi + sum_r T[x + o_r]) / n_union)``
-    (SPEC.md section 4; toroidal volume)."""
+    (docs/model.md, section 6; toroidal volume)."""
     n1, n2, n3 = temps.shape
     n_union = union_offsets.shape[0]
     total = 0.0

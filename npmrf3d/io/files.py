@@ -1,7 +1,7 @@
 """Reading and writing exemplars, volumes and JSON: the bottom of the file layer.
 
 (Why over 400 lines: small readers and writers, each with the checks and messages of
-STYLE.md practice 7 and a numpydoc docstring; they share the atomic-write and error helpers.)
+one validation and a numpydoc docstring; they share the atomic-write and error helpers.)
 
 Public through :mod:`npmrf3d.io` (which adds the run folders of :mod:`npmrf3d.io.runs`); the
 model layer and :mod:`npmrf3d.plotting` import this module directly, so that reading an

@@ -1,5 +1,5 @@
 """NP_K's building blocks: exemplar pyramid, PCA + kd-tree search, IRLS optimisation with
-histogram matching, up-sampling and voxel constraints (Kopf et al. 2007; SPEC.md section 6).
+histogram matching, up-sampling and voxel constraints (Kopf et al. 2007; docs/kopf.md).
 
 Private to :mod:`npmrf3d.methods.kopf`, which documents the method, validates the inputs and
 drives these steps level by level (:func:`npmrf3d.model.pyramid.run_pyramid`). The compiled loops are

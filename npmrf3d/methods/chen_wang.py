@@ -1,7 +1,7 @@
 """Chen & Wang 2010: k-coherence search, discrete solver, position and index histograms.
 
 "High quality solid texture synthesis using position and index histogram matching" (The Visual
-Computer 26(4), 2010; issue 11). Like NP_K (:mod:`npmrf3d.methods.kopf`) the volume minimises
+Computer 26(4), 2010). Like NP_K (:mod:`npmrf3d.methods.kopf`) the volume minimises
 
     E = sum_v sum_{i in views} ||s_{v,i} - e_{v,i}||^r,        r = 0.8,
 
@@ -205,7 +205,7 @@ def _check_exemplar_levels(config: ChenWangConfig, per_view: Mapping[str, np.nda
 def chen_wang_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress: ProgressCallback | None = None,
                          checkpoint: str | Path | None = None, exemplars: Mapping | None = None,
                          **options) -> SynthesisResult:
-    """Synthesize a solid texture with Chen & Wang's method (2010; issue 11).
+    """Synthesize a solid texture with Chen & Wang's method (2010).
 
     Parameters
     ----------
@@ -271,7 +271,7 @@ def chen_wang_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress
     value_bins : int
         Bins per channel of those histograms.
     phase_weight : float >= 0
-        A phase control through the histogram prior (this project's addition, stop 33): each
+        A phase control through the histogram prior (this project's addition, docs/volume.md): each
         channel's value bins split at the Otsu threshold of the exemplars' histogram into two
         phases, and after every iteration a :class:`npmrf3d.model.phases.PhaseControl` per
         channel prices the phase the volume over-uses; a candidate's prior loses

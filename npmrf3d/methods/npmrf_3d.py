@@ -1,6 +1,6 @@
-"""The NP-MRF with one 3D view (issue 15, item 2): registry name ``npmrf-3d``.
+"""The NP-MRF with one 3D view: registry name ``npmrf-3d``.
 
-SPEC.md's Parzen LCPDF with the 2D views replaced by one 3D neighbourhood: for a voxel ``s`` and
+The Parzen LCPDF of docs/model.md, section 2, with the 2D views replaced by one 3D neighbourhood: for a voxel ``s`` and
 a candidate value ``lam``,
 
     f(lam) = sum_p exp(-D_p / 2h^2) exp(-||lam - y_p||^2 / 2 h_c^2),
@@ -14,8 +14,8 @@ voxel's own source -- and the voxel copies the candidate whose centre value maxi
 coarser levels), so one voxel's state is its exemplar coordinate.
 
 Choices (docs/volume.md): the bandwidth is adaptive, ``2h^2 = adaptive * min_p D_p`` (the
-literal ``h_opt`` of SPEC.md is far too wide for ``d = 124 C``, as SPEC.md section 4 measured in
-2D); ``adaptive = 0.1`` by measurement: at 1.0 the decision is mode-seeking and the porous test
+literal ``h_opt`` of docs/model.md, section 2, is far too wide for ``d = 124 C``, as
+docs/quality.md, "The literal method collapses", measured in 2D); ``adaptive = 0.1`` by measurement: at 1.0 the decision is mode-seeking and the porous test
 volume's minority phase shrank from 50 % to 26 % in large blobs, at 0.1 it kept 45 %; the centre kernel's ``h_c`` is ``centre_bandwidth`` times the exemplar's standard deviation;
 neighbourhood values at level ``l`` are read from the exemplar smoothed for that level, every
 ``2**l`` voxels. No vector field (``vector_field`` stays ``none``).

@@ -1,11 +1,11 @@
-"""Synthesis from a 3D exemplar with a vector-field deformation (seed 002; issue 15, item 3).
+"""Synthesis from a 3D exemplar with a vector-field deformation (the vector-field deformation method, IET Image Processing 2012).
 
 Why a module of ~640 lines: configuration, validation, the appearance-space model, the
 coordinate pyramid's side of the shared level loop (:class:`CoordinateLevels`) and the registry
 entry of one method, most of it the documented signature.
 
 The method (registry name ``volume-lh``: it is Lefebvre & Hoppe's appearance-space, coordinate
-pyramid synthesis carried to 3D, as seed 002 does) makes a volume whose every voxel *copies* a
+pyramid synthesis carried to 3D, as the vector-field deformation method does) makes a volume whose every voxel *copies* a
 voxel of the 3D exemplar: the synthesised volume is a field of exemplar coordinates ``S``.
 
 1. **Appearance space** (per level): the exemplar, Gaussian-smoothed for the level's spacing
@@ -15,8 +15,8 @@ voxel of the 3D exemplar: the synthesised volume is a field of exemplar coordina
 2. **Similarity sets** (``k = 3``): the voxel itself, then the nearest voxels in appearance space
    with each new one outside the ``7 x 7 x 7`` neighbourhood (``exclude = 3``) of the earlier ones.
 3. **Coordinate pyramid**: the coarsest level starts from the exemplar tiled at its spacing
-   with a random offset of its own for every tile, and jitter (``start = "blocks"``, since stop
-   33; ``"tiled"``: one offset for all, what the paper's pyramid from one voxel gives, which
+   with a random offset of its own for every tile, and jitter (``start = "blocks"``;
+   ``"tiled"``: one offset for all, what the paper's pyramid from one voxel gives, which
    repeats the exemplar at its period; ``"random"``: uniform coordinates);
    each level's children take ``S[parent] + floor(h R^T (delta - 1/2) + 1/2)`` (``delta`` in
    {0, 1}^3, ``R`` the child's frame), then a **jitter** ``floor(h r U + 1/2)``, ``U`` uniform in
@@ -104,7 +104,7 @@ class VolumeConfig:
     fine_jitter: float = 0.0
     usage: float = 1.0
     balance: float = 4.0
-    # stop 33 (docs/volume.md): the tiled start repeats 8-22 % of a 128^3 volume at the
+    # docs/volume.md: the tiled start repeats 8-22 % of a 128^3 volume at the
     # exemplar's period; blocks keeps the statistics of 6 scans x 3 seeds but one surface area
     start: str = "blocks"
     vector_field: str = "none"
@@ -285,7 +285,7 @@ def correction_pass(coords: np.ndarray, frames: np.ndarray, feat: np.ndarray, ks
     A sub-pass reads ``coords`` and writes its parity class into ``out``, which is then copied
     back into ``coords`` (an eighth of the voxels), so every sub-pass reads its input unchanged.
     ``usage`` is the strength of the position histogram (:func:`cell_usage`), recounted before
-    every sub-pass; 0 is seed 002's rule. ``balance`` is the strength of the phase histogram
+    every sub-pass; 0 is the paper's rule. ``balance`` is the strength of the phase histogram
     (:func:`npmrf3d.model.phases.class_balance`, of ``phases = (phase_footprint(...),
     share)``), also recounted before every sub-pass; ``control``
     (:class:`npmrf3d.model.phases.PhaseControl`, ``PhaseControl.start(phases)`` at the start
@@ -327,7 +327,7 @@ def cell_usage(coords: np.ndarray, shape, h: int, lo, hi) -> tuple[np.ndarray, f
     ``u // h`` of the exemplar (float64, ``ceil(shape / h)``), and ``even``, the count of every
     cell that meets the valid box if all were used equally.
 
-    This project's addition after Chen & Wang 2010's position histogram (seed 002 has none, and
+    This project's addition after Chen & Wang 2010's position histogram (the vector-field deformation method has none, and
     relies on a stationary exemplar): the correction adds ``usage * s * max(0, c / even - 1)`` to
     a candidate's distance (``s``: :func:`usage_scale`), so that no part of the exemplar is
     copied far more often than the rest. Without it a non-stationary exemplar (a scan with a
@@ -383,7 +383,7 @@ def parzen_pass(coords, frames, feat, values, kset, h: int, lo, hi, offsets, win
 def volume_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress: ProgressCallback | None = None,
                       checkpoint: str | Path | None = None, exemplars=None, exemplar_kind: str = "auto",
                       spacing=None, **options) -> SynthesisResult:
-    """Synthesise a volume from a 3D exemplar, optionally deformed by a vector field (seed 002).
+    """Synthesise a volume from a 3D exemplar, optionally deformed by a vector field.
 
     Parameters
     ----------
@@ -417,7 +417,7 @@ def volume_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress: P
     usage : float
         Strength of the position histogram (:func:`cell_usage`): ``usage * s * max(0, c / even -
         1)`` is added to a candidate's distance, ``c`` the voxels already copying its exemplar
-        cell, ``s`` half the distance of two random exemplar neighbourhoods. 0 is seed 002's rule, which collapses onto one homogeneous region of a
+        cell, ``s`` half the distance of two random exemplar neighbourhoods. 0 is the paper's rule, which collapses onto one homogeneous region of a
         non-stationary scan (``docs/volume.md``).
     balance : float
         Strength of the phase histogram (:mod:`npmrf3d.model.phases`): a candidate whose

@@ -1,4 +1,4 @@
-"""Public Parzen-window LCPDF functions and the per-level view models (SPEC.md section 2).
+"""Public Parzen-window LCPDF functions and the per-level view models (docs/model.md, section 2).
 
 The compiled work lives in :mod:`npmrf3d._kernels.parzen`; this module builds its inputs
 (patch matrices, bandwidths, normalisers) from validated exemplars.

@@ -1,4 +1,4 @@
-"""Multi-scale grids and the one coarse-to-fine level loop (SPEC.md section 5).
+"""Multi-scale grids and the one coarse-to-fine level loop (docs/model.md, section 7).
 
 Level ``l`` is the level-0 grid decimated by ``2**l``; synthesis runs from ``l = levels - 1``
 down to 0. The voxel of level ``l - 1`` at ``2 * (i, j, k)`` is the *inherited* child of voxel
@@ -113,7 +113,7 @@ class Upsampler(NamedTuple):
     description: str
 
 
-#: Up-sampling choices by name (SPEC.md section 5 and Kopf et al. 2007).
+#: Up-sampling choices by name (docs/model.md, section 7, and Kopf et al. 2007).
 UPSAMPLERS: dict[str, Upsampler] = {
     "1/8": Upsampler(upsample_one_of_eight, True,
                      "keep only the inherited voxel and draw the other 7 at random"),
@@ -123,7 +123,7 @@ UPSAMPLERS: dict[str, Upsampler] = {
 }
 #: The choices of the label-based NP-MRF sampler.
 LABEL_UPSAMPLING = tuple(name for name, u in UPSAMPLERS.items() if u.labels)
-#: Kept under its old name: the NP-MRF sampler's choices.
+#: The NP-MRF sampler's choices (the same as LABEL_UPSAMPLING).
 UPSAMPLING = LABEL_UPSAMPLING
 
 

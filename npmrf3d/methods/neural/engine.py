@@ -3,7 +3,7 @@
 Imported only through :func:`npmrf3d.methods.neural._extra.engine` (the documented lazy import), so
 ``import npmrf3d`` never imports torch.
 
-Training (seed 004, section 5): each step draws, per constrained view, ``batch`` single-slice
+Training (Gutierrez et al. 2020, section 5): each step draws, per constrained view, ``batch`` single-slice
 blocks of the unbounded volume at random integer origins (the slice orientation of the view,
 :data:`npmrf3d.model.neighbourhood.VIEW_AXES`), and minimises the Gram loss of their descriptor
 features against the view's exemplar (plus ``histogram_weight`` times the sorted-value distance

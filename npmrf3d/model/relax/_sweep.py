@@ -18,7 +18,7 @@ from ..._kernels.relax import PARALLEL_MIN_SITES
 __all__ = ["DISTANCES", "GEMM_MIN_CLASS_SITES", "GEMM_MIN_DIMENSION", "histogram_penalty",
            "label_counts", "mean_class_sites", "resolve_distances", "sweep"]
 
-#: How the class kernels get the neighbour distances ``D_p`` (SPEC.md section 2): ``gemm``
+#: How the class kernels get the neighbour distances ``D_p`` (docs/model.md, section 2): ``gemm``
 #: computes a block of sites at once as one float32 matrix product plus rank-one terms
 #: (:mod:`npmrf3d._kernels.gemm`); ``direct`` sums the squared differences site by site
 #: (:func:`npmrf3d._kernels.parzen.neighbour_distances`); ``auto`` (the default) picks ``gemm``
@@ -29,8 +29,8 @@ DISTANCES = ("auto", "gemm", "direct")
 #: Measured (benchmarks/bench_icm.py, the Figure-4 job, after the label stage was vectorised;
 #: AMD EPYC, 2 cores): grey 7x7 (d = 48) at 64^3 (4,096 sites per class) takes 58 s of level 0
 #: with gemm against 66 s direct; at 16^3 (64 sites per class, fewer than one block of
-#: :data:`npmrf3d._kernels.gemm.BLOCK` sites) 19 s against 9 s. Earlier (bench_parzen_blas.py,
-#: distance stage alone): grey 5x5 (d = 24) 0.65-0.81x, grey 11x11 (120) 1.3-1.85x, colour 7x7
+#: :data:`npmrf3d._kernels.gemm.BLOCK` sites) 19 s against 9 s. The distance stage alone
+#: (bench_parzen_blas.py): grey 5x5 (d = 24) 0.65-0.81x, grey 11x11 (120) 1.3-1.85x, colour 7x7
 #: (144) 1.5-1.9x, colour 11x11 (360) 2.3-4.7x.
 GEMM_MIN_DIMENSION = 48
 #: Average sites per colour class below which ``auto`` keeps the direct loop (half-empty blocks).

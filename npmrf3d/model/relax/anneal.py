@@ -1,4 +1,4 @@
-"""Simulated annealing with one global temperature per level (SPEC.md section 4).
+"""Simulated annealing with one global temperature per level (docs/model.md, section 5).
 
 A level runs ``proposals`` sweeps; sweep ``s`` uses the temperature ``T_s`` of a schedule
 from :data:`SCHEDULES` that falls from ``t0`` to ``t_end``. Every sweep gives every voxel one

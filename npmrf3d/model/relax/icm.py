@@ -1,4 +1,4 @@
-"""ICM with per-voxel temperatures (SPEC.md section 4), in a parallel random scan.
+"""ICM with per-voxel temperatures (docs/model.md, section 4), in a parallel random scan.
 
 One sweep visits the colour classes of :func:`npmrf3d.model.neighbourhood.colour_classes` in a random
 order; the sites of a class never interact, so the compiled kernel updates them in parallel and
