@@ -27,9 +27,9 @@ SMALL = np.random.default_rng(1).integers(0, 4, (12, 12)).astype(np.uint8) * 80
 #: (method, exemplar, configuration): small runs where the volume dominates and where the
 #: exemplar patch tables dominate.
 CASES = [
-    ("npmrf", "small", dict(size=32, levels=1, window=3, max_sweeps=1)),
-    ("npmrf", "small", dict(size=16, levels=2, window=3, max_sweeps=1)),
-    ("npmrf", "tiny_rgb", dict(size=8, levels=1, window=5, relaxation="anneal", proposals=1)),
+    ("npmrf", "small", dict(size=32, levels=1, window=3, support="full", max_sweeps=1)),
+    ("npmrf", "small", dict(size=16, levels=2, window=3)),
+    ("npmrf", "tiny_rgb", dict(size=8, levels=1, window=5, relaxation="anneal", support="full", proposals=1)),
     ("kopf", "small", dict(size=32, levels=1, window=4, iterations=1)),
     ("kopf", "tiny_rgb", dict(size=16, levels=2, window=4, iterations=1)),
 ]

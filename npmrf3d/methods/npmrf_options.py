@@ -65,20 +65,28 @@ TEMPERATURE_OPTIONS = ("xi", "stop", "max_sweeps", "inherit")
 _C = SynthesisConfig  # every default below is a field default of the configuration
 
 
-def combination(options) -> tuple[str, str]:
-    """(support, relaxation) that keyword ``options`` of :func:`make_config` ask for (unchecked).
+def combination(options) -> tuple[str, str, bool]:
+    """(support, relaxation, temperatures) that keyword ``options`` of :func:`make_config` ask
+    for (unchecked).
 
     >>> combination({"variant": "literal"}), combination({"relaxation": "anneal"})
-    (('full', 'icm'), ('coherent', 'anneal'))
+    (('full', 'icm', True), ('coherent', 'anneal', False))
     """
     variant = options.get("variant")
     support = VARIANTS[variant][0] if variant in VARIANTS else options.get("support") or _C.support
-    return support, options.get("relaxation", _C.relaxation)
+    relaxation = options.get("relaxation", _C.relaxation)
+    temperatures = options.get("temperatures")
+    if temperatures is None:
+        temperatures = support == "full" and relaxation == "icm"
+    return support, relaxation, bool(temperatures)
 
 
-def applies(name: str, where: tuple[str, str]) -> bool:
-    """Whether option ``name`` changes the result of the combination ``where``."""
-    return name not in APPLIES or where in APPLIES[name]
+def applies(name: str, where: tuple) -> bool:
+    """Whether option ``name`` changes the result of the combination ``where``, a (support,
+    relaxation) pair or the (support, relaxation, temperatures) of :func:`combination`."""
+    if name in TEMPERATURE_OPTIONS and len(where) > 2 and where[:2] == ("coherent", "icm"):
+        return bool(where[2])
+    return name not in APPLIES or tuple(where[:2]) in APPLIES[name]
 
 
 def _refuse_unused(given: dict, support: str, relaxation: str) -> None:
