@@ -20,7 +20,11 @@ CASES = {
     # given, "npmrf-segmented" with the segmented preset (which sets the window itself)
     "npmrf-icm": ("npmrf", dict(size=16, window=5, levels=2, segmented="no")),
     "npmrf-segmented": ("npmrf", dict(size=16, levels=2)),
-    "npmrf-anneal": ("npmrf", dict(size=16, window=5, levels=2, relaxation="anneal", proposals=2)),
+    "npmrf-anneal": ("npmrf", dict(size=16, window=5, levels=2, relaxation="anneal", support="full",
+                                   proposals=2)),
+    "npmrf-coherent-anneal": ("npmrf", dict(size=16, window=5, levels=2, relaxation="anneal", proposals=2,
+                                            segmented="no")),
+    "npmrf-temperatures": ("npmrf", dict(size=16, window=5, levels=2, temperatures=True, segmented="no")),
     "kopf": ("kopf", dict(size=16, window=4, levels=2, iterations=2)),
     "chen-wang": ("chen-wang", dict(size=16, window=(4, 4), levels=2, iterations=(2, 2))),
     "coherent": ("coherent", dict(size=16, window=(4, 4), levels=2, iterations=(2, 2))),
