@@ -25,7 +25,6 @@ from npmrf3d.model.neighbourhood import VIEW_AXES
 from tests.naive import naive_cool, naive_search_view, naive_solve, naive_window_trust
 from tests.test_chen_wang import VIEWS3, _histograms, _packed, _solve_case, _values
 
-pytestmark = pytest.mark.kernels
 
 
 def _dyadic_trust(rng, shape):
@@ -33,6 +32,7 @@ def _dyadic_trust(rng, shape):
     return (rng.integers(0, 5, size=shape) / 4.0).astype(np.float32)
 
 
+@pytest.mark.kernels  # the twin tests run again with NUMBA_DISABLE_JIT=1 (.ci/run)
 @pytest.mark.parametrize("view", VIEWS3)
 @pytest.mark.parametrize("window,channels,grid,n_random", [(3, 1, 1, 0), (4, 3, 2, 4)])
 def test_trusted_search_matches_twin(rng, view, window, channels, grid, n_random):
@@ -59,6 +59,7 @@ def test_trusted_search_matches_twin(rng, view, window, channels, grid, n_random
     np.testing.assert_array_equal(got_hist, want_hist)
 
 
+@pytest.mark.kernels  # the twin tests run again with NUMBA_DISABLE_JIT=1 (.ci/run)
 @pytest.mark.parametrize("views", [("front",), VIEWS3])
 @pytest.mark.parametrize("medoid,balance,likelihood,value_weight", [(0, False, 0, 0.0), (8, True, 0, 4.0),
                                                                     (8, False, 1, 4.0), (3, False, 2, 0.0)])
@@ -95,6 +96,7 @@ def test_trusted_solve_matches_twin(rng, views, medoid, balance, likelihood, val
     assert changed == want_changed
 
 
+@pytest.mark.kernels  # the twin tests run again with NUMBA_DISABLE_JIT=1 (.ci/run)
 @pytest.mark.parametrize("window", [2, 3, 4])
 def test_window_trust_matches_twin(rng, window):
     trust = rng.random((5, 6, 7)).astype(np.float32)
@@ -105,6 +107,7 @@ def test_window_trust_matches_twin(rng, window):
             assert got[vi][site] == pytest.approx(naive_window_trust(trust, view, site, window), rel=1e-6)
 
 
+@pytest.mark.kernels  # the twin tests run again with NUMBA_DISABLE_JIT=1 (.ci/run)
 def test_cooling_matches_twin(rng):
     temps = rng.random((5, 4, 6)).astype(np.float32)
     temps[0, 0, 0] = 0.0
