@@ -41,7 +41,6 @@ APPLIES: dict[str, tuple[tuple[str, str], ...]] = {
     "stop": (("full", "icm"), ("coherent", "icm")),
     "max_sweeps": (("full", "icm"), ("coherent", "icm")),
     "temperatures": (("full", "icm"), ("coherent", "icm")),
-    "upsample": (("full", "icm"), ("full", "anneal"), ("coherent", "icm"), ("coherent", "anneal")),
     "inherit": (("full", "icm"), ("full", "anneal"), ("coherent", "icm")),
     "sampler": (("full", "anneal"), ("coherent", "anneal")),
     "schedule": (("full", "anneal"), ("coherent", "anneal")),
@@ -93,8 +92,7 @@ def _refuse_unused(given: dict, support: str, relaxation: str) -> None:
     """One line for the first option set away from its default that (support, relaxation)
     cannot use."""
     for name, value in given.items():
-        default = getattr(_C, name, None) if name != "upsample" else None
-        if value is None or value == default or applies(name, (support, relaxation)):
+        if value is None or value == getattr(_C, name, None) or applies(name, (support, relaxation)):
             continue
         users = " or ".join(f"support '{s}' with relaxation '{r}'" for s, r in APPLIES[name])
         check.fail(f"option {name} does not apply to support '{support}' with relaxation "
@@ -142,7 +140,7 @@ def make_config(
     relaxation = check.choice("relaxation", relaxation, RELAXATIONS)
     views = check.views(views, VIEWS)
     support, preset_name = _support_and_preset(variant, support, preset)
-    given = {"xi": xi, "stop": stop, "max_sweeps": max_sweeps, "upsample": upsample, "inherit": inherit,
+    given = {"xi": xi, "stop": stop, "max_sweeps": max_sweeps, "inherit": inherit,
              "sampler": sampler, "schedule": schedule, "t0": t0, "t_end": t_end, "proposals": proposals,
              "proposal": proposal, "preset": preset if variant is None else None, "bandwidth": bandwidth,
              "adaptive": adaptive, "decision": decision, "tau": tau, "histogram_weight": histogram_weight,
