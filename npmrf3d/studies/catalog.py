@@ -89,36 +89,50 @@ _QUICK_NEURAL = Method("neural", "neural", (
 
 
 def _m(name: str, algorithm: str = "npmrf", **params) -> Method:
-    # the paper's studies compare full-Parzen NP-MRF settings: they use the full support with
-    # the tuned rule (docs/model.md, section 8) unless they name a support or variant
-    if algorithm == "npmrf" and not {"variant", "support"} & set(params):
-        params = {**params, "support": "full"}
+    """A study column: ``algorithm`` with ``params`` (the NP-MRF sampler's support: coherent,
+    unless named)."""
     return Method(name, algorithm, tuple(params.items()))
 
 
-#: synth's default (ICM, the coherent NP-MRF sampler, full colours): the studies that compare the
-#: paper's full-Parzen settings show it beside them.
+def _full(name: str, **params) -> Method:
+    """A reproduction row: the NP-MRF sampler with the paper's full-Parzen support (every
+    exemplar patch in each view's estimate, a 64-colour palette), on the first seed only: one
+    such run costs 3-6 minutes of one core at the paper's scale, and the coherent rows beside it
+    show the spread over seeds."""
+    return Method(name, "npmrf", tuple({"support": "full", "palette": 64, **params}.items()),
+                  max_seeds=1)
+
+
+#: synth's default (ICM, the coherent NP-MRF sampler, full colours): the studies that compare
+#: sampler settings show it beside them.
 _DEFAULT = _m("default", relaxation="icm", support="coherent", palette=None)
-#: The coherent sampler annealed over its candidates (docs/model.md, section 8), full colours.
+#: The coherent support annealed over its candidates (docs/model.md, section 8), full colours.
 _COHERENT_ANNEAL = _m("coherent-anneal", relaxation="anneal", support="coherent", sampler="heat-bath",
                       proposals=4, palette=None)
+#: ICM with the paper's per-voxel temperatures (docs/model.md, section 6) over coherent candidates.
+_TEMPERATURES = (("temperatures", True),)
 
 HEURISTICS = Study(
     name="heuristics",
     title="Heuristics compared: ML_H1a, ML_H1b, ML_H2a, ML_H2b",
     question="Which way of making one voxel value from three 2D views gives the best volumes?",
-    notes="The paper's settings: ICM, 7x7 windows, random visiting order, 8/8 up-sampling, "
-          "resynth, xi = -3, stop at 95 %. The four heuristics run the literal decision rule "
-          "(argmax, h_opt), as in the paper; ML_H2b with the default (measured) rule is the "
-          "reference of what works. ML_H1a/ML_H1b have no objective and can only use argmax.",
+    notes="The paper's settings: ICM with per-voxel temperatures, 7x7 windows, 8/8 "
+          "up-sampling, resynth, xi = -3, stop at 95 %. The main rows run each heuristic over "
+          "the coherent candidates (full colours); the '-full' rows reproduce the paper: the "
+          "full-Parzen support with the paper's literal rule (argmax, h_opt), one seed, 64 grey "
+          "levels. ML_H1b averages the views' best values, so it makes values the exemplar "
+          "does not have (a washed-out volume), as the paper shows.",
     common=(("relaxation", "icm"), ("window", 7), ("upsample", "8/8"), ("inherit", "resynth"),
-            ("xi", -3.0), ("stop", 0.95), ("max_sweeps", 30)),
+            ("xi", -3.0), ("stop", 0.95), ("max_sweeps", 30), *_TEMPERATURES),
     methods=(
-        _m("ML_H1a", heuristic="ML_H1a", support="full", preset="paper"),
-        _m("ML_H1b", heuristic="ML_H1b", support="full", preset="paper"),
-        _m("ML_H2a", heuristic="ML_H2a", support="full", preset="paper"),
-        _m("ML_H2b", heuristic="ML_H2b", support="full", preset="paper"),
-        _m("ML_H2b-default", heuristic="ML_H2b", support="full", preset="tuned"),
+        _m("ML_H1a", heuristic="ML_H1a"),
+        _m("ML_H1b", heuristic="ML_H1b"),
+        _m("ML_H2a", heuristic="ML_H2a"),
+        _m("ML_H2b", heuristic="ML_H2b"),
+        _full("ML_H1a-full", heuristic="ML_H1a", preset="paper"),
+        _full("ML_H1b-full", heuristic="ML_H1b", preset="paper"),
+        _full("ML_H2a-full", heuristic="ML_H2a", preset="paper"),
+        _full("ML_H2b-full", heuristic="ML_H2b", preset="paper"),
     ),
     full=Scale(exemplars=("gravel64",), **_FULL),
     quick=Scale(**_QUICK),
@@ -129,17 +143,20 @@ COOLING = Study(
     title="ICM cooling: xi = -1 versus -3, full versus 95 % stop",
     question="How fast should voxels cool, and does stopping at 95 % of the global temperature "
              "lose anything against cooling down to 0?",
-    notes="ML_H2b, default decision rule, 7x7, 8/8, resynth, 64-colour palette. The "
-          "temperature figure shows the "
-          "global temperature (sum of voxel temperatures) after each sweep, levels one after "
-          "the other; its numbers are in temperature.csv.",
+    notes="ML_H2b, ICM with per-voxel temperatures over coherent candidates, 7x7, 8/8, "
+          "resynth; the '-full' rows reproduce the paper with the full-Parzen support (tuned "
+          "rule, one seed). The temperature figure shows the global temperature (sum of voxel "
+          "temperatures) after each sweep, levels one after the other; its numbers are in "
+          "temperature.csv.",
     common=(("relaxation", "icm"), ("heuristic", "ML_H2b"), ("window", 7), ("upsample", "8/8"),
-            ("inherit", "resynth"), ("max_sweeps", 60), ("palette", 64)),
+            ("inherit", "resynth"), ("max_sweeps", 60), *_TEMPERATURES),
     methods=(
-        _m("xi-1-full", xi=-1.0, stop=1.0),
+        _m("xi-1-to0", xi=-1.0, stop=1.0),
         _m("xi-1-stop95", xi=-1.0, stop=0.95),
-        _m("xi-3-full", xi=-3.0, stop=1.0),
+        _m("xi-3-to0", xi=-3.0, stop=1.0),
         _m("xi-3-stop95", xi=-3.0, stop=0.95),
+        _full("xi-1-stop95-full", xi=-1.0, stop=0.95),
+        _full("xi-3-stop95-full", xi=-3.0, stop=0.95),
     ),
     full=Scale(exemplars=("gravel64",), **_FULL),
     quick=Scale(**{**_QUICK, "common": (("window", 3), ("max_sweeps", 4))}),
@@ -151,37 +168,45 @@ NEIGHBOURHOOD = Study(
     title="Neighbourhood size (9x9, 11x11) crossed with 1/8 versus 8/8 up-sampling",
     question="Do larger neighbourhoods capture larger structures, and which up-sampling keeps "
              "them across scales?",
-    notes="ML_H2b, ICM, default decision rule, resynth, xi = -3, stop at 95 %. The quick "
-          "variant uses 3x3 and 5x5 windows (8^3 volumes are too small for 9x9).",
+    notes="ML_H2b, ICM with per-voxel temperatures over coherent candidates, resynth, xi = -3, "
+          "stop at 95 %; the '-full' rows reproduce the paper's 9x9 with the full-Parzen support "
+          "(tuned rule, one seed). The quick variant uses 3x3 and 5x5 windows on 16^3 volumes.",
     common=(("relaxation", "icm"), ("heuristic", "ML_H2b"), ("inherit", "resynth"),
-            ("xi", -3.0), ("stop", 0.95), ("max_sweeps", 30)),
+            ("xi", -3.0), ("stop", 0.95), ("max_sweeps", 30), *_TEMPERATURES),
     methods=(
         _m("w9-1of8", window=9, upsample="1/8"),
         _m("w9-8of8", window=9, upsample="8/8"),
         _m("w11-1of8", window=11, upsample="1/8"),
         _m("w11-8of8", window=11, upsample="8/8"),
+        _full("w9-1of8-full", window=9, upsample="1/8"),
+        _full("w9-8of8-full", window=9, upsample="8/8"),
     ),
     full=Scale(exemplars=("brick",), **_FULL),
-    quick=Scale(exemplars=("gravel64",), seeds=(0,), sizes=(8,), levels=2, crop=24,
+    quick=Scale(exemplars=("gravel64",), seeds=(0,), sizes=(16,), levels=2, crop=24,
                 common=(("max_sweeps", 2),),
                 methods=(_m("w3-1of8", window=3, upsample="1/8"),
                          _m("w3-8of8", window=3, upsample="8/8"),
                          _m("w5-1of8", window=5, upsample="1/8"),
-                         _m("w5-8of8", window=5, upsample="8/8"))),
+                         _m("w5-8of8", window=5, upsample="8/8"),
+                         _full("w3-1of8-full", window=3, upsample="1/8"))),
 )
 
 ICM_VS_ANNEAL = Study(
     name="icm_vs_anneal",
     title="ICM versus simulated annealing on 32-level grey exemplars",
     question="Does ICM lose the exemplar's dynamics (grey-level range) where annealing keeps it?",
-    notes="ML_H2b, 7x7, exemplars re-quantised to 32 grey levels. ICM uses 1/8 up-sampling, "
-          "annealing 8/8 (each relaxation's default); annealing: Metropolis, geometric "
-          "schedule, 8 proposals per voxel and level.",
+    notes="ML_H2b, 7x7, exemplars re-quantised to 32 grey levels. Main rows over coherent "
+          "candidates: ICM with per-voxel temperatures and 1/8 up-sampling (the paper's ICM), "
+          "annealing with the Metropolis step and with the heat-bath draw (8/8). The '-full' "
+          "rows reproduce the paper with the full-Parzen support, one seed: ICM with the literal "
+          "rule, and Metropolis annealing (geometric schedule, 8 proposals per voxel and level).",
     common=(("heuristic", "ML_H2b"), ("window", 7), ("grey_levels", 32)),
     methods=(
-        _m("ICM", relaxation="icm", max_sweeps=30),
-        _m("ICM-literal", relaxation="icm", support="full", preset="paper", max_sweeps=30),
-        Method("anneal", "npmrf", _ANNEAL),
+        _m("ICM", relaxation="icm", upsample="1/8", max_sweeps=30, **dict(_TEMPERATURES)),
+        _m("anneal-metropolis", relaxation="anneal", sampler="metropolis"),
+        _m("anneal-heat-bath", relaxation="anneal", sampler="heat-bath"),
+        _full("ICM-full", relaxation="icm", preset="paper", max_sweeps=30),
+        _full("anneal-full", **dict(_ANNEAL)),
     ),
     full=Scale(exemplars=("gravel64",), **_FULL),
     quick=Scale(**{**_QUICK, "common": (("window", 3), ("max_sweeps", 2), *_QUICK_ANNEAL)}),
@@ -192,20 +217,22 @@ COLOUR = Study(
     title="Colour exemplars with simulated annealing and ML_H2b",
     question="Does annealing with ML_H2b reproduce colour textures, as Urs et al. 2014 "
              "(section V.E) show it doing?",
-    notes="ML_H2b, 7x7, 64-colour palette (k-means), geometric schedule, 8 proposals per voxel "
-          "and level; Metropolis and heat-bath sampling, with ICM as the reference. 'default' is "
-          "synth's default (the coherent NP-MRF sampler, ICM) on the full colours, no palette.",
-    common=(("heuristic", "ML_H2b"), ("window", 7), ("palette", 64)),
+    notes="ML_H2b, 7x7. Main rows over coherent candidates on the full colours: annealing with "
+          "the Metropolis step and the heat-bath draw, and ICM ('default', synth's default) as "
+          "the reference. The '-full' rows reproduce the paper: the full-Parzen support with a "
+          "64-colour palette (k-means), geometric schedule, 8 proposals per voxel and level, "
+          "one seed.",
+    common=(("heuristic", "ML_H2b"), ("window", 7)),
     methods=(
-        Method("anneal-metropolis", "npmrf", _ANNEAL),
-        Method("anneal-heat-bath", "npmrf",
-               tuple((k, "heat-bath" if k == "sampler" else v) for k, v in _ANNEAL)),
-        _m("ICM", relaxation="icm", max_sweeps=30),
+        _m("anneal-metropolis", relaxation="anneal", sampler="metropolis"),
+        _m("anneal-heat-bath", relaxation="anneal", sampler="heat-bath"),
         _DEFAULT,
+        _full("anneal-metropolis-full", **dict(_ANNEAL)),
+        _full("anneal-heat-bath-full", **{**dict(_ANNEAL), "sampler": "heat-bath"}),
     ),
     full=Scale(exemplars=("ihc64",), **_FULL),
     quick=Scale(**{**_QUICK, "exemplars": ("ihc64",),
-                   "common": (("window", 3), ("max_sweeps", 2), ("palette", 16), *_QUICK_ANNEAL)}),
+                   "common": (("window", 3), ("max_sweeps", 2), *_QUICK_ANNEAL)}),
 )
 
 NPK = Study(
@@ -213,23 +240,24 @@ NPK = Study(
     title="ML_H2b (annealing) versus NP_K on ~15 real exemplars",
     question="How does the NP-MRF with annealing compare with texture optimisation (NP_K) on "
              "histogram KL, autocorrelation L2 and orientation KL?",
-    notes="ML_H2b: annealing as in the colour study (64-colour palette for colour exemplars, 64 "
-          "levels for grey ones), with the paper's Metropolis sampler and with this project's "
-          "heat-bath sampler. NP_K: Kopf et al. 2007 as implemented in "
+    notes="ML_H2b annealed over coherent candidates on the full colours, with the paper's "
+          "Metropolis step ('ML_H2b-anneal') and the heat-bath draw ('coherent-anneal', 4 "
+          "proposals per level); 'ML_H2b-anneal-full' reproduces the paper: the full-Parzen "
+          "support, a 64-colour palette (64 levels for grey exemplars), one seed. NP_K: Kopf et al. 2007 as implemented in "
           "npmrf3d.methods.kopf with its default settings and the study's levels. 'control' is "
           "the structureless control (voxels drawn independently from the exemplar): a method "
           "no better than it made no structure. 'default' is synth's default (the coherent "
-          "NP-MRF sampler, ICM, 7x7 at every level); 'coherent-anneal' the same annealed over "
-          "its candidates (t0 1 to 0.05 per level); both on the full colours, no palette. "
+          "NP-MRF sampler, ICM, 7x7 at every level) and 'coherent' the coherent method with its "
+          "own windows (8, 6, 4); all on the full colours, no palette. "
           "'neural' is the on-demand 3D CNN generator (Gutierrez et al. 2020; "
           "npmrf3d.methods.neural) trained on the same exemplar (150 steps of one 64x64 "
           "slice per view, Gram and value-histogram loss), its train and generate seconds "
           "apart; it needs the optional extra npmrf3d[neural] (torch) and is left out, with a "
           "note in study.json, where that is not installed.",
-    common=(("heuristic", "ML_H2b"), ("window", 7), ("palette", 64), *_ANNEAL),
+    common=(("heuristic", "ML_H2b"), ("window", 7)),
     methods=(
-        _m("ML_H2b-anneal"),
-        _m("ML_H2b-heat-bath", sampler="heat-bath"),
+        _m("ML_H2b-anneal", relaxation="anneal", sampler="metropolis"),
+        _full("ML_H2b-anneal-full", **dict(_ANNEAL)),
         _m("NP_K", "kopf", window=8),
         _m("chen-wang", "chen-wang"),
         _m("coherent", "coherent"),
@@ -240,8 +268,10 @@ NPK = Study(
     ),
     full=Scale(exemplars=NPK_FULL_EXEMPLARS, **_FULL),
     quick=Scale(exemplars=("gravel64",), seeds=(0,), sizes=(8,), levels=1, crop=24,
-                common=(("window", 3), ("palette", 16), *_QUICK_ANNEAL),
-                methods=(_m("ML_H2b-anneal"), _m("NP_K", "kopf", window=4, iterations=1),
+                common=(("window", 3), *_QUICK_ANNEAL),
+                methods=(_m("ML_H2b-anneal", relaxation="anneal", sampler="metropolis"),
+                         _full("ML_H2b-anneal-full", **dict(_ANNEAL)),
+                         _m("NP_K", "kopf", window=4, iterations=1),
                          _QUICK_NEURAL, _m("control", "control"))),
 )
 
@@ -252,17 +282,16 @@ VIEWS = Study(
              "layering direction (front and top) avoid the conflict a third view creates?",
     notes="The exemplars' layers run along the image rows, i.e. along axis i in the front "
           "(i, j) and top (i, k) views; the right view (j, k) would ask for layers along j too. "
-          "ML_H2b, ICM, default rule, 7x7, 64-colour palette (the colour photographs have "
-          "thousands of distinct colours). Metrics are computed on the constrained views only. "
-          "The '-default' methods are synth's default (the coherent NP-MRF sampler) on the full "
-          "colours.",
-    common=(("relaxation", "icm"), ("heuristic", "ML_H2b"), ("window", 7), ("max_sweeps", 30),
-            ("palette", 64)),
+          "ML_H2b, ICM, 7x7. Main rows: synth's default (the coherent NP-MRF sampler) on the "
+          "full colours; the '-full' rows reproduce the paper with the full-Parzen support (tuned "
+          "rule, 64-colour palette: the photographs have thousands of distinct colours), one "
+          "seed. Metrics are computed on the constrained views only.",
+    common=(("relaxation", "icm"), ("heuristic", "ML_H2b"), ("window", 7), ("max_sweeps", 30)),
     methods=(
         _m("3views", views="front,right,top"),
         _m("2views", views="front,top"),
-        _m("3views-default", views="front,right,top", support="coherent", palette=None),
-        _m("2views-default", views="front,top", support="coherent", palette=None),
+        _full("3views-full", views="front,right,top"),
+        _full("2views-full", views="front,top"),
     ),
     full=Scale(exemplars=("wood",), **_FULL),
     quick=Scale(**{**_QUICK, "exemplars": ("stripes",)}),
@@ -278,11 +307,14 @@ GROUNDTRUTH = Study(
           "used for all three views. 'real' is a crop of the real volume (the floor set by "
           "finite size); 'control' draws voxels independently from the exemplar. Slice "
           "metrics compare each view's slices with the real volume's middle slice in that view. "
-          "'default' is synth's default (the coherent NP-MRF sampler).",
+          "'default' is synth's default (the coherent NP-MRF sampler); 'ML_H2b-icm' adds the "
+          "per-voxel temperatures, 'ML_H2b-anneal' anneals over the coherent candidates "
+          "(Metropolis) and 'ML_H2b-anneal-full' is the paper's full-Parzen annealer (one seed).",
     common=(("heuristic", "ML_H2b"), ("window", 7), ("max_sweeps", 30)),
     methods=(
-        _m("ML_H2b-icm", relaxation="icm"),
-        Method("ML_H2b-anneal", "npmrf", _ANNEAL),
+        _m("ML_H2b-icm", relaxation="icm", **dict(_TEMPERATURES)),
+        _m("ML_H2b-anneal", relaxation="anneal", sampler="metropolis"),
+        _full("ML_H2b-anneal-full", **dict(_ANNEAL)),
         _m("NP_K", "kopf", window=8),
         _DEFAULT,
         _m("chen-wang", "chen-wang"),
@@ -292,8 +324,8 @@ GROUNDTRUTH = Study(
     full=Scale(exemplars=("volume",), seeds=(0, 1, 2), sizes=(64,), levels=3),
     quick=Scale(exemplars=("volume",), seeds=(0,), sizes=(16,), levels=1,
                 common=(("window", 3), ("max_sweeps", 2), *_QUICK_ANNEAL),
-                methods=(_m("ML_H2b-icm", relaxation="icm"),
-                         Method("ML_H2b-anneal", "npmrf", _ANNEAL),
+                methods=(_m("ML_H2b-icm", relaxation="icm", **dict(_TEMPERATURES)),
+                         _full("ML_H2b-anneal-full", **dict(_ANNEAL)),
                          _m("NP_K", "kopf", window=4, iterations=1),
                          _m("control", "control"), _m("real", "real"))),
     figures=("two_point",),

@@ -138,6 +138,19 @@ def _run_json(study_dir, spec, name="run.json"):
     return json.loads(path.read_text(encoding="utf-8"))
 
 
+def _temperatures(record) -> list:
+    """A run's global temperature after each sweep, one list per level, coarse first: the
+    coherent support records it in each level's statistics, the full support's history is it."""
+    if not record:
+        return []
+    levels = ((record.get("stats") or {}).get("levels") or {})
+    if levels and all("temperature" in v for v in levels.values()):
+        order = sorted(levels, key=lambda k: -int(k.rsplit("_", 1)[-1]))
+        return [levels[k]["temperature"] for k in order]
+    config = record.get("config") or {}
+    return (record.get("history") or []) if config.get("support") == "full" else []
+
+
 def _temperature_figure(study_dir, specs, rows):
 
     done = {r["run_id"] for r in rows if r["status"] != "failed"}
@@ -145,7 +158,7 @@ def _temperature_figure(study_dir, specs, rows):
     table, curves = [], defaultdict(list)
     for s in specs:
         record = _run_json(study_dir, s) if s.run_id in done else None
-        history = (record or {}).get("history") or []
+        history = _temperatures(record)
         xs, ys, sweep = [], [], 0
         for level_index, level in enumerate(history):
             for k, t in enumerate(level):

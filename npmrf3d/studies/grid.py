@@ -82,11 +82,15 @@ class Method:
     algorithm : a name of :data:`npmrf3d.methods.METHODS` (or an alias), "control" or "real"
     params : tuple of (name, value) pairs
         Keyword arguments for the algorithm (a dict is accepted and frozen).
+    max_seeds : int or None
+        Run only the first ``max_seeds`` of the variant's seeds (None: all of them); for the
+        costly rows of a study whose spread over seeds the other rows already show.
     """
 
     name: str
     algorithm: str = "npmrf"
     params: Params = ()
+    max_seeds: int | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "params", _params(self.params))
@@ -95,6 +99,9 @@ class Method:
         if self.algorithm not in ALGORITHMS:
             raise ParameterError(f"method {self.name!r}: algorithm must be one of "
                                  f"{', '.join(ALGORITHMS)}; got {self.algorithm!r}")
+        if self.max_seeds is not None and (not isinstance(self.max_seeds, int) or self.max_seeds < 1):
+            raise ParameterError(f"method {self.name!r}: max_seeds must be a positive integer or "
+                                 f"None; got {self.max_seeds!r}")
         if not re.fullmatch(r"[A-Za-z0-9_.+-]+", self.name):
             raise ParameterError(f"method name must use letters, digits, '_', '.', '+', '-'; "
                                  f"got {self.name!r}")
@@ -285,7 +292,7 @@ class Study:
                     params = {k: v for k, v in common.items() if applies(k, where)}
                 params.update(method.params)
                 for size in sizes:
-                    for seed in seeds:
+                    for seed in seeds[:method.max_seeds]:
                         specs.append(RunSpec(
                             study=self.name,
                             run_id=run_id(exemplar, method.name, seed,
@@ -306,7 +313,8 @@ class Study:
         """Plain description of the declaration (for ``study.json`` and the report)."""
 
         def method(m: Method) -> dict:
-            return {"name": m.name, "algorithm": m.algorithm, "params": dict(m.params)}
+            return {"name": m.name, "algorithm": m.algorithm, "params": dict(m.params),
+                    "max_seeds": m.max_seeds}
 
         def scale(s: Scale) -> dict:
             d = asdict(s)
