@@ -87,6 +87,16 @@ def _npmrf_anneal(ex, size, levels, seed, *, palette=None, **_):
                               relaxation="anneal", variant="coherent").volume
 
 
+def _npmrf(**fixed):
+    """``npmrf3d.synthesize`` with the coherent support and the options ``fixed`` (one
+    combination of the sampler's heuristic, relaxation and temperatures)."""
+    def run(ex, size, levels, seed, *, palette=None, **_):
+        return npmrf3d.synthesize(ex, size=size, levels=levels, rng=seed, palette=palette,
+                                  **fixed).volume
+    run.__doc__ = f"npmrf3d.synthesize(..., {', '.join(f'{k}={v!r}' for k, v in fixed.items())})"
+    return run
+
+
 def _npk(ex, size, levels, seed, **_):
     from npmrf3d.methods.kopf import kopf_synthesize
     return kopf_synthesize(ex, size=size, levels=levels, rng=seed).volume
@@ -110,8 +120,21 @@ METHODS: dict[str, Callable[..., np.ndarray]] = {
     "chen-wang": _registered("chen-wang"),
     "coherent": _registered("coherent"),
 }
+#: The sampler's combinations over coherent candidates: each heuristic under ICM (the default's
+#: iterations, or per-voxel temperatures), ML_H2a/ML_H2b annealed by each sampler.
+SAMPLER_COMBINATIONS = {
+    "npmrf-H1a": dict(heuristic="ML_H1a"),
+    "npmrf-H1b": dict(heuristic="ML_H1b"),
+    "npmrf-H2a": dict(heuristic="ML_H2a"),
+    "npmrf-temperatures": dict(temperatures=True),
+    "npmrf-H2a-heat-bath": dict(heuristic="ML_H2a", relaxation="anneal", sampler="heat-bath"),
+    "npmrf-H2b-heat-bath": dict(heuristic="ML_H2b", relaxation="anneal", sampler="heat-bath"),
+    "npmrf-H2a-metropolis": dict(heuristic="ML_H2a", relaxation="anneal", sampler="metropolis"),
+    "npmrf-H2b-metropolis": dict(heuristic="ML_H2b", relaxation="anneal", sampler="metropolis"),
+}
+METHODS.update({name: _npmrf(**options) for name, options in SAMPLER_COMBINATIONS.items()})
 #: Methods that take ``palette`` (the others never see it, and their cache key has none).
-PALETTE_METHODS = {"npmrf-default", "npmrf-sharp", "npmrf-anneal"}
+PALETTE_METHODS = {"npmrf-default", "npmrf-sharp", "npmrf-anneal", *SAMPLER_COMBINATIONS}
 
 
 # --------------------------------------------------------------------------- exemplars
