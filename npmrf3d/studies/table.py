@@ -124,10 +124,10 @@ def read_results_checked(path, warn: Callable[[str], None] | None = None) -> lis
     ``nan``, ``inf``) becomes empty, shown as missing, and ``warn`` gets one line naming the
     file, the row and the column (an empty cell is a missing number as written, no warning).
 
-    >>> import tempfile, os
-    >>> path = os.path.join(tempfile.mkdtemp(), "results.csv")
-    >>> _ = open(path, "w").write("run_id,exemplar,method,seed,size,levels,status,mean_kl\n"
-    ...                           "a,e,m,0,8,1,done,oops\n")
+    >>> import pathlib, tempfile
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "results.csv"
+    >>> _ = path.write_text("run_id,exemplar,method,seed,size,levels,status,mean_kl" + chr(10)
+    ...                     + "a,e,m,0,8,1,done,oops" + chr(10))
     >>> [r["mean_kl"] for r in read_results_checked(path, print)]  # doctest: +ELLIPSIS
     warning: ...results.csv: row 1 (a), column mean_kl: 'oops' is not a number; shown as missing
     ['']
