@@ -37,13 +37,17 @@ _SINGLE_THREADED = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NU
 
 #: Seconds to wait for an existing Dask scheduler before giving up.
 CONNECT_TIMEOUT = 5
+#: What every worker of :func:`local_cluster` runs as it starts (:mod:`npmrf3d._worker_setup`:
+#: Ctrl-C is the parent's to handle, and an interruption is said in one line).
+WORKER_PRELOAD = "npmrf3d._worker_setup"
 #: Address schemes of dask.distributed's communication back-ends.
 _SCHEMES = ("tcp", "tls", "ucx", "inproc", "ws", "wss")
 
 
 def local_cluster(workers: int, *, dashboard_address=":0", silence_logs=logging.WARNING):
     """A ``distributed.LocalCluster`` of ``workers`` processes with one Dask thread each, BLAS
-    single-threaded and the allocator setting above in every worker's environment.
+    single-threaded, the allocator setting above in every worker's environment and
+    :data:`WORKER_PRELOAD` run in every worker.
 
     The numba thread count is not put in the workers' environment as ``NUMBA_NUM_THREADS``: a
     spawned worker imports the parent's main module (a study script imports numba) before the
@@ -59,7 +63,7 @@ def local_cluster(workers: int, *, dashboard_address=":0", silence_logs=logging.
     with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_": MMAP_THRESHOLD}):
         return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                             dashboard_address=dashboard_address, silence_logs=silence_logs,
-                            env=dict(_SINGLE_THREADED))
+                            env=dict(_SINGLE_THREADED), preload=[WORKER_PRELOAD])
 
 
 @contextlib.contextmanager
@@ -70,22 +74,43 @@ def dask_client(scheduler: str | None, workers: int = 1) -> Iterator:
     are closed on leaving."""
     from distributed import Client
 
-    cluster = None
-    if scheduler is None:
-        cluster = local_cluster(workers)
-        client = Client(cluster)
-    else:
-        try:
-            client = Client(scheduler, timeout=f"{CONNECT_TIMEOUT}s")
-        except (OSError, TimeoutError) as exc:
-            raise ParameterError(f"cannot connect to the Dask scheduler {scheduler}: "
-                                 f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
+    cluster = client = None
+    stopped = True
     try:
+        if scheduler is None:
+            cluster = local_cluster(workers)
+            client = Client(cluster)
+        else:
+            try:
+                client = Client(scheduler, timeout=f"{CONNECT_TIMEOUT}s")
+            except (OSError, TimeoutError) as exc:
+                raise ParameterError(f"cannot connect to the Dask scheduler {scheduler}: "
+                                     f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
         yield client
+        stopped = False
     finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        # After Ctrl-C (or an error) the runs still going are cancelled and their workers
+        # killed: that is the interruption itself, which the caller says in one line, so the
+        # cluster's warnings and errors about it ("... still alive after 4.0 seconds, killing",
+        # a CancelledError traceback) stay quiet.
+        with _quiet(stopped):
+            if client is not None:
+                client.close()
+            if cluster is not None:
+                cluster.close()
+
+
+@contextlib.contextmanager
+def _quiet(quiet: bool = True) -> Iterator[None]:
+    """Nothing of the ``distributed`` loggers in this process for a while (``quiet``)."""
+    logger = logging.getLogger("distributed")
+    previous = logger.level
+    if quiet:
+        logger.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        logger.setLevel(previous)
 
 
 def dashboard_link(client) -> str:

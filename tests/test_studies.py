@@ -39,7 +39,8 @@ def _study(name, *methods):
 
 GOOD = Method("H2b", params=(("heuristic", "ML_H2b"),))
 CONTROL = Method("control", "control")
-BROKEN = Method("broken", params=(("window", 4),))  # even window: a ParameterError in the run
+BROKEN = Method("broken", params=(("window", 4),))  # even window: refused up front, or (check=False)
+#                                                    a ParameterError in the run
 
 
 @pytest.fixture(scope="module")
@@ -252,7 +253,11 @@ def test_resume_skips_finished_runs(tmp_path):
 
 def test_failed_run_is_recorded_and_others_go_on(tmp_path):
     study = _study("failing", BROKEN, GOOD)
-    outcome = run_study(study, out=tmp_path, scheduler="serial", progress=False, echo=None)
+    with pytest.raises(ParameterError, match="study failing: run gravel64-broken-s0: window"):
+        run_study(study, out=tmp_path, scheduler="serial", progress=False, echo=None)
+    assert not (tmp_path / "failing").exists()
+    outcome = run_study(study, out=tmp_path, scheduler="serial", progress=False, echo=None,
+                        check=False)  # what only a run finds out is a failed row
     broken, good = outcome.rows
     assert broken["status"] == "failed" and good["status"] == "done"
     assert "ParameterError" in broken["error"] and "window" in broken["error"]
@@ -260,7 +265,8 @@ def test_failed_run_is_recorded_and_others_go_on(tmp_path):
     assert "Traceback" in error["traceback"] and error["spec"]["method"] == "broken"
     rows = table.read_results(tmp_path / "failing" / "results.csv")
     assert [r["status"] for r in rows] == ["failed", "done"] and rows[0]["error"]
-    again = run_study(study, out=tmp_path, scheduler="serial", progress=False, echo=None)
+    again = run_study(study, out=tmp_path, scheduler="serial", progress=False, echo=None,
+                      check=False)
     assert [r["status"] for r in again.rows] == ["failed", "skipped"]  # failures are retried
 
 
@@ -268,10 +274,10 @@ def test_dask_gives_the_serial_results(tmp_path, cluster):
     study = _study("same", GOOD, CONTROL, BROKEN)
     study = study.with_scale("quick", seeds=(0, 1))
     serial = run_study(study, out=tmp_path / "serial", scheduler="serial", progress=False,
-                       echo=None)
+                       echo=None, check=False)
     messages = []
     dask = run_study(study, out=tmp_path / "dask", scheduler=cluster, threads=1,
-                     progress=False, echo=messages.append)
+                     progress=False, echo=messages.append, check=False)
     assert any("dashboard" in m for m in messages)
     assert [r["status"] for r in dask.rows] == [r["status"] for r in serial.rows] == [
         "done", "done", "done", "done", "failed", "failed"]
@@ -354,7 +360,7 @@ def test_spread_summary_and_which_leads_exceed_it(tmp_path):
 
 def test_report_shows_failures(tmp_path):
     outcome = run_study(_study("failing", BROKEN, GOOD), out=tmp_path, scheduler="serial",
-                        progress=False, echo=None)
+                        progress=False, echo=None, check=False)
     parser = _Collector()
     text = report.build_report(tmp_path)
     parser.feed(text)
@@ -440,10 +446,9 @@ def test_study_script_entry_point(tmp_path):
 
     assert study_main("views", ["--quick", "--out", str(tmp_path), "--scheduler", "serial",
                                 "--quiet"]) == 0
-    assert study_main("views", ["--quick", "--out", str(tmp_path), "--scheduler", "serial",
-                                "--quiet", "--exemplars", "nope.png"]) == 1  # failed run: recorded, exit 1
-    rows = table.read_results(tmp_path / "views" / "results.csv")
-    assert {r["status"] for r in rows} == {"failed"} and "does not exist" in rows[0]["error"]
+    assert study_main("views", ["--quick", "--out", str(tmp_path / "other"), "--scheduler",
+                                "serial", "--quiet", "--exemplars", "nope.png"]) == 2  # refused up front
+    assert not (tmp_path / "other").exists()
 
 
 # --------------------------------------------------------------------------- ground truth

@@ -111,7 +111,8 @@ def _study_handler(args, argv) -> int:
 
 
 def _report_handler(args, argv) -> int:
-    path = write_report(args.results_dir, args.out)
+    path = write_report(args.results_dir, args.out, overwrite=args.overwrite,
+                        warn=lambda line: say(f"{PROG} report: {line}", error=True))
     say(f"wrote {path}")
     return 0
 
@@ -152,6 +153,8 @@ def register(commands, formatter_class) -> None:
                              f"{_DEFAULT_OUT}")
     report.add_argument("--out", default=None, metavar="FILE",
                         help="HTML file to write (default: None = RESULTS_DIR/report.html)")
+    report.add_argument("--overwrite", action="store_true",
+                        help="replace an existing report file instead of refusing")
     report.set_defaults(handler=_report_handler)
 
 

@@ -41,11 +41,13 @@ def option_names(method: SynthesisMethod) -> tuple[str, ...]:
 
 def prepare(method: SynthesisMethod, exemplar, exemplars: Mapping | None, *, size, rng,
             options: Mapping[str, Any],
-            load: Callable[..., dict] | None = None) -> tuple[Any, np.random.Generator, dict]:
+            load: Callable[..., dict] | None = None,
+            memory: bool = True) -> tuple[Any, np.random.Generator, dict]:
     """``(config, generator, per_view)`` of a call of ``method``'s public function.
 
     ``load(exemplar, exemplars, config)`` reads the exemplars (default: one 2D exemplar per
-    constrained view, checked against the method's ``fit``).
+    constrained view, checked against the method's ``fit``). ``memory=False`` leaves out the
+    memory check (a run that will go to another machine).
     """
     known = option_names(method)
     unknown = sorted(set(options) - set(known))
@@ -60,5 +62,6 @@ def prepare(method: SynthesisMethod, exemplar, exemplars: Mapping | None, *, siz
                                      levels=fit["levels"], toroidal=fit.get("toroidal", False))
     else:
         per_view = load(exemplar, exemplars, config)
-    check_memory((method.resources or generic_estimate)(config, per_view))
+    if memory:
+        check_memory((method.resources or generic_estimate)(config, per_view))
     return config, generator, per_view

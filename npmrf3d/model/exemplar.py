@@ -31,6 +31,7 @@ __all__ = [
     "BUNDLED_PREFIX",
     "decimation_phases",
     "etr_available",
+    "etr_path",
     "exemplar_slice",
     "exemplar_source",
     "extract_patches",
@@ -111,12 +112,16 @@ def exemplar_source(text: str | None) -> tuple[Path | None, str | None]:
     'bundled:gravel64'
     >>> exemplar_source(None)
     (None, None)
+
+    ``etr:NAME`` is an installed Extreme Tux Racer terrain photograph (:func:`etr_path`).
     """
     if text is None:
         return None, None
     if text.startswith(BUNDLED_PREFIX):
         name = text[len(BUNDLED_PREFIX):]
         return data.path(name), f"{BUNDLED_PREFIX}{name}"
+    if text.startswith(ETR_PREFIX):
+        return etr_path(text), text
     if not text.strip():
         raise ParameterError("exemplar file name is empty")
     return Path(text), text
@@ -129,6 +134,33 @@ def etr_available(folder: Path | None = None) -> list[str]:
         return []
     return sorted(f"{ETR_PREFIX}{p.stem}" for p in folder.iterdir()
                   if p.suffix.lower() in IMAGE_SUFFIXES)
+
+
+def etr_path(name: str) -> Path:
+    """The file of the ``etr:NAME`` exemplar (an installed Extreme Tux Racer terrain photograph).
+
+    Raises
+    ------
+    ParameterError
+        The Debian package is not installed, or it has no terrain called ``NAME`` (the message
+        lists the installed names).
+    """
+    stem = name[len(ETR_PREFIX):] if name.startswith(ETR_PREFIX) else name
+    if not ETR_DIR.is_dir():
+        raise ParameterError(
+            f"exemplar {name!r} is an Extreme Tux Racer terrain photograph, read at run time "
+            f"from {ETR_DIR}, which does not exist: install Debian's extremetuxracer-data "
+            f"package (apt-get install extremetuxracer-data; GPL-2+, so it is not bundled with "
+            f"npmrf3d) or choose another exemplar")
+    files = [p for p in sorted(ETR_DIR.iterdir())
+             if p.stem == stem and p.suffix.lower() in IMAGE_SUFFIXES]
+    if not files:
+        installed = etr_available()
+        raise ParameterError(
+            f"unknown {ETR_PREFIX} exemplar {name!r}: no terrain photograph {stem!r} in {ETR_DIR}; "
+            + (f"the available ones are {', '.join(installed)}" if installed
+               else "the folder holds none (reinstall extremetuxracer-data)"))
+    return files[0]
 
 
 def named_exemplar(name: str, crop: int | None = None) -> np.ndarray:
@@ -150,18 +182,7 @@ def named_exemplar(name: str, crop: int | None = None) -> np.ndarray:
     if name in data.available():
         image = load_exemplar(data.path(name))
     elif name.startswith(ETR_PREFIX):
-        stem = name[len(ETR_PREFIX):]
-        if not ETR_DIR.is_dir():
-            raise ParameterError(
-                f"exemplar {name!r} is an Extreme Tux Racer terrain photograph, read at run time "
-                f"from {ETR_DIR}, which does not exist: install Debian's extremetuxracer-data "
-                f"package (GPL-2+, so it is not bundled with npmrf3d) or choose another exemplar")
-        files = [p for p in sorted(ETR_DIR.iterdir())
-                 if p.stem == stem and p.suffix.lower() in IMAGE_SUFFIXES]
-        if not files:
-            raise ParameterError(f"no terrain photograph {stem!r} in {ETR_DIR}; installed: "
-                                 f"{', '.join(etr_available()) or 'none'}")
-        image = load_exemplar(files[0])
+        image = load_exemplar(etr_path(name))
     elif Path(name).suffix.lower() in IMAGE_SUFFIXES:
         image = load_exemplar(name)
     else:

@@ -66,8 +66,13 @@ MAX_LAG = 32
 
 def load_reference(path) -> np.ndarray:
     """The real volume as float32 ``(N1, N2, N3, C)`` (``.npy`` or ``.tif``, see
-    :func:`npmrf3d.io.read_volume`)."""
-    return read_volume(path)
+    :func:`npmrf3d.io.read_volume`); one holding NaN or Inf is refused."""
+    volume = read_volume(path)
+    bad = int(np.count_nonzero(~np.isfinite(volume)))
+    if bad:
+        raise ParameterError(f"volume file '{path}' contains {bad} NaN or Inf values; clean or "
+                             f"mask them first")
+    return volume
 
 
 def reference_slices(volume: np.ndarray) -> dict[str, np.ndarray]:

@@ -25,7 +25,7 @@ from ..errors import ParameterError
 from ..io import atomic_write
 from ..methods import METHODS
 from .figures import make_figures  # noqa: F401 (re-exported: report.make_figures)
-from .table import as_float, metric_columns, read_results, separations, summarise, unique
+from .table import as_float, metric_columns, read_results_checked, separations, summarise, unique
 
 __all__ = ["build_report", "find_studies", "make_figures", "write_report"]
 
@@ -83,13 +83,13 @@ def _params_table(declaration: dict) -> str:
             + f"<p><b>common (npmrf methods):</b> {_esc(common or 'none')}</p>")
 
 
-def _study_section(study_dir: pathlib.Path) -> str:
+def _study_section(study_dir: pathlib.Path, warn=None) -> str:
     info = {}
     if (study_dir / "study.json").is_file():
         info = json.loads((study_dir / "study.json").read_text(encoding="utf-8"))
     declaration = info.get("study", {})
     name = declaration.get("name", study_dir.name)
-    rows = read_results(study_dir / "results.csv")
+    rows = read_results_checked(study_dir / "results.csv", warn)
     mode = info.get("mode", "?")
     scale = declaration.get(mode, {}) if mode in ("quick", "full") else {}
     parts = [f"<section id='study-{_esc(name)}'>",
@@ -218,10 +218,10 @@ section { border-top: 2px solid #888; margin-top: 2em; }
 """
 
 
-def _checked_section(study_dir: pathlib.Path) -> str:
+def _checked_section(study_dir: pathlib.Path, warn=None) -> str:
     """:func:`_study_section`, with damaged or foreign files refused as a ParameterError."""
     try:
-        return _study_section(study_dir)
+        return _study_section(study_dir, warn)
     except ParameterError:
         raise
     except (ValueError, KeyError, TypeError, IndexError, AttributeError, UnicodeError, OSError,
@@ -232,12 +232,13 @@ def _checked_section(study_dir: pathlib.Path) -> str:
             f"or was not written by 'npmrf3d study'): {type(exc).__name__}: {reason}") from None
 
 
-def build_report(results_dir) -> str:
-    """The HTML text of the report on every study under ``results_dir``."""
+def build_report(results_dir, warn=None) -> str:
+    """The HTML text of the report on every study under ``results_dir``; ``warn(line)`` hears
+    of every cell of a ``results.csv`` that is not a number (shown as missing)."""
     studies = find_studies(results_dir)
     created = datetime.now(timezone.utc).isoformat(timespec="seconds")
     toc = "".join(f"<li><a href='#study-{_esc(p.name)}'>{_esc(p.name)}</a></li>" for p in studies)
-    sections = "\n".join(_checked_section(p) for p in studies)
+    sections = "\n".join(_checked_section(p, warn) for p in studies)
     title = "npmrf3d studies" if len(studies) > 1 else f"npmrf3d study {studies[0].name}"
     return (f"<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>"
             f"<title>{_esc(title)}</title><style>{_STYLE}</style></head><body>"
@@ -246,12 +247,19 @@ def build_report(results_dir) -> str:
             f"embedded.</p><ul class='toc'>{toc}</ul>{sections}</body></html>\n")
 
 
-def write_report(results_dir, out=None) -> pathlib.Path:
-    """Write :func:`build_report` to ``out`` (default ``RESULTS_DIR/report.html``)."""
-    text = build_report(results_dir)
+def write_report(results_dir, out=None, *, overwrite: bool = False, warn=None) -> pathlib.Path:
+    """Write :func:`build_report` to ``out`` (default ``RESULTS_DIR/report.html``).
+
+    An existing ``out`` is refused unless ``overwrite``; ``warn`` as in :func:`build_report`.
+    """
+    find_studies(results_dir)
     out = pathlib.Path(results_dir) / "report.html" if out is None else pathlib.Path(out)
     if out.is_dir():
         raise ParameterError(f"report file '{out}' is a folder; give a file name")
     if not out.absolute().parent.is_dir():
         raise ParameterError(f"folder of report file '{out}' does not exist")
+    if out.exists() and not overwrite:
+        raise ParameterError(f"report file '{out}' already exists; pass --overwrite to replace it "
+                             f"or choose another --out")
+    text = build_report(results_dir, warn)
     return atomic_write(out, lambda tmp: tmp.write_text(text, encoding="utf-8"))

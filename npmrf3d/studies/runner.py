@@ -17,8 +17,12 @@ Behaviour
   <= cores`` (each run sets its numba threads inside its task); an address
   (``tcp://host:8786``) connects to an existing scheduler, whose workers keep their own
   ``NUMBA_NUM_THREADS``; ``"serial"`` runs in this process, one run after the other. The
-  dashboard address is printed (it needs ``bokeh`` to be served). A bad ``--workers``,
-  ``--threads``, scheduler address or study folder is refused before anything is created.
+  dashboard address is printed (it needs ``bokeh`` to be served).
+* **Input checked first**: a bad ``--workers``, ``--threads``, scheduler address or study
+  folder, a real volume that is not 3-D or holds NaN, a slice index past it, an exemplar that
+  cannot be loaded, or a run whose options its method refuses (a size too small for the
+  window and levels ...) is refused as a whole, with one message naming the first problem,
+  before the first run and before any folder is created (:mod:`.inputs`).
 * **Same results everywhere**: every run is seeded by its own seed only and numba kernels do
   not depend on the thread count, so Dask and serial execution write identical volumes.
 * **Resumable**: a run whose folder holds ``run.json`` and ``metrics.json`` is finished and is
@@ -43,6 +47,7 @@ from . import groundtruth
 from .execute import execute_run, record_failure
 from .figures import make_figures
 from .grid import RunSpec, Study
+from .inputs import check_reference, check_runs
 from .table import BASE_COLUMNS, is_finished, load_row, write_csv
 
 __all__ = ["StudyOutcome", "leave_out_unavailable", "run_study"]
@@ -162,7 +167,7 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
               sizes=None, levels: int | None = None, volume=None, slice_axis: int = 0,
               slice_index: int | None = None, slices: int = 1,
               progress: Callable[[dict | None, int, int], None] | bool | None = None,
-              echo: Callable[[str], None] | None = None) -> StudyOutcome:
+              echo: Callable[[str], None] | None = None, check: bool = True) -> StudyOutcome:
     """Run (or resume) a study and write its runs, ``results.csv``, figures and ``study.json``.
 
     Parameters
@@ -193,6 +198,16 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
         accepted and ignored: the library draws nothing.
     echo : callable or None
         Where the one-line messages go (None: nowhere).
+    check : bool
+        Check the whole grid before the first run (:func:`.inputs.check_runs`: every exemplar,
+        every run's options against its method's configuration); False leaves each run to
+        fail on its own, as a ``failed`` row.
+
+    Raises
+    ------
+    ParameterError
+        The first problem of the input (options, scheduler, study folder, the real volume, an
+        exemplar, a run's options), before any folder is created.
 
     Returns
     -------
@@ -204,14 +219,19 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
         if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
             raise ParameterError(f"--{name} must be a positive integer; got {value!r}")
     scheduler = check_scheduler(scheduler)
+    if scheduler in (None, "local"):
+        plan_workers(workers, threads)  # refused here, before any folder exists
     study_dir = check_study_dir(out, study.name)
-    reference = None
+    reference = real = None
     if volume is not None:
         reference = str(pathlib.Path(volume).absolute())
-        shape = groundtruth.load_reference(reference).shape
+        real = check_reference(study.name, reference, slice_axis=slice_axis, slice_index=slice_index)
         base_sizes = sizes if sizes is not None else study.scale(mode).sizes
         lv = levels if levels is not None else study.scale(mode).levels
-        sizes = sorted({groundtruth.fit_size(shape, s, lv) for s in base_sizes})
+        try:
+            sizes = sorted({groundtruth.fit_size(real.shape, s, lv) for s in base_sizes})
+        except ParameterError as exc:
+            raise ParameterError(f"study {study.name}: {exc}") from None
     elif study.needs_volume:
         raise ParameterError(f"study {study.name} compares with a real 3-D volume: give one with "
                              f"--volume FILE (.npy or .tif)")
@@ -222,6 +242,9 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
     if not specs:
         raise ParameterError(f"study {study.name}: no method can run here: "
                              f"{'; '.join(item['reason'] for item in left_out)}")
+    if check:
+        check_runs(study.name, specs, real, memory=scheduler in (None, "local", "serial"))
+    del real
     if scheduler not in (None, "local", "serial"):
         probe_scheduler(scheduler)
     try:

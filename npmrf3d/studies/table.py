@@ -10,13 +10,14 @@ import csv
 import json
 import math
 import pathlib
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
+from ..errors import ParameterError
 from ..io.files import atomic_write
 from .grid import RunSpec
 
-__all__ = ["BASE_COLUMNS", "FINISHED_FILES", "as_float", "is_finished", "metric_columns", "unique", "load_row", "make_row", "read_results",
+__all__ = ["BASE_COLUMNS", "FINISHED_FILES", "as_float", "is_finished", "metric_columns", "unique", "load_row", "make_row", "read_results", "read_results_checked",
            "separations", "summarise", "write_csv"]
 
 #: The files that mark a finished run.
@@ -107,6 +108,49 @@ def read_results(path) -> list[dict]:
     """Rows of a ``results.csv`` (numbers stay strings)."""
     with open(path, newline="", encoding="utf-8") as handle:
         return list(csv.DictReader(handle))
+
+
+#: Columns of results.csv that every reader of it needs.
+REQUIRED_COLUMNS = ("run_id", "exemplar", "method", "seed", "size", "levels", "status")
+#: Columns of results.csv that hold text; every other column holds numbers.
+TEXT_COLUMNS = ("study", "run_id", "exemplar", "method", "algorithm", "status", "error")
+
+
+def read_results_checked(path, warn: Callable[[str], None] | None = None) -> list[dict]:
+    """:func:`read_results`, read defensively (for the report).
+
+    A file without the :data:`REQUIRED_COLUMNS` is refused (:class:`ParameterError` naming the
+    file and the columns). A cell of a number column that is not a finite number (text,
+    ``nan``, ``inf``) becomes empty, shown as missing, and ``warn`` gets one line naming the
+    file, the row and the column (an empty cell is a missing number as written, no warning).
+
+    >>> import pathlib, tempfile
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "results.csv"
+    >>> _ = path.write_text("run_id,exemplar,method,seed,size,levels,status,mean_kl" + chr(10)
+    ...                     + "a,e,m,0,8,1,done,oops" + chr(10))
+    >>> [r["mean_kl"] for r in read_results_checked(path, print)]  # doctest: +ELLIPSIS
+    warning: ...results.csv: row 1 (a), column mean_kl: 'oops' is not a number; shown as missing
+    ['']
+    """
+    with open(path, newline="", encoding="utf-8") as handle:
+        reader = csv.DictReader(handle)
+        rows = list(reader)
+        columns = list(reader.fieldnames or ())
+    missing = [c for c in REQUIRED_COLUMNS if c not in columns]
+    if missing:
+        raise ParameterError(f"results file '{path}' lacks the column{'s' if len(missing) > 1 else ''} "
+                             f"{', '.join(missing)} (it was not written by 'npmrf3d study')")
+    for number, row in enumerate(rows, start=1):
+        for column in columns:
+            value = row.get(column)
+            if column in TEXT_COLUMNS or value is None or value == "":
+                continue
+            if not math.isfinite(as_float(value)):
+                row[column] = ""
+                if warn is not None:
+                    warn(f"warning: {path}: row {number} ({row.get('run_id') or '?'}), column "
+                         f"{column}: {value!r} is not a number; shown as missing")
+    return rows
 
 
 def as_float(value) -> float:
