@@ -136,13 +136,24 @@ def seal(arrays: Mapping[str, Any]) -> dict[str, np.ndarray]:
 
 
 def is_checkpoint_file(path: str | os.PathLike[str]) -> bool:
-    """Whether ``path`` is a file that npmrf3d wrote as a checkpoint: a zip archive (``.npz``)
-    holding the :data:`CHECKSUM` member. Reads the archive's directory only, not the arrays."""
+    """Whether ``path`` is a file that npmrf3d wrote as a checkpoint, intact or damaged: a zip
+    archive (``.npz``) holding the :data:`CHECKSUM` member, or, when its directory cannot be
+    read or lacks that member, a zip file whose bytes name it. Anything else is a file of
+    someone else's, which is neither read as a checkpoint nor replaced by one."""
     try:
         with zipfile.ZipFile(path) as archive:
-            return f"{CHECKSUM}.npy" in archive.namelist()
-    except (OSError, zipfile.BadZipFile, ValueError, EOFError):
+            if f"{CHECKSUM}.npy" in archive.namelist():
+                return True
+    except (zipfile.BadZipFile, ValueError, EOFError):
+        pass
+    except OSError:
         return False
+    try:
+        with open(path, "rb") as handle:
+            data = handle.read()
+    except OSError:
+        return False
+    return data.startswith(b"PK\x03\x04") and f"{CHECKSUM}.npy".encode() in data
 
 
 def _checksum(arrays: Mapping[str, np.ndarray]) -> str:
