@@ -153,5 +153,6 @@ def test_a_changed_value_with_a_valid_zip_is_caught_by_the_checksum(tmp_path):
 def test_a_checkpoint_without_checksum_is_not_ours(tmp_path):
     path = tmp_path / "foreign.npz"
     np.savez(path, volume=np.zeros(3))
-    with pytest.raises(ParameterError, match="not an npmrf3d checkpoint"):
+    with pytest.raises(ParameterError, match="is not a checkpoint file of npmrf3d") as info:
         io.load_checkpoint(path)
+    assert "delete" not in str(info.value)

@@ -234,8 +234,12 @@ def test_load_checkpoint_errors(tmp_path):
     with pytest.raises(ParameterError, match="checkpoint file .* does not exist"):
         io.load_checkpoint(tmp_path / "missing.npz")
     (tmp_path / "bad.npz").write_bytes(b"garbage")
-    with pytest.raises(ParameterError, match=r"checkpoint file '.*bad\.npz' cannot be read"):
+    with pytest.raises(ParameterError, match=r"checkpoint file '.*bad\.npz' is not a checkpoint file of npmrf3d"):
         io.load_checkpoint(tmp_path / "bad.npz")
+    good = io.save_checkpoint(tmp_path / "good.npz", level=1)
+    (tmp_path / "cut.npz").write_bytes(good.read_bytes()[:-40])  # one of ours, damaged
+    with pytest.raises(ParameterError, match=r"checkpoint file '.*cut\.npz' cannot be read .*delete it"):
+        io.load_checkpoint(tmp_path / "cut.npz")
 
 
 def test_package_versions():

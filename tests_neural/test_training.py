@@ -43,7 +43,7 @@ def test_a_checkpoint_of_another_run_is_refused(tmp_path, exemplar, tiny_options
     with pytest.raises(ParameterError, match="different configuration"):
         neural.train(exemplar, rng=1, checkpoint=path, **{**tiny_options, "batch": 2})
     path.write_bytes(b"not a checkpoint")
-    with pytest.raises(ParameterError, match="cannot be read"):
+    with pytest.raises(ParameterError, match="is not a checkpoint file of npmrf3d"):
         neural.train(exemplar, rng=1, checkpoint=path, **tiny_options)
 
 

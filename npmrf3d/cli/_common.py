@@ -18,7 +18,8 @@ import numpy as np
 from tqdm import tqdm
 
 from ..errors import ParameterError
-from ..io.runs import RUN_FILES, OutputLock, run_record, write_run
+from ..io.checkpoints import is_checkpoint_file
+from ..io.runs import RUN_DERIVED, RUN_FILES, OutputLock, check_replaceable, run_record, write_run
 from ..methods import check_resources, estimate
 from ..model.exemplar import exemplar_source, resolve_exemplars
 from ..model.neighbourhood import VIEWS
@@ -196,22 +197,47 @@ def check_out(out: pathlib.Path, overwrite: bool, files: tuple[str, ...] = RUN_F
 
 
 def output_folder(args: argparse.Namespace) -> pathlib.Path:
-    """The checked ``--out`` folder of a command that writes a run folder."""
+    """The checked ``--out`` folder of a command that writes a run folder (with ``--overwrite``
+    never the working folder, one of its parents or the home folder: the swap would pull the
+    folder away from under the calling shell)."""
     if not args.out.strip():
         raise ParameterError("--out must name a folder; got an empty string")
     out = pathlib.Path(args.out)
+    if args.overwrite:
+        check_replaceable(out)
     check_out(out, args.overwrite)
     return out
 
 
-def check_checkpoint(path: pathlib.Path | None) -> None:
-    """A ``--checkpoint`` must be a file (or not exist yet) in an existing folder."""
+def check_checkpoint(path: pathlib.Path | None, out: pathlib.Path | None = None, *,
+                     out_file: bool = False) -> None:
+    """A ``--checkpoint`` must be a file (or not exist yet) in an existing folder; an existing
+    file must be a checkpoint of npmrf3d (a file of the user's is never read as one, nor
+    replaced); and it must not clash with the output ``out``: not ``out`` itself, not a folder
+    holding it, not one of the files a run folder ``out`` receives or an overwrite drops
+    (``out_file``: ``out`` is a file, e.g. a model, and only the same path clashes). Checked
+    before any work."""
     if path is None:
         return
     if path.exists() and not path.is_file():
         raise ParameterError(f"checkpoint '{path}' exists and is not a file")
     if not path.absolute().parent.is_dir():
         raise ParameterError(f"folder of checkpoint '{path}' does not exist")
+    if out is not None:
+        mine, theirs = path.resolve(), out.resolve()
+        if mine == theirs:
+            raise ParameterError(f"checkpoint '{path}' is the output '{out}' itself; "
+                                 "choose a checkpoint path apart from --out")
+        if not out_file and mine in theirs.parents:
+            raise ParameterError(f"checkpoint '{path}' would have to be a folder holding the output "
+                                 f"folder '{out}'; choose a checkpoint path apart from --out")
+        if not out_file and mine.parent == theirs and mine.name in (*RUN_FILES, *RUN_DERIVED):
+            raise ParameterError(f"checkpoint '{path}' is the run file {mine.name} of the output "
+                                 f"folder '{out}', which the run writes or replaces; choose "
+                                 "another checkpoint path")
+    if path.is_file() and not is_checkpoint_file(path):
+        raise ParameterError(f"checkpoint '{path}' is not a checkpoint file of npmrf3d (it is "
+                             "left untouched); choose another --checkpoint")
 
 
 def add_exemplar_kind(group) -> None:
@@ -241,7 +267,7 @@ def prepare_run(args: argparse.Namespace, method, config):
     the exemplars. Returns (out, checkpoint, per-view exemplars, per-view names for run.json)."""
     out = output_folder(args)
     checkpoint = pathlib.Path(args.checkpoint) if getattr(args, "checkpoint", None) is not None else None
-    check_checkpoint(checkpoint)
+    check_checkpoint(checkpoint, out)
     exemplar, per_view_sources, source_names = view_sources(args)
     per_view = resolve_exemplars(exemplar, per_view_sources, config.views, **method.fit(config),
                                  exemplar_kind=getattr(args, "exemplar_kind", "auto"))

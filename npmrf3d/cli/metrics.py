@@ -4,11 +4,17 @@ Prints a table (one row per view plus the mean, one column per metric of
 :data:`npmrf3d.analysis.metrics.METRICS`) and writes ``histograms.png`` and ``metrics.json`` (last) into
 the output folder, each atomically and only after every number was computed, so a user error
 leaves no file behind. See ``docs/metrics.md`` for the definitions.
+
+A run folder it reads or writes (one holding a run's files) is locked for the whole command
+(:class:`npmrf3d.io.runs.OutputLock`, the lock every run takes on its ``--out``): a run that
+is writing or ``--overwrite``-replacing the folder makes the command refuse at once, and no run
+can replace the folder while the metrics of its volume are computed and written.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import pathlib
 import shutil
@@ -24,6 +30,7 @@ from .. import io
 from ..analysis import metrics
 from ..analysis.metrics import METRICS
 from ..errors import ParameterError
+from ..io.runs import RUN_FILES, OutputLock
 from ..model.exemplar import BUNDLED_PREFIX, exemplar_source, load_exemplar
 from ..model.neighbourhood import VIEWS
 from ..plotting import save_figure
@@ -214,13 +221,35 @@ def _write(out: pathlib.Path, fig, record: dict[str, Any]) -> None:
         raise
 
 
+def _run_folders(*folders: pathlib.Path) -> list[pathlib.Path]:
+    """The distinct folders among ``folders`` that hold a run's files (what a run may replace)."""
+    found = {}
+    for folder in folders:
+        if folder.is_dir() and any((folder / name).exists() for name in RUN_FILES):
+            found.setdefault(folder.resolve(), folder)
+    return [found[key] for key in sorted(found)]
+
+
 def run(args: argparse.Namespace, argv: list[str]) -> int:
     """Handler of ``npmrf3d metrics``; returns the exit code (errors raise ParameterError)."""
     views = check.views(args.views, VIEWS)
     if args.out is not None and not args.out.strip():
         raise ParameterError("--out must name a folder; got an empty string")
+    if not args.volume.strip():
+        raise ParameterError("volume file name is empty")
     out = pathlib.Path(args.out) if args.out is not None else pathlib.Path(args.volume).parent
     check_out(out, args.overwrite, files=OUT_FILES, what="metrics")
+    with contextlib.ExitStack() as locks:
+        for folder in _run_folders(pathlib.Path(args.volume).parent, out):
+            locks.enter_context(OutputLock(
+                folder, what="run folder",
+                advice="wait for that run to finish, then run npmrf3d metrics again"))
+        check_out(out, args.overwrite, files=OUT_FILES, what="metrics")  # again, under the lock
+        return _measure(args, argv, views, out)
+
+
+def _measure(args: argparse.Namespace, argv: list[str], views: tuple[str, ...], out: pathlib.Path) -> int:
+    """Read, compare, write: the body of :func:`run`, under the locks of the run folders."""
     volume, stored = _read_volume(args.volume)
     exemplars, sources = _read_exemplars(args, views)
     result = metrics.evaluate(volume, exemplars, views=views)

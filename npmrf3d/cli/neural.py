@@ -23,7 +23,7 @@ from ..methods.neural import _extra
 from ..methods.neural.config import DESCRIPTORS, ZARR_BLOCK, ZARR_WORKERS, NeuralConfig
 from ..model.exemplar import BUNDLED_PREFIX
 from ..model.neighbourhood import VIEWS
-from ._common import CountProgress, choices, default, parse_size, say, view_sources
+from ._common import CountProgress, check_checkpoint, choices, default, parse_size, say, view_sources
 
 __all__ = ["register"]
 
@@ -77,8 +77,7 @@ def _train(args: argparse.Namespace, argv) -> int:
     out = pathlib.Path(args.out)
     _check_new_file(out, args.overwrite, "model file")
     checkpoint = None if args.checkpoint is None else pathlib.Path(args.checkpoint)
-    if checkpoint is not None and not checkpoint.absolute().parent.is_dir():
-        raise ParameterError(f"folder of checkpoint '{checkpoint}' does not exist")
+    check_checkpoint(checkpoint, out, out_file=True)
     exemplar, per_view_sources, _names = view_sources(args)
     _threads(args.threads)
     bar = CountProgress("train", unit="step", symbol="loss", enabled=not args.quiet)

@@ -168,7 +168,7 @@ def _handler(args: argparse.Namespace, argv: list[str], method) -> int:
         raise ParameterError(message) from None
     out = output_folder(args)
     checkpoint = pathlib.Path(args.checkpoint) if args.checkpoint is not None else None
-    check_checkpoint(checkpoint)
+    check_checkpoint(checkpoint, out)
     source, _ = exemplar_source(args.exemplar)
     exemplar = load_volume_exemplar(source, exemplar_kind=args.exemplar_kind,
                                     spacing=_spacing(args.spacing))

@@ -14,6 +14,7 @@ import os
 import pathlib
 import shutil
 import socket
+import stat
 import tempfile
 from collections.abc import Mapping
 from datetime import datetime, timezone
@@ -25,7 +26,8 @@ from ..errors import ParameterError
 from ..plotting import preview_figure, save_figure
 from .files import as_volume, json_text, package_versions, to_jsonable, write_volume_tiff
 
-__all__ = ["OutputLock", "RUN_FILES", "clean_stale_staging", "config_dict", "run_record", "write_run"]
+__all__ = ["OutputLock", "RUN_DERIVED", "RUN_FILES", "check_replaceable", "clean_stale_staging",
+           "config_dict", "run_record", "write_run"]
 
 #: The files that make up one run folder, in the order they are moved into place
 #: (``run.json`` last, so its presence marks a complete run).
@@ -87,7 +89,7 @@ def run_record(command: str, result, *, exemplars: Mapping[str, str], threads: i
 
 
 #: Files of an old run that an overwrite drops with it (they describe the old volume).
-_RUN_DERIVED = ("metrics.json", "histograms.png")
+RUN_DERIVED = ("metrics.json", "histograms.png")
 
 
 def _pid_alive(pid: int) -> bool:
@@ -128,10 +130,21 @@ class OutputLock:
     :class:`ParameterError` while the owner lives; a lock left by a killed run on this host (its
     PID is dead) is taken over; a lock from another host (a shared file system) is never taken
     over. Re-entrant within one process. Use as a context manager.
+
+    Parameters
+    ----------
+    out_dir : path
+    what : str
+        What the folder is to the caller, for the refusal (a writer's ``output folder``, a
+        reader's ``run folder``).
+    advice : str
+        What to do about a live owner, ending the refusal.
     """
 
-    def __init__(self, out_dir: str | os.PathLike[str]):
+    def __init__(self, out_dir: str | os.PathLike[str], *, what: str = "output folder",
+                 advice: str = "wait for it to finish or choose another --out"):
         self.target = pathlib.Path(out_dir).absolute()
+        self.what, self.advice = what, advice
         self.path = None
 
     def __enter__(self) -> "OutputLock":
@@ -156,15 +169,15 @@ class OutputLock:
                     who = f"PID {owner}" if owner is not None else "another run"
                     who += f" on {host}" if host and host != socket.gethostname() else ""
                     raise ParameterError(
-                        f"output folder '{self.target}' is in use by another run ({who}, lock "
-                        f"file '{path}'); wait for it to finish or choose another --out") from None
+                        f"{self.what} '{self.target}' is in use by another run ({who}, lock "
+                        f"file '{path}'); {self.advice}") from None
                 try:  # the owner died: its lock is stale
                     path.unlink()
                 except FileNotFoundError:
                     pass
                 continue
             except OSError as exc:
-                raise ParameterError(f"output folder '{self.target}' cannot be locked: "
+                raise ParameterError(f"{self.what} '{self.target}' cannot be locked: "
                                      f"{exc.strerror or exc}") from None
             with os.fdopen(fd, "w", encoding="ascii") as handle:
                 handle.write(f"{os.getpid()} {socket.gethostname()}\n")
@@ -172,8 +185,8 @@ class OutputLock:
             self.path = path
             clean_stale_staging(self.target)
             return
-        raise ParameterError(f"output folder '{self.target}' cannot be locked (lock file '{path}' "
-                             f"keeps reappearing); choose another --out")
+        raise ParameterError(f"{self.what} '{self.target}' cannot be locked (lock file '{path}' "
+                             f"keeps reappearing); {self.advice}")
 
     def release(self) -> None:
         path, self.path = self.path, None
@@ -227,6 +240,38 @@ def glob_escape(text: str) -> str:
     return "".join(f"[{c}]" if c in "*?[" else c for c in text)
 
 
+def check_replaceable(out_dir: str | os.PathLike[str]) -> None:
+    """Refuse to replace ``out_dir`` by a new run folder (an overwrite swaps the whole folder)
+    when it is the current working folder, one of its parents, or the home folder: the calling
+    shell would be left in a deleted folder (and a home folder is nobody's run folder)."""
+    target = pathlib.Path(out_dir).resolve()
+    try:
+        cwd = pathlib.Path.cwd().resolve()
+    except OSError:  # the working folder is gone already
+        cwd = None
+    try:
+        home = pathlib.Path.home().resolve()
+    except (RuntimeError, KeyError, OSError):  # no home folder known
+        home = None
+    reason = None
+    if target == home:
+        reason = "the home folder"
+    elif cwd is not None and target == cwd:
+        reason = "the current working folder"
+    elif cwd is not None and target in cwd.parents:
+        reason = "a parent of the current working folder"
+    if reason is not None:
+        raise ParameterError(f"output folder '{out_dir}' is {reason}; --overwrite replaces the "
+                             "whole folder, so choose a folder of its own with --out")
+
+
+def _umask() -> int:
+    """The process's umask (read by setting it and putting it back)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 def write_run(
     out_dir: str | os.PathLike[str],
     *,
@@ -272,13 +317,16 @@ def write_run(
     ------
     ParameterError
         If ``out_dir`` is an existing file, already holds a run and ``overwrite`` is False, or
-        another run holds its lock.
+        another run holds its lock; or ``overwrite`` is set and ``out_dir`` is the working
+        folder, one of its parents or the home folder (:func:`check_replaceable`).
     TypeError
         If ``record`` cannot be converted to JSON (checked before anything is written).
     """
     out_dir = pathlib.Path(out_dir)
     volume = as_volume(volume)
     text = json_text(record)  # fail on a bad record before touching the disk
+    if overwrite:
+        check_replaceable(out_dir)
     with OutputLock(out_dir):
         if out_dir.exists() and not out_dir.is_dir():
             raise ParameterError(f"output folder '{out_dir}' exists and is not a folder")
@@ -294,6 +342,10 @@ def write_run(
         staging = pathlib.Path(tempfile.mkdtemp(prefix=f".{target.name}.partial-{os.getpid()}-",
                                                 dir=anchor))
         try:
+            # mkdtemp makes 0700; the folder gets the mode mkdir would give it, or keeps its own
+            mode = (stat.S_IMODE(target.stat().st_mode) if previous and overwrite
+                    else 0o777 & ~_umask())
+            os.chmod(staging, mode)
             np.save(staging / "volume.npy", volume, allow_pickle=False)
             write_volume_tiff(staging / "volume.tif", volume)
             save_figure(preview_figure(volume, exemplars, title=title), staging / "preview.png")
@@ -318,7 +370,7 @@ def _move_into_place(staging: pathlib.Path, target: pathlib.Path, anchor: pathli
         return
     # overwrite: the new folder is complete; carry the old folder's other files over, then swap
     carried = [e.name for e in target.iterdir()
-               if e.name not in RUN_FILES and e.name not in _RUN_DERIVED]
+               if e.name not in RUN_FILES and e.name not in RUN_DERIVED]
     for name in carried:
         os.rename(target / name, staging / name)
     old = pathlib.Path(tempfile.mkdtemp(prefix=f".{target.name}.old-{os.getpid()}-", dir=anchor))

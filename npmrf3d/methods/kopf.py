@@ -68,7 +68,7 @@ from .. import _validation as check
 from .._kernels import _jit
 from ..config import DEFAULT_SIZE, SynthesisMethod, SynthesisResult
 from ..model.neighbourhood import VIEW_AXES, VIEWS
-from ..model.pyramid import Levels, run_pyramid
+from ..model.pyramid import ArraySpec, Levels, run_pyramid
 from ..resources import kopf_estimate
 
 # The building blocks (search, IRLS optimisation, histograms, up-sampling, constraints) live in
@@ -368,6 +368,9 @@ class _KopfLevels(Levels):
 
     def from_arrays(self, arrays):
         return np.ascontiguousarray(arrays["volume"], dtype=np.float32)
+
+    def array_specs(self, level, shape):
+        return {"volume": ArraySpec((*shape, self.channels), np.float32)}
 
 
 def run_kopf(config: KopfConfig, per_view: Mapping[str, np.ndarray], rng: np.random.Generator, *,

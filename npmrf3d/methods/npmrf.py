@@ -16,7 +16,7 @@ from ..model.exemplar import make_labels
 from ..model.heuristics import DECISIONS, get_heuristic
 from ..model.neighbourhood import colour_classes
 from ..model.parzen import PRUNE, adaptive_floor, build_view_models
-from ..model.pyramid import Levels, LevelState, random_state, run_pyramid, upsample
+from ..model.pyramid import ArraySpec, Levels, LevelState, random_state, run_pyramid, upsample
 from ..model.relax import RELAXATIONS
 from ..model.relax.icm import expected_sweeps
 from ..resources import coherent_estimate, npmrf_estimate, one_after_another
@@ -216,6 +216,11 @@ class _NpmrfLevels(Levels):
 
     def from_arrays(self, arrays):
         return LevelState(arrays["volume"], arrays["labels_volume"], arrays["temps"], arrays["inherited"])
+
+    def array_specs(self, level, shape):
+        return {"volume": ArraySpec((*shape, self.labels.shape[1]), np.float32),
+                "labels_volume": ArraySpec(shape, np.int32, 0, len(self.labels) - 1),
+                "temps": ArraySpec(shape, np.float32, 0.0), "inherited": ArraySpec(shape, np.bool_)}
 
 
 def run(config: SynthesisConfig, per_view: dict[str, np.ndarray], rng: np.random.Generator, *,

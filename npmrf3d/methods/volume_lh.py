@@ -67,7 +67,7 @@ from ..model.phases import (
     phase_footprint,
     phase_membership,
 )
-from ..model.pyramid import Levels, run_pyramid
+from ..model.pyramid import ArraySpec, Levels, run_pyramid
 from ..resources import Estimate
 from ._api import prepare
 
@@ -600,6 +600,11 @@ class CoordinateLevels(Levels):
         if self.control is not None and prices.size:
             self.control = PhaseControl.from_array(prices, len(self.membership[1]))
         return np.asarray(arrays["coords"], dtype=np.int64)
+
+    def array_specs(self, level, shape):
+        prices = (0,) if self.control is None else self.control.to_array().shape
+        return {"coords": ArraySpec((*shape, 3), np.int64, self.lo, self.hi),
+                "prices": ArraySpec(prices, np.float64)}
 
 
 def _exemplar(per_view, config: VolumeConfig) -> np.ndarray:

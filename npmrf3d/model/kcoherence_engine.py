@@ -43,7 +43,7 @@ from .exemplar import pack_rows
 from .kcoherence_icm import IcmLevel, IcmSchedule, inherited_mask
 from .neighbourhood import VIEW_AXES
 from .phases import PhaseControl, bin_phase_error, bin_phases, phase_prior_target
-from .pyramid import Levels
+from .pyramid import ArraySpec, Levels
 
 __all__ = ["CANDIDATE_HEURISTICS", "CANDIDATE_SAMPLERS", "COHERENT_HEURISTICS", "PER_VIEW_HEURISTICS",
            "CandidateDecision", "CoherentState", "KCoherenceLevels", "ValueHistogram",
@@ -439,3 +439,17 @@ class KCoherenceLevels(Levels):
         return CoherentState(volume, np.ascontiguousarray(arrays["sources"], dtype=np.int32),
                              [int(w) for w in np.atleast_1d(arrays["widths"])],
                              np.ascontiguousarray(temps, dtype=np.float32), np.asarray(inherited, dtype=bool))
+
+    def array_specs(self, level, shape):
+        f = 2 ** level  # each view's exemplar at this level (coh.downsample_exemplar)
+        heights = np.array([self.per_view[v].shape[0] // f for v in self.views], dtype=np.int64)
+        widths = np.array([self.per_view[v].shape[1] // f for v in self.views], dtype=np.int64)
+        last = (heights * widths - 1).reshape(-1, 1, 1, 1)
+        specs = {"volume": ArraySpec((*shape, self.distinct[0].shape[2]), np.float32),
+                 "sources": ArraySpec((len(self.views), *shape), np.int32, 0, last),
+                 "widths": ArraySpec((len(self.views),), np.int64, widths, widths),
+                 "temps": ArraySpec(shape, np.float32, 0.0, 1.0), "inherited": ArraySpec(shape, np.bool_)}
+        if self.control is not None:
+            specs["phase_control"] = ArraySpec(np.stack([c.to_array() for c in self.control]).shape,
+                                               np.float64)
+        return specs

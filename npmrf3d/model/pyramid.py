@@ -11,7 +11,9 @@ down to 0. The voxel of level ``l - 1`` at ``2 * (i, j, k)`` is the *inherited* 
 the k-coherence engine of Chen–Wang and the coherent sampler, the coordinate pyramid of
 volume-lh and npmrf-3d): initialise the coarsest level, up-sample into each finer one, relax
 it, report progress, write a checkpoint after each level and resume from one. A method gives
-it a :class:`Levels` object that knows how to do those steps for its own state.
+it a :class:`Levels` object that knows how to do those steps for its own state, and what a
+checkpoint of each level must hold (:meth:`Levels.array_specs`): a checkpoint is resumed only
+when every member is what that level of this run writes.
 """
 
 from __future__ import annotations
@@ -28,10 +30,11 @@ import numpy as np
 from scipy import ndimage
 
 from .._kernels._jit import thread_count
-from ..io.checkpoints import load_run_state, save_run_state
+from ..io.checkpoints import (KEY, check_array, check_members, check_rng_state, load_run_state,
+                              refusal, save_run_state)
 
-__all__ = ["INHERIT", "LABEL_UPSAMPLING", "LevelState", "Levels", "UPSAMPLERS", "UPSAMPLING",
-           "level_shape", "random_state", "run_pyramid", "upsample"]
+__all__ = ["ArraySpec", "INHERIT", "LABEL_UPSAMPLING", "LevelState", "Levels", "UPSAMPLERS",
+           "UPSAMPLING", "level_shape", "random_state", "run_pyramid", "upsample"]
 
 INHERIT = ("resynth", "fixed")
 
@@ -136,6 +139,20 @@ def upsample(parent: LevelState, mode: str, labels: np.ndarray, label_freq: np.n
 # --------------------------------------------------------------------------- the level loop
 
 
+class ArraySpec(NamedTuple):
+    """What one array of a level's checkpoint must be: its exact shape and dtype, and bounds of
+    its values (inclusive, broadcast against the array; None: any finite value)."""
+
+    shape: tuple[int, ...]
+    dtype: Any
+    low: Any = None
+    high: Any = None
+
+
+#: Members every checkpoint of the level loop holds besides the method's arrays.
+LOOP_MEMBERS = (KEY, "level", "rng_state", "history", "timings", "stats")
+
+
 class Levels(ABC):
     """What a multi-scale method tells :func:`run_pyramid` (override every method).
 
@@ -192,6 +209,13 @@ class Levels(ABC):
     def from_arrays(self, arrays: dict[str, np.ndarray]) -> Any:
         """Inverse of :meth:`to_arrays`: restores the method's own state, returns the level's."""
 
+    @abstractmethod
+    def array_specs(self, level: int, shape: tuple[int, int, int]) -> dict[str, ArraySpec]:
+        """What :meth:`to_arrays` writes after relaxing ``level`` (grid ``shape``): name ->
+        :class:`ArraySpec`, every name it writes and nothing else. A checkpoint is resumed only
+        when it holds exactly these (and :attr:`fingerprint`), so :meth:`from_arrays` never
+        sees an array of another shape, dtype or range."""
+
 
 @dataclass
 class PyramidRun:
@@ -233,7 +257,7 @@ def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressC
     history: list[list[float]] = []
     state = None
     first_level = method.levels - 1
-    resumed = _load(checkpoint, method)
+    resumed = _load(checkpoint, method, rng)
     if resumed is not None:
         state, done_level, rng_state, history, timings, stats = resumed
         rng.bit_generator.state = rng_state
@@ -266,11 +290,46 @@ def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressC
     return PyramidRun(state, history, timings, stats)
 
 
-def _load(path, method: Levels):
-    """State after the last finished level, or None when there is nothing to resume."""
+def _load(path, method: Levels, rng: np.random.Generator):
+    """State after the last finished level, or None when there is nothing to resume.
+
+    Past its checksum and identity (:func:`npmrf3d.io.checkpoints.load_run_state`) every member
+    is checked against what this run writes at the saved level; anything else is refused with
+    the one checkpoint refusal (:func:`npmrf3d.io.checkpoints.refusal`)."""
     data = load_run_state(path, method.key, fingerprint=method.fingerprint)
     if data is None:
         return None
-    return (method.from_arrays(data), int(data["level"]), json.loads(str(data["rng_state"])),
-            json.loads(str(data["history"])), json.loads(str(data["timings"])),
-            json.loads(str(data["stats"])))
+    level = data.get("level")
+    if isinstance(level, bool) or not isinstance(level, int) or not 0 <= level < method.levels:
+        raise refusal(path, f"'level' is {level!r}; this run has levels 0 to {method.levels - 1}")
+    specs = method.array_specs(level, level_shape(method.size, level))
+    check_members(path, data, [*LOOP_MEMBERS, *method.fingerprint, *specs])
+    arrays = {name: check_array(path, data, name, *spec) for name, spec in specs.items()}
+    rng_state = check_rng_state(path, data["rng_state"], rng.bit_generator)
+    history = _json_member(path, data, "history", list)
+    if len(history) != method.levels - level or not all(
+            isinstance(h, list) and all(_is_number(v) for v in h) for h in history):
+        raise refusal(path, f"'history' is not {method.levels - level} lists of numbers, one per "
+                            f"level finished")
+    timings = _json_member(path, data, "timings", dict)
+    if not all(_is_number(v) for v in timings.values()):
+        raise refusal(path, "'timings' holds a value that is not a number")
+    stats = _json_member(path, data, "stats", dict)
+    if not isinstance(stats.get("levels"), dict):
+        raise refusal(path, "'stats' has no per-level statistics")
+    return method.from_arrays(arrays), level, rng_state, history, timings, stats
+
+
+def _json_member(path, data, name: str, kind: type):
+    """Member ``name``: JSON text of a ``kind`` (list or dict)."""
+    try:
+        value = json.loads(data[name]) if isinstance(data[name], str) else None
+    except ValueError:
+        value = None
+    if not isinstance(value, kind):
+        raise refusal(path, f"'{name}' is not the JSON text of a {kind.__name__}")
+    return value
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
