@@ -76,7 +76,7 @@ def test_synth_help_lists_every_option_with_its_default(capsys):
     for expected in ("(default: 7)", "(default: 64)", "(default: 3)", "(default: ML_H2b)",
                      "(default: icm)", "(default: -3.0)", "(default: 0.95)", "(default: 30)",
                      "1/8 for icm and 8/8 for anneal", "(default: resynth)", "(default: front,right,top)",
-                     "(default: none = coherent)", "(default: 0)", "(default: npmrf3d-out)",
+                     "(default: none = coherent)", "(default: 0)", "(default: npmrf3d-synth-out)",
                      "(default: heat-bath)", "(default: geometric)", "(default: 10)",
                      "(default: 0.05)", "(default: exemplar)", "this project's addition",
                      "needs ML_H2a or ML_H2b", "word for word", "docs/quality.md",
