@@ -344,7 +344,7 @@ BAD_INPUTS = {
     "coherent-anneal-with-H1": (lambda t: ["--heuristic", "ML_H1a", "--relaxation", "anneal"],
                                 "ML_H1a cannot drive annealing"),
     "coherent-xi-without-temperatures": (lambda t: ["--xi", "-1"], "needs per-voxel temperatures"),
-    "anneal-option-with-icm": (lambda t: ["--proposal", "labels"], "option proposal does not apply to support 'coherent'"),
+    "anneal-option-with-icm": (lambda t: ["--proposal", "labels"], "option --proposal does not apply to support 'coherent'"),
     "variant-contradicts-support": (lambda t: ["--variant", "literal", "--support", "coherent"],
                                     "contradicts"),
     "coherent-anneal-hot-end": (lambda t: ["--relaxation", "anneal", "--variant", "coherent", "--t0", "0.5",
