@@ -144,8 +144,11 @@ def exemplar_fits(exemplar: np.ndarray, *, window: int, levels: int, toroidal: b
         )
 
 
-def size(value, *, levels: int, window: int) -> tuple[int, int, int]:
-    """Volume size: one int (a cube) or three; divisible by ``2**(levels - 1)``."""
+def size(value, *, levels: int, window: int | None = None,
+         coarsest: int | None = None) -> tuple[int, int, int]:
+    """Volume size: one int (a cube) or three; divisible by ``2**(levels - 1)``; the coarsest
+    level holds ``window // 2 + 1`` voxels per side, or ``coarsest`` where the method's rule is
+    not a window's (the message then names no window)."""
     if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
         dims = (int(value),) * 3
     else:
@@ -156,16 +159,17 @@ def size(value, *, levels: int, window: int) -> tuple[int, int, int]:
         if len(dims) != 3:
             fail(f"size must be an integer or three integers; got {value!r}")
     f = 2 ** (levels - 1)
-    radius = window // 2
+    need = coarsest if coarsest is not None else window // 2 + 1
     for n in dims:
         if n < 1:
             fail(f"size must be positive; got {value!r}")
         if n % f:
             fail(f"size {n} is not divisible by 2**(levels-1) = {f} (levels={levels}); "
                  f"choose a multiple of {f} or fewer levels")
-        if n // f < radius + 1:
-            fail(f"size {n} is too small for window {window} with {levels} levels: the coarsest "
-                 f"level has {n // f} voxels per side, needs at least {radius + 1}")
+        if n // f < need:
+            what = f"window {window} with {levels} levels" if coarsest is None else f"{levels} levels"
+            fail(f"size {n} is too small for {what}: the coarsest level has {n // f} voxels per "
+                 f"side, needs at least {need}; choose a larger size or fewer levels")
     return dims
 
 

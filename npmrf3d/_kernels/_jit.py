@@ -17,11 +17,42 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import NamedTuple
 
-import numba
-import scipy.linalg.cython_blas  # noqa: F401  (loads the BLAS that np.dot in a kernel calls,
+from ..errors import ParameterError
+
+
+def thread_setting_problem(text: str | None) -> str | None:
+    """One line about a ``NUMBA_NUM_THREADS`` value numba cannot start with (0, negative, not a
+    number), else None."""
+    if text is None or not text.strip():
+        return None
+    try:
+        threads = int(text)
+    except ValueError:
+        threads = 0
+    if threads >= 1:
+        return None
+    return (f"the environment variable NUMBA_NUM_THREADS must be a positive integer (the threads "
+            f"of the compiled loops); got {text!r}: unset it or set it to 1 or more")
+
+
+#: What is wrong with this process's ``NUMBA_NUM_THREADS`` (None: nothing). numba would fail at
+#: import with a traceback, so the value is taken out of the environment before numba is
+#: imported, and every run refuses to start with this message (:func:`check_thread_setting`).
+THREAD_SETTING_PROBLEM = thread_setting_problem(os.environ.get("NUMBA_NUM_THREADS"))
+if THREAD_SETTING_PROBLEM is not None:
+    del os.environ["NUMBA_NUM_THREADS"]
+
+import numba  # noqa: E402  (after the check above)
+import scipy.linalg.cython_blas  # noqa: E402, F401  (loads the BLAS that np.dot in a kernel calls,
 
 # so that threadpoolctl finds it and limits it: see single_threaded_blas)
-from threadpoolctl import threadpool_limits
+from threadpoolctl import threadpool_limits  # noqa: E402
+
+
+def check_thread_setting() -> None:
+    """Raise :class:`~npmrf3d.errors.ParameterError` if ``NUMBA_NUM_THREADS`` was unusable."""
+    if THREAD_SETTING_PROBLEM is not None:
+        raise ParameterError(THREAD_SETTING_PROBLEM)
 
 
 def _default_cache_dir() -> str:
@@ -80,6 +111,7 @@ def use_threads(threads: int | None) -> int:
 
 def thread_count() -> int:
     """Number of threads numba's parallel loops use in this process."""
+    check_thread_setting()
     return int(numba.get_num_threads())
 
 

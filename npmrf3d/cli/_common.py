@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import errno
+import math
 import os
 import pathlib
 import sys
@@ -26,6 +27,7 @@ from ..model.neighbourhood import VIEWS
 from ..model.pyramid import level_shape
 from ..resources import available_memory, format_bytes
 from . import _interrupt
+from ._options import speak_options
 
 PROG = "npmrf3d"
 
@@ -147,11 +149,10 @@ def say(text: str, *, error: bool = False) -> None:
 
 
 def error(message: str, option_names=()) -> int:
-    """Print ``npmrf3d: error: <message>`` on one line (library names turned into options)."""
+    """Print ``npmrf3d: error: <message>`` on one line (library names turned into options by
+    :func:`speak_options`)."""
     line = " ".join(part.strip() for part in str(message).splitlines() if part.strip())
-    for name in option_names:
-        if line.startswith(f"{name} must "):
-            line = "--" + name.replace("_", "-") + line[len(name):]
+    line = speak_options(line, option_names)
     say(f"{PROG}: error: {line or 'invalid input'}", error=True)
     return 2
 
@@ -365,7 +366,8 @@ class LevelProgress:
             side = f"{shape[0]}^3" if len(set(shape)) == 1 else "x".join(map(str, shape))
             self.bar = tqdm(total=max_sweeps, desc=f"level {level} ({side})", unit=self.unit,
                             file=sys.stderr, leave=True, dynamic_ncols=True)
-        self.bar.set_postfix({self.symbol: f"{temperature:.4g}"}, refresh=False)
+        if not math.isnan(temperature):  # nan: no value yet at the start of a level
+            self.bar.set_postfix({self.symbol: f"{temperature:.4g}"}, refresh=False)
         if max_sweeps != self.bar.total:  # the method corrected its expected step count
             self.bar.total = max_sweeps
         if sweep > self.bar.n:

@@ -50,9 +50,14 @@ def _option(name: str) -> str:
 
 
 def add_method_parser(commands, name: str, method, *, help: str, description: str,
-                      out: str, field_help: dict[str, str], formatter_class) -> argparse.ArgumentParser:
+                      out: str, field_help: dict[str, str], formatter_class,
+                      refuse=None) -> argparse.ArgumentParser:
     """Add sub-command ``name`` that runs ``method`` (a :class:`npmrf3d.config.SynthesisMethod`);
-    ``field_help`` explains each configuration field (every field must have an entry)."""
+    ``field_help`` explains each configuration field (every field must have an entry);
+    ``refuse(args, config, per_view)``, when given, raises a
+    :class:`~npmrf3d.errors.ParameterError` for options written on the command line that the
+    configuration or the exemplars leave without effect (before any work, also with
+    ``--dry-run``)."""
     parser = commands.add_parser(name, help=help, description=description, formatter_class=formatter_class)
     parser.add_argument(
         "exemplar", nargs="?", default=f"{BUNDLED_PREFIX}{data.DEFAULT_EXEMPLAR}", metavar="EXEMPLAR",
@@ -98,15 +103,11 @@ def add_method_parser(commands, name: str, method, *, help: str, description: st
             if value == fields[fname].default:
                 # the field's own object: per-level defaults then adapt to --levels (make_config)
                 options[fname] = fields[fname].default
-        try:
-            config = method.make_config(size=parse_size(args.size), views=args.views, seed=args.seed, **options)
-        except ParameterError as exc:
-            message = str(exc)
-            for fname in fields:
-                if message.startswith(f"{fname} must "):
-                    message = _option(fname) + message[len(fname):]
-            raise ParameterError(message) from None
+        # messages name library parameters; npmrf3d.cli.main turns them into these options
+        config = method.make_config(size=parse_size(args.size), views=args.views, seed=args.seed, **options)
         out_dir, checkpoint, per_view, sources = prepare_run(args, method, config)
+        if refuse is not None:
+            refuse(args, config, per_view)
         if args.dry_run:
             return dry_run(method, config, per_view)
         with claim_output(out_dir, args.overwrite):

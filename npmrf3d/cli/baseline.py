@@ -19,6 +19,7 @@ from ..config import DEFAULT_SIZE
 from ..errors import ParameterError
 from ..io.runs import RUN_FILES
 from ..methods import chen_wang
+from ..methods._kopf_steps import _constraint_arrays
 from ..methods.kopf import DEFAULT_ITERATIONS, METHOD, UPSAMPLING, KopfConfig
 from ..model.exemplar import BUNDLED_PREFIX
 from ..model.neighbourhood import VIEWS
@@ -35,6 +36,7 @@ from ._common import (
     write_result,
 )
 from ._generic import add_method_parser
+from ._options import given
 
 __all__ = ["register"]
 
@@ -150,7 +152,36 @@ def _add_chen_wang(commands, formatter_class, name: str = "chen-wang") -> None:
             "  npmrf3d chen-wang bundled:ihc --size 128 --window 8,6,4 --out ihc-cw"
         ),
         out="npmrf3d-chen-wang-out", field_help=CHEN_WANG_HELP, formatter_class=formatter_class,
+        refuse=refuse_chen_wang,
     )
+
+
+def refuse_coherence_bias(args: argparse.Namespace, config, per_view=None) -> None:
+    """``--coherence-bias`` weighs the global matches of ``--global-share``; with a share of 0
+    there are none, so a written ``--coherence-bias`` is refused (chen-wang and coherent)."""
+    if given(args, "coherence_bias") and config.global_share == 0:
+        raise ParameterError("--coherence-bias changes nothing with --global-share 0 (it weighs the "
+                             "global matches that --global-share asks for): drop --coherence-bias "
+                             "or set --global-share above 0")
+
+
+def refuse_chen_wang(args: argparse.Namespace, config, per_view: dict) -> None:
+    """What ``chen-wang`` refuses once the exemplars are read: :func:`refuse_coherence_bias`, and
+    a written ``--pca-dims`` above the dimensions of the smallest neighbourhoods (window x window
+    x channels at the level with the smallest window), which the PCA could not keep: the value
+    would be cut down at that level without a word. The default is kept as the most dimensions
+    each level may use."""
+    refuse_coherence_bias(args, config)
+    if not given(args, "pca_dims"):
+        return
+    w = min(config.window)
+    channels = min(a.shape[2] for a in per_view.values())
+    limit = w * w * channels
+    if config.pca_dims > limit:
+        raise ParameterError(
+            f"--pca-dims {config.pca_dims} is more than the neighbourhoods have: the {w}x{w} window "
+            f"of a {channels}-channel exemplar has {limit} dimensions; choose at most {limit} (or "
+            f"larger --window values)")
 
 #: One line per configuration field of :class:`npmrf3d.methods.chen_wang.ChenWangConfig`.
 CHEN_WANG_HELP = {
@@ -237,6 +268,13 @@ def _kopf(args: argparse.Namespace, argv: list[str]) -> int:
 
 def _run(args: argparse.Namespace, argv: list[str]) -> int:
     t_start = time.perf_counter()
+    if args.constraint_weight is not None and args.constraint is None:
+        raise ParameterError("--constraint-weight needs --constraint (the volume of target values "
+                             "it weighs): add --constraint or drop --constraint-weight")
+    if given(args, "histogram_bins") and args.histogram_weight == 0:
+        raise ParameterError("--histogram-bins changes nothing with --histogram-weight 0 (no "
+                             "histogram matching): drop --histogram-bins or set --histogram-weight "
+                             "above 0")
     constraint = io.read_volume(args.constraint) if args.constraint is not None else None
     weight = _constraint_weight(args.constraint_weight)
     config = METHOD.make_config(
@@ -247,6 +285,9 @@ def _run(args: argparse.Namespace, argv: list[str]) -> int:
         upsample=args.upsample, constrained=constraint is not None, seed=args.seed,
     )
     out, checkpoint, per_view, sources = prepare_run(args, METHOD, config)
+    if constraint is not None:  # its checks, before the work (the method repeats them)
+        channels = next(iter(per_view.values())).shape[2]
+        _constraint_arrays(constraint, weight, config.size, channels)
     if args.dry_run:
         return dry_run(METHOD, config, per_view)
     with claim_output(out, args.overwrite):

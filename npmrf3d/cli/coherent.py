@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from ..methods.npmrf_coherent import METHOD
 from ._generic import add_method_parser
-from .baseline import CHEN_WANG_HELP
+from .baseline import CHEN_WANG_HELP, refuse_coherence_bias
 
 __all__ = ["register", "FIELD_HELP"]
 
@@ -67,4 +67,5 @@ def register(commands, formatter_class) -> None:
             "  npmrf3d coherent wood.png --size 128 --out wood"
         ),
         out="npmrf3d-coherent-out", field_help=FIELD_HELP, formatter_class=formatter_class,
+        refuse=refuse_coherence_bias,
     )

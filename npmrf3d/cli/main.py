@@ -17,16 +17,20 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import warnings
 
 from .. import __version__
+from ..errors import InputNote
 from . import _interrupt, baseline, coherent, info, metrics, neural, study, synth, volume
-from ._common import PROG, HelpFormatter, Parser, guarded, say
+from ._common import PROG, HelpFormatter, Parser, error, guarded, say
+from ._options import environment_problem, given_options, option_strings
 
 __all__ = ["COMMANDS", "build_parser", "main"]
 
 #: The sub-command modules, in the order ``--help`` lists them (``study`` adds ``report``).
 COMMANDS = (synth, coherent, info, metrics, study, baseline, volume, neural)
-#: Library parameter names that messages should call by their option names.
+#: Library parameter names that messages should call by their option names (besides the
+#: options of the command that ran, which :func:`main` adds).
 OPTION_NAMES = synth.OPTION_NAMES
 
 
@@ -59,6 +63,22 @@ def interrupted_message(args) -> str:
     return "interrupted"
 
 
+def _print_notes(*, quiet: bool) -> None:
+    """Show the library's :class:`~npmrf3d.errors.InputNote` warnings, every time, as one line
+    ``npmrf3d: note: ...`` on stderr (none with ``--quiet``); other warnings as Python shows
+    them. Call inside ``warnings.catch_warnings()``, which restores both afterwards."""
+    show = warnings.showwarning
+
+    def note(message, category, filename, lineno, file=None, line=None):
+        if not issubclass(category, InputNote):
+            return show(message, category, filename, lineno, file, line)
+        if not quiet:
+            say(f"{PROG}: note: {message}", error=True)
+
+    warnings.simplefilter("always", InputNote)
+    warnings.showwarning = note
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; return the exit code (0 ok, 2 user error, 130 interrupted)."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -67,10 +87,18 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help, --version and usage errors (argparse printed them)
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+    problem = environment_problem()
+    if problem is not None:
+        return error(problem)
+    args.given = given_options(build_parser(), argv)  # what the user wrote, not the defaults
+    option_names = {**{name: "--" + name.replace("_", "-") for name in OPTION_NAMES},
+                    **option_strings(parser, args)}
     # Ctrl-C and SIGTERM end a run alike (one line, exit 130), latched so that none is lost
     previous = _interrupt.install()
     try:
-        return guarded(args.handler, args, argv, OPTION_NAMES)
+        with warnings.catch_warnings():
+            _print_notes(quiet=bool(getattr(args, "quiet", False)))
+            return guarded(args.handler, args, argv, option_names)
     except KeyboardInterrupt:
         say(f"{PROG}: {interrupted_message(args)}", error=True)
         return 130

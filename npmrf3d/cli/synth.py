@@ -15,8 +15,9 @@ import numpy as np
 
 from .. import data
 from ..config import DEFAULT_SIZE, PRESETS, SEGMENTED_MODES, SUPPORTS, VARIANTS, SynthesisConfig
+from ..errors import ParameterError
 from ..io.runs import RUN_FILES
-from ..methods.npmrf import METHOD
+from ..methods.npmrf import METHOD, segmented
 from ..methods.npmrf_coherent import SEGMENTED, SEGMENTED_MAX_VALUES
 from ..model.exemplar import BUNDLED_PREFIX
 from ..model.heuristics import DECISIONS, HEURISTICS
@@ -38,6 +39,7 @@ from ._common import (
     say,
     write_result,
 )
+from ._options import given
 
 __all__ = ["register", "run"]
 
@@ -267,7 +269,7 @@ def register(commands, formatter_class) -> None:
              "support coherent, which re-decides every voxel in each of a level's iterations)",
     )
 
-    add_run_options(synth, out="npmrf3d-out")
+    add_run_options(synth, out="npmrf3d-synth-out")
 
     synth.set_defaults(handler=run)
 
@@ -284,6 +286,23 @@ def _note_many_values(per_view: dict) -> None:
         say(f"{PROG}: note: the exemplar has {len(values)} distinct values, each a label; run "
               f"time grows with the label count: --palette 64 (colour) or --grey-levels 64 "
               f"is usually as good and much faster", error=True)
+
+
+def _check_segmented_window(args: argparse.Namespace, config, per_view: dict) -> None:
+    """The segmented preset runs its own window at every level, so a ``--window`` the user wrote
+    would change nothing: refused with ``--segmented yes``; with ``--segmented auto`` (the
+    default, decided on the exemplar) a warning on stderr says so, even with ``--quiet``."""
+    if (config.support != "coherent" or not given(args, "window")
+            or config.window == SEGMENTED.window):
+        return
+    if config.segmented == "yes":
+        raise ParameterError(f"--window {config.window} changes nothing with --segmented yes, whose "
+                             f"preset uses window {SEGMENTED.window} at every level: drop --window, "
+                             f"or pass --segmented no to use it")
+    if config.segmented == "auto" and segmented(config, per_view):
+        say(f"{PROG}: warning: the exemplar holds at most {SEGMENTED_MAX_VALUES} grey values, so "
+            f"--segmented auto runs the segmented preset with window {SEGMENTED.window} and "
+            f"--window {config.window} is not used; pass --segmented no to use it", error=True)
 
 
 def run(args: argparse.Namespace, argv: list[str]) -> int:
@@ -304,6 +323,7 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
         seed=args.seed,
     )
     out, checkpoint, per_view, sources = prepare_run(args, METHOD, config)
+    _check_segmented_window(args, config, per_view)
     if args.dry_run:
         return dry_run(METHOD, config, per_view)
     if not args.quiet and config.palette is None and config.grey_levels is None:

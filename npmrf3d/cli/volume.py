@@ -35,6 +35,7 @@ from ._common import (
     say,
     write_result,
 )
+from ._options import given
 
 __all__ = ["FIELD_HELP", "register"]
 
@@ -112,15 +113,16 @@ def _add(commands, name, method, formatter_class, *, help, description) -> None:
                         help="output size in voxels: N for an N^3 cube or N1,N2,N3; each divisible "
                              "by 2**(levels-1)")
     group = parser.add_argument_group("method")
-    for name, f in fields.items():
-        if name in _OWN or name in getattr(config_class, "unused", ()):
+    for field_name, f in fields.items():
+        if field_name in _OWN or field_name in getattr(config_class, "unused", ()):
             continue
         kind = {int: int, float: float}.get(type(f.default))
         if kind is None:
-            group.add_argument(_option(name), default=f.default, metavar="NAME", help=FIELD_HELP[name])
+            group.add_argument(_option(field_name), default=f.default, metavar="NAME",
+                               help=FIELD_HELP[field_name])
         else:
-            group.add_argument(_option(name), type=kind, default=f.default,
-                               metavar="N" if kind is int else "X", help=FIELD_HELP[name])
+            group.add_argument(_option(field_name), type=kind, default=f.default,
+                               metavar="N" if kind is int else "X", help=FIELD_HELP[field_name])
     if method is METHOD:
         group.add_argument("--vector-field", default=fields["vector_field"].default,
                            metavar="{" + ",".join(FIELDS) + "}|FILE.npy",
@@ -148,6 +150,23 @@ def _spacing(text):
     return values[0] if len(values) == 1 else tuple(values)
 
 
+#: The named fields that ``--angle`` turns.
+ANGLE_FIELDS = ("twist", "bend")
+
+
+def _check_angle(args: argparse.Namespace) -> None:
+    """``--angle`` turns the named fields twist and bend; with any other field it would change
+    nothing, so it is refused."""
+    if not given(args, "angle"):
+        return
+    field = str(args.vector_field)
+    if field.lower() not in ANGLE_FIELDS:
+        what = "a field file" if field.lower().endswith(".npy") else field
+        raise ParameterError(f"--angle turns only --vector-field {' or '.join(ANGLE_FIELDS)}; with "
+                             f"--vector-field {what} it changes nothing: drop --angle or choose "
+                             f"--vector-field {' or '.join(ANGLE_FIELDS)}")
+
+
 def _handler(args: argparse.Namespace, argv: list[str], method) -> int:
     t_start = time.perf_counter()
     fields = [f.name for f in dataclasses.fields(method.config_class)
@@ -155,17 +174,16 @@ def _handler(args: argparse.Namespace, argv: list[str], method) -> int:
     options = {name: getattr(args, name) for name in fields}
     size = parse_size(args.size)
     extra = {}
-    try:
-        config = method.make_config(size=size, seed=args.seed, vector_field="none", **options)
-        if method is METHOD:
-            field_name, extra["vector_field"] = field_input(args.vector_field, config.size)
-            config = dataclasses.replace(config, vector_field=field_name)
-    except ParameterError as exc:
-        message = str(exc)
-        for name in [*fields, "vector_field"]:
-            if message.startswith(f"{name} must "):
-                message = _option(name) + message[len(name):]
-        raise ParameterError(message) from None
+    # messages name library parameters; npmrf3d.cli.main turns them into these options
+    config = method.make_config(size=size, seed=args.seed, vector_field="none", **options)
+    if config.passes < 1:
+        raise ParameterError(f"--passes must be between 1 and 16; got {config.passes}: without a "
+                             f"correction pass a level keeps its up-sampled, jittered coordinates "
+                             f"unmatched")
+    if method is METHOD:
+        _check_angle(args)
+        field_name, extra["vector_field"] = field_input(args.vector_field, config.size)
+        config = dataclasses.replace(config, vector_field=field_name)
     out = output_folder(args)
     checkpoint = pathlib.Path(args.checkpoint) if args.checkpoint is not None else None
     check_checkpoint(checkpoint, out)

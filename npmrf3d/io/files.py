@@ -158,12 +158,15 @@ def read_stack(path: str | os.PathLike[str], *, what: str = "input file") -> tup
         ``axes``: tifffile's axes string of a TIFF's first series (``"ZYX"``, ``"QYX"`` for a plain
         multi-page stack, ``"YXS"`` for an RGB page, ``"ZCYX"`` for an ImageJ hyperstack, ...), None
         for other files; ``spacing``: ``(z, y, x)`` voxel size from ImageJ metadata (``spacing``
-        and the X/Y resolution tags) when the file records it, else None.
+        and the X/Y resolution tags) when the file records it, else None; ``alpha`` (images read
+        by Pillow only): whether the last channel is the image's alpha.
     """
     path = _existing_file(path, what)
     suffix = _suffix(path, _READABLE_EXTENSIONS, what)
     if suffix not in TIFF_EXTENSIONS:
-        return read_array(path, what=what), {"axes": None, "spacing": None}
+        array = read_array(path, what=what)
+        alpha = suffix in IMAGE_EXTENSIONS and _has_alpha(path, array)
+        return array, {"axes": None, "spacing": None, "alpha": alpha}
     try:
         import tifffile
 
@@ -174,6 +177,21 @@ def read_stack(path: str | os.PathLike[str], *, what: str = "input file") -> tup
     except Exception as exc:  # any decoder failure is a user-facing unreadable file
         raise ParameterError(f"{what} '{path}' cannot be read: {_reason(exc)}") from exc
     return array, {"axes": axes, "spacing": spacing}
+
+
+def _has_alpha(path: pathlib.Path, array: np.ndarray) -> bool:
+    """Whether the last channel of an image read by Pillow is its alpha (grey + alpha, RGBA, or a
+    palette or grey image with a transparent colour, which imageio reads as RGBA)."""
+    if array.ndim != 3 or array.shape[2] not in (2, 4):
+        return False
+    from PIL import Image
+
+    try:
+        with Image.open(path) as image:
+            mode = image.mode
+    except Exception:  # read once already; without its mode, channels are taken as they are
+        return False
+    return mode not in ("CMYK", "RGBX")
 
 
 def _imagej_spacing(tif) -> tuple[float, float, float] | None:

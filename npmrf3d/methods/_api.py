@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from .. import _validation as check
+from .._kernels._jit import check_thread_setting
 from ..config import SynthesisMethod
 from ..model.exemplar import resolve_exemplars
 from ..resources import check_memory, generic_estimate
@@ -49,6 +50,7 @@ def prepare(method: SynthesisMethod, exemplar, exemplars: Mapping | None, *, siz
     constrained view, checked against the method's ``fit``). ``memory=False`` leaves out the
     memory check (a run that will go to another machine).
     """
+    check_thread_setting()  # a NUMBA_NUM_THREADS of 0 is refused, not silently replaced
     known = option_names(method)
     unknown = sorted(set(options) - set(known))
     if unknown:

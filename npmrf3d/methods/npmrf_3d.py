@@ -42,7 +42,8 @@ class NpmrfVolumeConfig(VolumeConfig):
     """:class:`npmrf3d.methods.volume_lh.VolumeConfig` plus the Parzen decision's bandwidths.
 
     ``usage`` and ``balance`` are 0 and ``start`` is ``random``, none an option: the Parzen
-    decision has neither histogram, and its measured numbers (``docs/volume.md``) are from random starts."""
+    decision has neither histogram, and its measured numbers (``docs/volume.md``) are from random starts.
+    ``angle`` is no option either: the method takes no vector field for it to turn."""
 
     usage: float = 0.0
     balance: float = 0.0
@@ -51,7 +52,7 @@ class NpmrfVolumeConfig(VolumeConfig):
     centre_bandwidth: float = 0.1
 
     #: Fields of the base configuration this method does not use (no command-line option).
-    unused: ClassVar[tuple[str, ...]] = ("usage", "balance", "start")
+    unused: ClassVar[tuple[str, ...]] = ("usage", "balance", "start", "angle")
 
 
 DEFAULTS = NpmrfVolumeConfig()

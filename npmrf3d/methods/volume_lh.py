@@ -130,7 +130,7 @@ def make_volume_config(*, size=DEFAULTS.size, levels=DEFAULTS.levels, window=DEF
     name of :data:`npmrf3d.model.fields.FIELDS`, ``array`` or ``file:PATH`` as :func:`field_input`
     records it)."""
     levels = check.integer("levels", levels, low=1, high=6)
-    dims = check.size(size, levels=levels, window=3)
+    dims = check.size(size, levels=levels, coarsest=2)
     window = check.integer("window", window, low=3, high=7)
     if window % 2 == 0:
         check.fail(f"window must be odd; got {window}")
@@ -467,7 +467,7 @@ def volume_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress: P
     t_start = time.perf_counter()
     levels = check.integer("levels", options.get("levels", DEFAULTS.levels), low=1, high=6)
     field_name, field_array = field_input(options.get("vector_field", DEFAULTS.vector_field),
-                                          check.size(size, levels=levels, window=3))
+                                          check.size(size, levels=levels, coarsest=2))
     config, generator, per_view = prepare(METHOD, exemplar, exemplars, size=size, rng=rng,
                                           options={**options, "vector_field": field_name},
                                           load=volume_loader(exemplar_kind, spacing))

@@ -14,6 +14,7 @@ samples.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -22,7 +23,7 @@ from scipy.cluster.vq import kmeans2, vq
 
 from .. import _validation as check
 from .. import data
-from ..errors import ParameterError
+from ..errors import InputNote, ParameterError
 from ..io.files import read_stack
 from .exemplar3d import interpret
 from .neighbourhood import window_offsets
@@ -68,7 +69,9 @@ def load_exemplar(source=None, *, name: str = "exemplar", exemplar_kind: str = "
     Returns
     -------
     (H, W, C) float32 ndarray
-        uint8 data divided by 255, uint16 by 65535, bool as 0/1, floats unchanged.
+        uint8 data divided by 255, uint16 by 65535, bool as 0/1, floats unchanged. An image
+        file's alpha channel is no data channel: fully opaque, it is dropped (an
+        :class:`~npmrf3d.errors.InputNote` says so); with transparent pixels the file is refused.
 
     Examples
     --------
@@ -82,6 +85,8 @@ def load_exemplar(source=None, *, name: str = "exemplar", exemplar_kind: str = "
         array, info = read_stack(source, what="exemplar file")
         axes = info["axes"]
         name = f"{name} '{source}'"
+        if info.get("alpha"):
+            array = _without_alpha(array, name)
     else:
         array = np.asarray(source)
     if array.ndim in (3, 4) and array.dtype != object and array.size:
@@ -95,6 +100,25 @@ def load_exemplar(source=None, *, name: str = "exemplar", exemplar_kind: str = "
                                    "exemplar_kind='image' (command line: --exemplar-kind image)"))
         array = shaped
     return check.exemplar_array(array, name=name)
+
+
+def _without_alpha(array: np.ndarray, name: str) -> np.ndarray:
+    """An image file's channels without its alpha (the last channel): a fully opaque alpha is
+    dropped with an :class:`~npmrf3d.errors.InputNote`; transparent pixels are refused, since
+    the methods would copy the alpha as one more data channel and what a transparent pixel
+    shows depends on the background it is flattened onto."""
+    alpha = array[..., -1]
+    full = True if array.dtype == bool else (
+        np.iinfo(array.dtype).max if np.issubdtype(array.dtype, np.integer) else 1.0)
+    transparent = int(np.count_nonzero(alpha != full))
+    if transparent:
+        check.fail(f"{name} has an alpha channel with {transparent} of {alpha.size} pixels not "
+                   f"fully opaque, which would be synthesised as one more colour channel; flatten "
+                   f"it onto a background first (e.g. ImageMagick: magick IN.png -background "
+                   f"white -alpha remove -alpha off OUT.png) or save it without alpha")
+    warnings.warn(f"{name}: its alpha channel is fully opaque and was dropped", InputNote,
+                  stacklevel=3)
+    return array[..., :-1]
 
 
 # --------------------------------------------------------------------------- exemplar sources

@@ -33,6 +33,7 @@ import os
 import numpy as np
 
 from .. import _validation as check
+from ..errors import ParameterError
 from ..io.files import read_stack
 
 __all__ = ["CUBE_RATIO", "EXEMPLAR_KINDS", "MAX_IMAGE_CHANNELS", "MIN_VOLUME_SIDE", "check_spacing", "interpret",
@@ -46,8 +47,11 @@ MAX_IMAGE_CHANNELS = 4
 MIN_VOLUME_SIDE = 16
 #: A 3-D array whose longest side is at most this factor times its shortest is a volume.
 CUBE_RATIO = 2.0
-_HOW = ("say which is meant with exemplar_kind='image' or 'volume' (command line: "
-        "--exemplar-kind image or --exemplar-kind volume)")
+#: How to say which is meant, by what the caller's method takes (the kinds its command accepts).
+_HOW = {"image": "if it is an image, say so with exemplar_kind='image' (command line: "
+                 "--exemplar-kind image)",
+        "volume": "if it is a volume, say so with exemplar_kind='volume' (command line: "
+                  "--exemplar-kind volume)"}
 
 
 def _canonical(array: np.ndarray, axes: str, kind: str, name: str) -> tuple[str, np.ndarray]:
@@ -134,7 +138,7 @@ def interpret(array, *, axes: str | None = None, kind: str = "auto", name: str =
             kind = "volume"
         else:
             check.fail(f"{name} of shape {a.shape} is ambiguous: an image with {a.shape[2]} "
-                       f"channels or a volume of {a.shape[0]} slices; {_HOW}")
+                       f"channels or a volume of {a.shape[0]} slices; {_HOW[expect]}")
     return kind, (a if kind == "image" else a[..., None])
 
 
@@ -197,13 +201,37 @@ def load_volume_exemplar(source, *, exemplar_kind: str = "auto", spacing=None,
         check_spacing(spacing)
     elif file_spacing is not None:
         check_spacing(file_spacing, name=f"voxel spacing recorded in {name}")
+    stored = array
     kind, array = interpret(array, axes=axes, kind=exemplar_kind, name=name, expect="volume")
     if kind != "volume":
-        check.fail(f"{name} of shape {array.shape[:2] if array.shape[2] == 1 else array.shape} is "
-                   f"a 2D image, and this method needs a volume (D, H, W[, C]): give a 3D "
-                   f"array, a multi-page TIFF or an ImageJ stack, or use a 2D method (npmrf3d "
-                   f"synth); {_HOW}")
+        check.fail(f"{name} is a 2D image, and this method needs a volume (D, H, W[, C]): its "
+                   f"shape {np.shape(stored)} reads as {_image_words(axes, array)}; give a volume "
+                   f"(a multi-page TIFF, an ImageJ stack or an array (D, H, W[, C])), or use a 2D "
+                   f"method (npmrf3d synth){_as_volume_hint(stored, axes)}")
     return check.volume_array(array, name=name)
+
+
+def _image_words(axes: str | None, image: np.ndarray) -> str:
+    """What an array read as an image ``(H, W, C)`` is, in words: pixels, channels and why."""
+    pixels = f"{image.shape[0]}x{image.shape[1]} pixels"
+    channels = image.shape[2]
+    if channels == 1:
+        return pixels + (f" (TIFF axes {axes}, no depth axis)" if axes is not None else "")
+    why = (f"TIFF axes {axes}, no depth axis" if axes is not None else
+           f"a 3-D array whose last axis is at most {MAX_IMAGE_CHANNELS} holds channels")
+    return f"{pixels} with {channels} channels ({why})"
+
+
+def _as_volume_hint(stored: np.ndarray, axes: str | None) -> str:
+    """How to read ``stored`` as a volume instead, if ``exemplar_kind="volume"`` would."""
+    try:
+        kind, _ = interpret(stored, axes=axes, kind="volume", expect="volume")
+    except ParameterError:
+        return ""
+    if kind != "volume":
+        return ""
+    return (f"; to read it as a volume of {np.shape(stored)[0]} slices, say so with "
+            f"exemplar_kind='volume' (command line: --exemplar-kind volume)")
 
 
 def volume_fits(volume: np.ndarray, *, window: int, name: str = "exemplar") -> None:

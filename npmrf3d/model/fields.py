@@ -15,7 +15,9 @@ field is one frame per output voxel, ``(N1, N2, N3, 3, 3)`` float32. It is given
   - ``radial``: exemplar axis 0 points away from the volume's central axis (the line through the
     centre along axis 0) and exemplar axis 2 along axis 0 -- concentric shells (``angle`` unused);
 * a direction field ``(N1, N2, N3, 3)``: the exemplar's axis 0 is turned onto the direction by the
-  smallest rotation (Rodrigues' formula; the paper's "vector field");
+  smallest rotation (Rodrigues' formula; the paper's "vector field"); a zero vector keeps the
+  exemplar's orientation, and a field that is zero everywhere (it would change nothing) is
+  refused, as are NaN and Inf;
 * a frame field ``(N1, N2, N3, 3, 3)``: its rotation part (polar decomposition by SVD, so any
   scaling is removed, as the paper's ``w~(D) = w(D) / ||w(D)||``);
 * a ``.npy`` file holding either array.
@@ -86,7 +88,11 @@ def as_frames(array, size: tuple[int, int, int], *, name: str = "vector_field") 
                    f"{size + (3, 3)} (a frame per voxel) for a volume of size {size}; got {a.shape}")
     a = a.astype(np.float64)
     if not np.isfinite(a).all():
-        check.fail(f"{name} contains NaN or Inf values")
+        check.fail(f"{name} contains {int((~np.isfinite(a)).sum())} NaN or Inf values; a field "
+                   f"needs a finite direction or frame at every voxel")
+    if not a.any():
+        check.fail(f"{name} is zero everywhere, which turns nothing (a zero vector keeps the "
+                   f"exemplar's orientation); give non-zero directions or frames, or no field")
     if a.ndim == 4:
         return rotation_onto(a).astype(np.float32)
     u, _, vt = np.linalg.svd(a)
@@ -108,7 +114,8 @@ def field_input(field, size: tuple[int, int, int]) -> tuple[str, np.ndarray | No
     if isinstance(field, (str, os.PathLike)):
         if not str(field).lower().endswith(".npy"):
             check.fail(f"vector_field must be one of {', '.join(FIELDS)} or a .npy file; got {field!r}")
-        return f"file:{os.fspath(field)}", as_frames(read_array(field, what="vector field file"), size)
+        return f"file:{os.fspath(field)}", as_frames(read_array(field, what="vector field file"), size,
+                                                     name=f"vector_field file '{os.fspath(field)}'")
     return "array", as_frames(field, size)
 
 
