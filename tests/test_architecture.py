@@ -148,7 +148,7 @@ def test_only_the_kernels_import_numba():
 
 
 #: The modules of ``npmrf3d/methods/neural/`` that import torch (everything else there must not).
-TORCH_MODULES = {f"methods/neural/{m}.py" for m in ("descriptor", "engine", "generator", "noise",
+TORCH_MODULES = {f"methods/neural/{m}.py" for m in ("checkpoint", "descriptor", "engine", "generator", "noise",
                                                    "zarr_volume")}
 
 

@@ -134,7 +134,7 @@ def _assert_refused(code, out, err, run_dir, checkpoint, before, words):
     lines = [line for line in err.splitlines() if line.strip()]
     assert code == 2, err
     assert len(lines) == 1, err
-    assert lines[0].startswith("npmrf3d: error: checkpoint ") and REFUSED in lines[0], lines[0]
+    assert lines[0].startswith(("npmrf3d: error: checkpoint ", "npmrf3d: error: --checkpoint ")) and REFUSED in lines[0], lines[0]
     assert words in lines[0], lines[0]
     assert "Traceback" not in err and out == ""
     assert not run_dir.exists()

@@ -18,6 +18,7 @@ from ..config import DEFAULT_SIZE, PRESETS, SEGMENTED_MODES, SUPPORTS, VARIANTS,
 from ..errors import ParameterError
 from ..io.runs import RUN_FILES
 from ..methods.npmrf import METHOD, segmented
+from ..methods.npmrf_options import DEFAULT_XI
 from ..methods.npmrf_coherent import SEGMENTED, SEGMENTED_MAX_VALUES
 from ..model.exemplar import BUNDLED_PREFIX
 from ..model.heuristics import DECISIONS, HEURISTICS
@@ -124,8 +125,10 @@ def register(commands, formatter_class) -> None:
              "needs ML_H2a or ML_H2b)",
     )
     method.add_argument(
-        "--xi", type=float, default=_d("xi"), metavar="X",
-        help="icm: cooling step, a negative number (more negative cools faster)",
+        "--xi", type=float, default=None, metavar="X",
+        help="icm with per-voxel temperatures: cooling step, a negative number (more negative "
+             f"cools faster; default: None = {DEFAULT_XI['full']} with support full, the paper's, "
+             f"{DEFAULT_XI['coherent']} with support coherent, measured)",
     )
     method.add_argument(
         "--stop", type=float, default=_d("stop"), metavar="F",

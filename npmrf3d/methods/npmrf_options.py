@@ -24,15 +24,20 @@ from ..config import (
     SynthesisConfig,
 )
 from ..model.heuristics import DECISIONS, get_heuristic
+from ..model.kcoherence_icm import IcmSchedule
 from ..model.neighbourhood import VIEWS
 from ..model.pyramid import INHERIT, UPSAMPLING
 from ..model.relax import RELAXATIONS
 from ..model.relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
 
-__all__ = ["APPLIES", "DEFAULT_UPSAMPLE", "applies", "combination", "make_config"]
+__all__ = ["APPLIES", "DEFAULT_UPSAMPLE", "DEFAULT_XI", "applies", "combination", "make_config"]
 
 #: Up-sampling used when none is asked for: the paper's choice for each relaxation.
 DEFAULT_UPSAMPLE = {"icm": "1/8", "anneal": "8/8"}
+#: ICM's cooling step ``xi`` when none is asked for, by support: the paper's -3 for ``full``;
+#: -1 for ``coherent``, whose trust-weighted search needs more than the two sweeps per level
+#: that -3 leaves (docs/quality.md, "Per-voxel temperatures").
+DEFAULT_XI = {"full": SynthesisConfig.xi, "coherent": IcmSchedule.xi}
 
 #: The combinations (support, relaxation) that use an option, for the options that some
 #: combinations cannot use; every other option applies everywhere.
@@ -88,11 +93,17 @@ def applies(name: str, where: tuple) -> bool:
     return name not in APPLIES or tuple(where[:2]) in APPLIES[name]
 
 
+def _unset(name: str, value) -> bool:
+    """Whether option ``name`` was left at its default (``xi``'s is None: it depends on the
+    support, so any value given counts)."""
+    return value is None or (name != "xi" and value == getattr(_C, name, None))
+
+
 def _refuse_unused(given: dict, support: str, relaxation: str) -> None:
     """One line for the first option set away from its default that (support, relaxation)
     cannot use."""
     for name, value in given.items():
-        if value is None or value == getattr(_C, name, None) or applies(name, (support, relaxation)):
+        if _unset(name, value) or applies(name, (support, relaxation)):
             continue
         users = " or ".join(f"support '{s}' with relaxation '{r}'" for s, r in APPLIES[name])
         check.fail(f"option {name} does not apply to support '{support}' with relaxation "
@@ -117,7 +128,7 @@ def _support_and_preset(variant, support, preset) -> tuple[str, str]:
 def make_config(
     *, size=DEFAULT_SIZE, window=_C.window, levels=_C.levels, heuristic=_C.heuristic,
     relaxation=_C.relaxation, views=_C.views, support=None, preset=None, upsample=None,
-    inherit=_C.inherit, xi=_C.xi, stop=_C.stop, max_sweeps=_C.max_sweeps, sampler=_C.sampler,
+    inherit=_C.inherit, xi=None, stop=_C.stop, max_sweeps=_C.max_sweeps, sampler=_C.sampler,
     schedule=_C.schedule, t0=_C.t0, t_end=_C.t_end, proposals=_C.proposals, proposal=_C.proposal,
     variant=None, segmented=_C.segmented, bandwidth=None, centre_bandwidth=None, adaptive=None,
     decision=None, tau=None, histogram_weight=None, outlier=None, grey_levels=None, palette=None,
@@ -128,7 +139,8 @@ def make_config(
     ``support`` (None: ``coherent``) and ``preset`` (None: ``tuned``; the full support's
     decision rule, :data:`npmrf3d.config.PRESETS`) may also be given together by the older name
     ``variant`` (:data:`npmrf3d.config.VARIANTS`). The rule arguments (``bandwidth`` ...
-    ``outlier``) override single fields of the support's rule when not None. ``temperatures``
+    ``outlier``) override single fields of the support's rule when not None. ``xi`` (None:
+    :data:`DEFAULT_XI` of the support) is ICM's cooling step. ``temperatures``
     (None: True for support ``full`` with ICM, False otherwise): ICM with per-voxel temperatures;
     support ``coherent`` then weights its searches and votes by trust and re-decides warm voxels
     only (``xi``, ``stop``, ``max_sweeps``, ``inherit`` and ``upsample`` 1/8 need it there).
@@ -154,7 +166,7 @@ def make_config(
         upsample = "8/8" if support == "coherent" else DEFAULT_UPSAMPLE[relaxation]
     upsample = check.choice("upsample", upsample, UPSAMPLING)
     inherit = check.choice("inherit", inherit, INHERIT)
-    xi = check.real("xi", xi, high=0.0, high_open=True)
+    xi = check.real("xi", DEFAULT_XI[support] if xi is None else xi, high=0.0, high_open=True)
     stop = check.real("stop", stop, low=0.0, high=1.0, low_open=True)
     max_sweeps = check.integer("max_sweeps", max_sweeps, low=1)
     sampler = check.choice("sampler", sampler, SAMPLERS)
@@ -186,7 +198,7 @@ def make_config(
         check.fail("support 'full' runs ICM with per-voxel temperatures only; drop temperatures=False")
     if support == "coherent" and relaxation == "icm" and not temperatures:
         for name in TEMPERATURE_OPTIONS:
-            if given[name] is not None and given[name] != getattr(_C, name):
+            if not _unset(name, given[name]):
                 check.fail(f"option {name} needs per-voxel temperatures with support 'coherent': "
                            f"add temperatures=True (--temperatures), or drop it")
         if upsample == "1/8":

@@ -116,14 +116,15 @@ HEURISTICS = Study(
     name="heuristics",
     title="Heuristics compared: ML_H1a, ML_H1b, ML_H2a, ML_H2b",
     question="Which way of making one voxel value from three 2D views gives the best volumes?",
-    notes="The paper's settings: ICM with per-voxel temperatures, 7x7 windows, 8/8 "
-          "up-sampling, resynth, xi = -3, stop at 95 %. The main rows run each heuristic over "
-          "the coherent candidates (full colours); the '-full' rows reproduce the paper: the "
-          "full-Parzen support with the paper's literal rule (argmax, h_opt), one seed, 64 grey "
-          "levels. ML_H1b averages the views' best values, so it makes values the exemplar "
-          "does not have (a washed-out volume), as the paper shows.",
+    notes="ICM, 7x7 windows, 8/8 up-sampling. The main rows run each heuristic over the "
+          "coherent candidates (full colours) with synth's ICM (every voxel re-decided in each "
+          "of a level's iterations; per-voxel temperatures are the cooling study's subject); "
+          "the '-full' rows reproduce the paper: the full-Parzen support with the paper's "
+          "literal rule (argmax, h_opt), per-voxel temperatures, resynth, xi = -3, stop at 95 %, "
+          "one seed, 64 grey levels. ML_H1b averages the views' best values, so it makes values "
+          "the exemplar does not have (a washed-out volume), as the paper shows.",
     common=(("relaxation", "icm"), ("window", 7), ("upsample", "8/8"), ("inherit", "resynth"),
-            ("xi", -3.0), ("stop", 0.95), ("max_sweeps", 30), *_TEMPERATURES),
+            ("xi", -3.0), ("stop", 0.95), ("max_sweeps", 30)),
     methods=(
         _m("ML_H1a", heuristic="ML_H1a"),
         _m("ML_H1b", heuristic="ML_H1b"),
@@ -168,11 +169,12 @@ NEIGHBOURHOOD = Study(
     title="Neighbourhood size (9x9, 11x11) crossed with 1/8 versus 8/8 up-sampling",
     question="Do larger neighbourhoods capture larger structures, and which up-sampling keeps "
              "them across scales?",
-    notes="ML_H2b, ICM with per-voxel temperatures over coherent candidates, resynth, xi = -3, "
-          "stop at 95 %; the '-full' rows reproduce the paper's 9x9 with the full-Parzen support "
-          "(tuned rule, one seed). The quick variant uses 3x3 and 5x5 windows on 16^3 volumes.",
+    notes="ML_H2b, ICM with per-voxel temperatures, resynth, stop at 95 %, each support's "
+          "default xi (-1 over coherent candidates, the paper's -3 with the full-Parzen support); "
+          "the '-full' rows reproduce the paper's 9x9 with the full-Parzen support (tuned rule, "
+          "one seed). The quick variant uses 3x3 and 5x5 windows on 16^3 volumes.",
     common=(("relaxation", "icm"), ("heuristic", "ML_H2b"), ("inherit", "resynth"),
-            ("xi", -3.0), ("stop", 0.95), ("max_sweeps", 30), *_TEMPERATURES),
+            ("stop", 0.95), ("max_sweeps", 30), *_TEMPERATURES),
     methods=(
         _m("w9-1of8", window=9, upsample="1/8"),
         _m("w9-8of8", window=9, upsample="8/8"),
@@ -196,7 +198,7 @@ ICM_VS_ANNEAL = Study(
     title="ICM versus simulated annealing on 32-level grey exemplars",
     question="Does ICM lose the exemplar's dynamics (grey-level range) where annealing keeps it?",
     notes="ML_H2b, 7x7, exemplars re-quantised to 32 grey levels. Main rows over coherent "
-          "candidates: ICM with per-voxel temperatures and 1/8 up-sampling (the paper's ICM), "
+          "candidates: ICM with per-voxel temperatures (xi = -1) and 1/8 up-sampling, "
           "annealing with the Metropolis step and with the heat-bath draw (8/8). The '-full' "
           "rows reproduce the paper with the full-Parzen support, one seed: ICM with the literal "
           "rule, and Metropolis annealing (geometric schedule, 8 proposals per voxel and level).",

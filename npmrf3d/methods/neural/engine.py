@@ -29,10 +29,9 @@ import numpy as np
 import torch
 
 from ...errors import ParameterError
-from ...io.checkpoints import (KEY, as_bytes_array, check_array, check_members, check_rng_state,
-                               load_run_state, refusal, run_key, save_run_state)
 from ...io.files import atomic_write
 from ...model.neighbourhood import VIEW_AXES
+from .checkpoint import load_training_state, restore_torch_state, save_training_state, training_key
 from .config import NeuralConfig, slice_side
 from .descriptor import gram, gram_loss, histogram_loss, histogram_target, make_descriptor
 from .generator import SolidGenerator
@@ -112,62 +111,6 @@ def _as_image(block: torch.Tensor, view: str) -> torch.Tensor:
     return block.squeeze(2 + thin)
 
 
-def _run_key(config: NeuralConfig, exemplars: dict) -> str:
-    """What a checkpoint must match (:func:`npmrf3d.io.checkpoints.run_key`): the configuration
-    and the exemplars. The volume size, the step count and the checkpoint interval are left out:
-    a step's randomness does not depend on them, so a finished run's checkpoint extends to more
-    ``iterations`` exactly as if it had been asked for from the start."""
-    settings = config.to_dict()
-    for name in ("size", "iterations", "checkpoint_every"):
-        settings.pop(name)
-    return run_key("neural", settings, exemplars)
-
-
-def _save_checkpoint(path, key, iteration, generator, optimizer, rng, history, seconds) -> None:
-    """The torch state (weights, Adam's moments) as the bytes of ``torch.save``, the rest as arrays."""
-    buffer = io.BytesIO()
-    torch.save({"generator": generator.state_dict(), "optimizer": optimizer.state_dict()}, buffer)
-    save_run_state(path, key, iteration=iteration, torch_state=as_bytes_array(buffer.getvalue()),
-                   rng_state=json.dumps(rng.bit_generator.state),
-                   history=np.asarray(history, dtype=np.float64), seconds=float(seconds))
-
-
-def _load_checkpoint(path, key, rng: np.random.Generator) -> dict | None:
-    """The saved state (``torch_state`` loaded back into tensors), or None when there is none.
-
-    Past its checksum and identity every member is checked (the step counter, one loss per step
-    done, the generator state, the torch state's bytes); anything else is refused with the one
-    checkpoint refusal (:func:`npmrf3d.io.checkpoints.refusal`)."""
-    data = load_run_state(path, key)
-    if data is None:
-        return None
-    check_members(path, data, [KEY, "iteration", "torch_state", "rng_state", "history", "seconds"])
-    done = data["iteration"]
-    if isinstance(done, bool) or not isinstance(done, int) or done < 0:
-        raise refusal(path, f"'iteration' is {done!r}, not a count of steps done")
-    check_array(path, data, "history", (done,), np.float64)
-    seconds = data["seconds"]
-    if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not 0 <= seconds < math.inf:
-        raise refusal(path, f"'seconds' is {seconds!r}, not a finite time")
-    check_rng_state(path, data["rng_state"], rng.bit_generator)
-    raw = data["torch_state"]
-    if not isinstance(raw, np.ndarray) or raw.dtype != np.uint8 or raw.ndim != 1:
-        raise refusal(path, "'torch_state' is not the bytes of a torch state")
-    try:
-        state = torch.load(io.BytesIO(raw.tobytes()), map_location="cpu", weights_only=True)
-    except Exception as exc:  # torch raises many kinds on bytes it cannot read
-        raise refusal(path, f"'torch_state' cannot be read: {_first_line(exc)}") from None
-    if not isinstance(state, dict) or not {"generator", "optimizer"} <= set(state):
-        raise refusal(path, "'torch_state' holds no generator and optimizer state")
-    data["torch_state"] = state
-    return data
-
-
-def _first_line(exc: BaseException) -> str:
-    text = str(exc).strip()
-    return text.splitlines()[0] if text else type(exc).__name__
-
-
 def train_model(per_view: dict, config: NeuralConfig, rng: np.random.Generator, *, progress=None,
                 checkpoint=None) -> NeuralModel:
     """Train a generator on validated float32 (H, W, C) exemplars, one per constrained view.
@@ -194,16 +137,11 @@ def train_model(per_view: dict, config: NeuralConfig, rng: np.random.Generator, 
             targets[view] = [gram(f) for f in descriptor(image)]
             values[view] = [t.to(device) for t in histogram_target(image[0].cpu(), sides[view] ** 2)]
     optimizer = torch.optim.Adam(generator.parameters(), lr=config.learning_rate)
-    key = _run_key(config, per_view)
+    key = training_key(config, per_view)
     start, history, seconds = 0, [], 0.0
-    state = _load_checkpoint(checkpoint, key, rng)
+    state = load_training_state(checkpoint, key, rng)
     if state is not None:
-        try:
-            generator.load_state_dict(state["torch_state"]["generator"])
-            optimizer.load_state_dict(state["torch_state"]["optimizer"])
-        except (RuntimeError, ValueError, KeyError, TypeError) as exc:
-            raise refusal(checkpoint, f"'torch_state' does not fit this generator: "
-                                      f"{_first_line(exc)}") from None
+        restore_torch_state(checkpoint, state, generator, optimizer)
         rng.bit_generator.state = json.loads(str(state["rng_state"]))
         start, seconds = int(state["iteration"]), float(state["seconds"])
         history = [float(x) for x in state["history"]]
@@ -229,7 +167,7 @@ def train_model(per_view: dict, config: NeuralConfig, rng: np.random.Generator, 
         history.append(total)
         done = step + 1
         if checkpoint is not None and (done % config.checkpoint_every == 0 or done == config.iterations):
-            _save_checkpoint(checkpoint, key, done, generator, optimizer, rng, history,
+            save_training_state(checkpoint, key, done, generator, optimizer, rng, history,
                              seconds + time.perf_counter() - t0)
         if progress is not None:
             progress(done, config.iterations, total)
