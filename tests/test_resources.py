@@ -1,7 +1,8 @@
 """The up-front resource check (npmrf3d.resources, the registry's ``resources`` hooks, --dry-run).
 
-The memory estimate of each registered method is compared with the peak that ``tracemalloc``
-measures on small runs (within a factor of 2); absurd sizes are refused in well under a second
+The memory estimate of each registered method, less the process's own runtime part, is compared
+with the peak that ``tracemalloc`` measures on small runs (within a factor of 2); the whole
+estimate of the default ``synth`` against measured peak RSS is ``benchmarks/bench_memory_estimate.py``; absurd sizes are refused in well under a second
 with one line and exit code 2, nothing written.
 """
 
@@ -52,8 +53,10 @@ def test_estimate_within_factor_two_of_measured_peak(name, which, kwargs, tiny_r
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()
-    needed = estimate(method, config, per_view).bytes
-    assert 0.5 <= needed / peak <= 2.0, (name, kwargs, needed, peak)
+    needed = estimate(method, config, per_view)
+    # tracemalloc sees the arrays, not the interpreter and libraries that the runtime part counts
+    arrays = needed.bytes - needed.parts.get("runtime", 0)
+    assert 0.5 <= arrays / peak <= 2.0, (name, kwargs, arrays, peak)
 
 
 def test_every_registered_method_has_a_resources_hook():
