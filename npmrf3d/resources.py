@@ -241,7 +241,7 @@ def coherent_patch_bytes(window: int, channels: int, dims: int = 20, k: int = 5,
     """
     d = window * window * channels
     dd = min(dims, d)
-    want = k + 1 if exclude <= 0 else k + (2 * int(math.floor(exclude)) + 1) ** 2
+    want = k + 1 if exclude <= 0 else k + (2 * math.floor(exclude) + 1) ** 2
     pca = 16 * d + 8 * dd
     search = 4 * 8 * dd + 48 + 8 + 16 * want + 20 * k
     return 4 * d + max(pca, search)

@@ -8,6 +8,7 @@ with one line and exit code 2, nothing written.
 
 from __future__ import annotations
 
+import itertools
 import pathlib
 import subprocess
 import sys
@@ -150,10 +151,10 @@ def test_coherent_estimate_grows_with_the_exemplar():
     sides = (64, 256, 1024, 4096)
     needs = [estimate(method, config, {v: (s, s, 3) for v in config.views}) for s in sides]
     tables = [e.parts["exemplar patch tables"] for e in needs]
-    assert all(b > a for a, b in zip(tables, tables[1:]))
+    assert all(b > a for a, b in itertools.pairwise(tables))
     # per patch, about 4x the bytes for a side twice as long: the patches, not a constant
     assert 14 < tables[-1] / tables[-2] < 18
-    assert all(b.seconds > a.seconds for a, b in zip(needs, needs[1:]))
+    assert all(b.seconds > a.seconds for a, b in itertools.pairwise(needs))
     assert needs[0].parts["runtime"] == resources.RUNTIME_BYTES
     with pytest.raises(ResourceError, match="exemplar patch tables"):
         resources.check_memory(needs[-1], available=needs[-2].bytes)

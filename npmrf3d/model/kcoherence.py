@@ -32,6 +32,7 @@ from typing import NamedTuple
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
+
 from .._kernels import kcoherence as _k
 from .nearest import PatchIndex, nearest_others
 from .neighbourhood import VIEW_AXES

@@ -180,7 +180,7 @@ def nearest_others(index: PatchIndex, k: int, *, exclude: float = 0.0,
     excluded points from its group's list. A point with fewer than ``k`` eligible points
     repeats its last one (itself when none)."""
     n = len(index)
-    reach = int(math.floor(exclude)) if exclude > 0 else 0
+    reach = math.floor(exclude) if exclude > 0 else 0
     want = min(n, k + (2 * reach + 1) ** 2)
     unique = index.tree.data                                  # distinct vector g = group g
     out = np.empty((n, k), dtype=np.int64)
