@@ -169,3 +169,16 @@ def test_a_signal_during_a_long_search_leaves_no_lock_and_no_output(tmp_path):
     assert not lock.exists() and not (tmp_path / "run").exists()
     assert sorted(p.name for p in pathlib.Path(tmp_path).iterdir()) == ["noise.npy"]
 
+
+
+def test_kopf_on_a_constant_exemplar_searches_one_distinct_neighbourhood():
+    from npmrf3d.methods._kopf_steps import PatchIndex as KopfIndex
+    from npmrf3d.methods.kopf import kopf_synthesize
+
+    ex = _constant(120)
+    index = KopfIndex(ex, 4)
+    assert index.tree.deduplicated and index.tree.distinct == 1
+    found, distance = index.query(index.patches[:5])
+    assert found.tolist() == [0] * 5 and np.all(distance == 0.0)
+    result = kopf_synthesize(ex, size=8, window=4, levels=1, iterations=1, rng=0)
+    assert np.all(result.volume == np.float32(0.5))

@@ -81,26 +81,28 @@ class PatchIndex:
     def __len__(self) -> int:
         return len(self.points)
 
-    def query(self, vectors, k: int) -> tuple[np.ndarray, np.ndarray]:
+    def query(self, vectors, k: int, *, eps: float = 0.0, workers: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """``(dist, idx)``, both ``(q, k)``: the ``k`` (at most ``n``) nearest points of every
-        row of ``vectors``, nearest first; identical points in index order when deduplicated."""
+        row of ``vectors``, nearest first; identical points in index order when deduplicated.
+        ``eps`` and ``workers`` as in ``cKDTree.query`` (an approximate search; threads, which
+        do not change the answer)."""
         vectors = np.ascontiguousarray(vectors, dtype=np.float64).reshape(-1, self.points.shape[1])
         k = min(int(k), len(self.points))
         dist = np.empty((len(vectors), k), dtype=np.float64)
         idx = np.empty((len(vectors), k), dtype=np.int64)
         for lo in range(0, len(vectors), self.chunk):
             hi = min(lo + self.chunk, len(vectors))
-            dist[lo:hi], idx[lo:hi] = self._query(vectors[lo:hi], k)
+            dist[lo:hi], idx[lo:hi] = self._query(vectors[lo:hi], k, eps, workers)
         return dist, idx
 
-    def _query(self, vectors, k):
+    def _query(self, vectors, k, eps=0.0, workers=1):
         if not self.deduplicated:
-            d, i = self.tree.query(vectors, k=k)
+            d, i = self.tree.query(vectors, k=k, eps=eps, workers=workers)
             return np.reshape(d, (len(vectors), k)), np.reshape(i, (len(vectors), k))
         # the k nearest points lie among the k nearest distinct vectors, each listing its first
         # k points (fewer when the group is smaller)
         groups = min(k, self.distinct)
-        d, g = self.tree.query(vectors, k=groups)
+        d, g = self.tree.query(vectors, k=groups, eps=eps, workers=workers)
         d = np.reshape(d, (len(vectors), groups))
         g = np.reshape(np.asarray(g, dtype=np.int64), (len(vectors), groups))
         take = np.minimum(self.counts[g], k)                                  # (q, groups)
