@@ -104,11 +104,11 @@ class _SignallingTree:
     def __init__(self, tree):
         self.tree, self.n, self.data, self.calls = tree, tree.n, tree.data, 0
 
-    def query(self, vectors, k):
+    def query(self, vectors, k, **options):
         self.calls += 1
         if self.calls == 2:
             os.kill(os.getpid(), signal.SIGINT)
-        return self.tree.query(vectors, k=k)
+        return self.tree.query(vectors, k=k, **options)
 
 
 def test_a_signal_ends_a_search_between_chunks():

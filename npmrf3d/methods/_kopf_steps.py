@@ -18,8 +18,10 @@ from .. import _validation as check
 from .._kernels import kopf as _k
 from ..model import nearest
 from ..model.exemplar import pack_rows
-from ..model.kcoherence import centre_patches
-from ..model.kcoherence import downsample_exemplar  # noqa: F401 (one box-average pyramid for every method; kopf.py re-exports it)
+from ..model.kcoherence import (
+    centre_patches,
+    downsample_exemplar,  # noqa: F401 (one box-average pyramid for every method; kopf.py re-exports it)
+)
 from ..model.neighbourhood import VIEW_AXES
 from ..model.pyramid import LevelState
 from ..model.pyramid import upsample as pyramid_upsample
