@@ -5,7 +5,9 @@ hook that returns an :class:`Estimate`: the peak memory of the run, split into n
 where it can be guessed a rough wall time. The formulas of the two built-in methods are here, in
 one place, counted from the arrays their code allocates (numbers of bytes per voxel of the
 finest level and per exemplar patch) and checked against measured peaks
-(``tests/test_resources.py``: within a factor of 2 of ``tracemalloc``'s peak). A new method
+(``tests/test_resources.py``: the arrays within a factor of 2 of ``tracemalloc``'s peak). The
+default ``synth``'s estimate also counts the process itself and is fitted to the peak resident
+memory of whole runs (``benchmarks/bench_memory_estimate.py``: within 25 %). A new method
 registers its own hook (``SynthesisMethod(resources=...)``); one without a hook gets
 :func:`generic_estimate` (the volume and a work copy).
 
@@ -25,8 +27,8 @@ import numpy as np
 from .errors import ParameterError
 from .model.parzen import KERNEL_TABLE_BYTES
 
-__all__ = ["Estimate", "ResourceError", "available_memory", "check_memory", "format_bytes",
-           "generic_estimate", "kopf_estimate", "npmrf_estimate", "one_after_another", "patch_count"]
+__all__ = ["Estimate", "ResourceError", "available_memory", "check_memory", "coherent_patch_bytes",
+           "format_bytes", "generic_estimate", "kopf_estimate", "npmrf_estimate", "one_after_another", "patch_count"]
 
 #: Bytes per voxel of the finest level that the NP-MRF sampler keeps or builds: the level state
 #: (volume 4C, labels 4, temperatures 4, inherited 1), the parent level (1/8 of that), the colour
@@ -210,29 +212,78 @@ def generic_estimate(config, exemplars) -> Estimate:
 
 #: Coherent search sites (voxel x view) per second on the 2-core machine (Chen–Wang benchmark).
 COHERENT_SITES = 2.5e5
+#: Resident memory of a synthesis process before its arrays: the interpreter, numpy, scipy,
+#: numba and the loaded kernels. Peak RSS measured (``benchmarks/bench_memory_estimate.py``,
+#: ``os.wait4`` on the child): a 8^3 run 220-225 MiB, the imports alone 157 MiB; 211 MiB is
+#: the intercept of the line through the 64^3 and 128^3 peaks of the default ``synth``.
+RUNTIME_BYTES = 211 * 2**20
+#: Bytes per voxel of the finest level that the default ``synth`` (the coherent sampler) holds
+#: at its peak, per channel and besides: the slopes of its measured peak RSS from 64^3 to 128^3
+#: (64 x 64 exemplars: grey 95.4 B per voxel, colour 168.6 B per voxel, ``gravel64``, ``ihc64``).
+COHERENT_VOXEL_BYTES = 59
+COHERENT_CHANNEL_BYTES = 36.5
+#: Nearest-neighbour work of building a level model, ``P log2(P) D`` per second (P patches of
+#: D PCA dimensions; a 300 x 300 noise exemplar's search took about 3 s).
+TREE_RATE = 4.5e6
+
+
+def coherent_patch_bytes(window: int, channels: int, dims: int = 20, k: int = 5,
+                         exclude: float = 0.0) -> int:
+    """Peak bytes per exemplar patch while a coherent level model is built
+    (:func:`npmrf3d.model.kcoherence.build_level_model`): the patch matrix (float32,
+    ``d = window**2 * C`` values), then the larger of the PCA (two float64 copies of the
+    patches and the projection) and the search (the projection, its copy in the full-size
+    table, the repeat check's copy, hash and groups, the k-d tree's copy and indices, the query's
+    distances and indices, the k-coherence sets).
+
+    >>> coherent_patch_bytes(7, 1)
+    1140
+    """
+    d = window * window * channels
+    dd = min(dims, d)
+    want = k + 1 if exclude <= 0 else k + (2 * math.floor(exclude) + 1) ** 2
+    pca = 16 * d + 8 * dd
+    search = 4 * 8 * dd + 48 + 8 + 16 * want + 20 * k
+    return 4 * d + max(pca, search)
 
 
 def coherent_estimate(config, exemplars) -> Estimate:
     """Peak memory (and a time guess) of the coherent methods (Chen–Wang and the coherent NP-MRF
-    sampler, :mod:`npmrf3d.methods.chen_wang`, :mod:`npmrf3d.methods.npmrf_coherent`): the volume, per view
-    its sources, matches, weights (int32, int32, float32), the visiting order (int64) and a copy
-    of the volume; per exemplar level the PCA projections (float64, 20 dimensions), the
-    k-coherence sets and the patch matrix the PCA is computed from."""
+    sampler, :mod:`npmrf3d.methods.chen_wang`, :mod:`npmrf3d.methods.npmrf_coherent`).
+
+    Four parts: the process itself (:data:`RUNTIME_BYTES`); the volume; the work arrays of the
+    finest level, fitted to measured peaks (:data:`COHERENT_VOXEL_BYTES` and
+    :data:`COHERENT_CHANNEL_BYTES` per voxel less the volume); the exemplar patch tables, counted
+    from the arrays of each distinct exemplar's finest level model
+    (:func:`coherent_patch_bytes` per patch) and its float32 copies and label set (16 C + 16
+    bytes per pixel). The time guess adds the level models' nearest-neighbour searches to the
+    coherent searches."""
     exemplar_shapes = _shapes(exemplars)
     n = _voxels(config.size)
     c = _channels(exemplar_shapes)
     views = len(config.views)
     volume = F4 * c * n
-    work = 12 * views * n + 12 * n + volume
-    w = max(config.window)
+    work = int((COHERENT_VOXEL_BYTES + COHERENT_CHANNEL_BYTES * c) * n) - volume
+    dims = getattr(config, "pca_dims", 20)
+    k = getattr(config, "k", 5)
+    exclude = getattr(config, "coherence_exclude", 0.0)
     tables = 0
-    for shape in {tuple(s) for s in exemplar_shapes.values()}:
-        pixels = shape[0] * shape[1]
-        tables += pixels * (20 * 8 + 4 * config.k + 2 * 8 * w * w * c)
+    tree_work = 0.0
+    for a in _distinct(exemplars):
+        h, w_, ch = _shapes({0: a})[0]
+        biggest = 0
+        for level in range(config.levels):
+            window = config.window[config.levels - 1 - level]
+            lh, lw = h >> level, w_ >> level
+            p = max(0, lh - window + 1) * max(0, lw - window + 1)
+            biggest = max(biggest, p * coherent_patch_bytes(window, ch, dims, k, exclude))
+            tree_work += p * math.log2(max(p, 2)) * min(dims, window * window * ch)
+        tables += biggest + h * w_ * (16 * ch + 16)
     sites = sum(config.iterations[config.levels - 1 - level] * views * (n / 8 ** level)
                 for level in range(config.levels))
-    return Estimate({"volume": volume, "work arrays": work, "exemplar patch tables": tables},
-                    seconds=sites / COHERENT_SITES)
+    return Estimate({"runtime": RUNTIME_BYTES, "volume": volume, "work arrays": max(0, work),
+                     "exemplar patch tables": tables},
+                    seconds=sites / COHERENT_SITES + tree_work / TREE_RATE)
 
 
 def npmrf_estimate(config, exemplars) -> Estimate:

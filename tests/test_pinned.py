@@ -21,6 +21,7 @@ import pytest
 
 import npmrf3d
 from npmrf3d import data
+from npmrf3d.methods.chen_wang import chen_wang_synthesize
 from tests.conftest import checkerboard as checker
 
 
@@ -58,6 +59,23 @@ PINNED = {
         lambda: npmrf3d.kopf_synthesize(checker(), size=8, window=4, levels=2, iterations=1,
                                         upsample="1/8", views="front,top", rng=3),
         "4dc32e57b84bd363472d19c27b3792113f8b29f5230079ca5669747e7f93f7f4"),
+    # the coherent support and Chen-Wang (k-coherence sets, exclusion, global k-d tree matches),
+    # pinned from the code as it stood before the level models' nearest-neighbour search kept
+    # repeated patches once (npmrf3d.model.nearest): these exemplars repeat too few patches for
+    # that path, so their volumes must not move
+    "coherent_ihc64": (
+        lambda: npmrf3d.synthesize(_ihc(), size=16, levels=2, rng=7),
+        "8b75adb0bd7193ef09e4032e748f4a07a98e2ef3d0691d8333593aa46847df9e"),
+    "coherent_gravel64_grey": (
+        lambda: npmrf3d.synthesize(data.path("gravel64"), size=16, levels=2, window=5, rng=3),
+        "f93e66edc88cfc2ea4413cec91ff1d2a5002d901dd120fc14a9627e1c04de196"),
+    "coherent_checker": (
+        lambda: npmrf3d.synthesize(checker(), size=16, levels=2, window=5, rng=7),
+        "60f60dee26b389fc239b76813e1c92010e9b126b0cbd91f1f86148c8551df2c1"),
+    "chen_wang_global_exclude": (
+        lambda: chen_wang_synthesize(_ihc(), size=16, window=(6, 4), levels=2, iterations=(2, 2),
+                                     global_share=0.2, coherence_exclude=2.0, rng=5),
+        "dd1d3235189fc9fc2e269443c0acf2cdac9c004e46bfd134ce7dfc56114bda6c"),
 }
 
 

@@ -13,13 +13,15 @@ from collections.abc import Sequence
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
-from scipy.spatial import cKDTree
 
 from .. import _validation as check
 from .._kernels import kopf as _k
+from ..model import nearest
 from ..model.exemplar import pack_rows
-from ..model.kcoherence import centre_patches
-from ..model.kcoherence import downsample_exemplar  # noqa: F401 (one box-average pyramid for every method; kopf.py re-exports it)
+from ..model.kcoherence import (
+    centre_patches,
+    downsample_exemplar,  # noqa: F401 (one box-average pyramid for every method; kopf.py re-exports it)
+)
 from ..model.neighbourhood import VIEW_AXES
 from ..model.pyramid import LevelState
 from ..model.pyramid import upsample as pyramid_upsample
@@ -27,6 +29,9 @@ from ..model.pyramid import upsample as pyramid_upsample
 _MEAN_SHIFT_ITERATIONS = 8
 _CHUNK_BYTES = 48 * 2**20  # neighbourhood vectors gathered per KD-tree batch
 _SWEEP_CHUNK = 1 << 15  # voxels gathered per optimisation batch
+#: Queries per k-d tree call: 8x the level models' chunk, since NP_K queries share two threads
+#: (``workers``) and its queries (eps = 2) are cheaper.
+QUERY_CHUNK = 8 * nearest.QUERY_CHUNK
 
 
 def _constraint_arrays(constraint, constraint_weight, size, channels):
@@ -102,7 +107,10 @@ class PatchIndex:
     """Approximate nearest-neighbour search among an exemplar's neighbourhoods.
 
     PCA keeping ``variance`` of the variance (:func:`pca_basis`), then a
-    ``scipy.spatial.cKDTree`` over the projected neighbourhoods, queried with error bound ``eps``.
+    ``scipy.spatial.cKDTree`` over the projected neighbourhoods, queried with error bound ``eps``
+    (through :class:`npmrf3d.model.nearest.PatchIndex`: identical neighbourhoods, as many as a
+    constant exemplar has, are searched once, and a search gives way to a signal every
+    :data:`QUERY_CHUNK` queries).
 
     Parameters
     ----------
@@ -117,7 +125,7 @@ class PatchIndex:
         self.patches = centre_patches(self.exemplar, window)
         self.mean, self.basis, self.kept = pca_basis(self.patches, variance)
         self.projected = self.project(self.patches)
-        self.tree = cKDTree(self.projected)
+        self.tree = nearest.PatchIndex(self.projected, chunk=QUERY_CHUNK)
         self.pwidth = exemplar.shape[1] - window + 1
 
     @property
@@ -138,8 +146,7 @@ class PatchIndex:
         index : (q,) int64 ndarray
         distance : (q,) float64 ndarray, ``||vectors[t] - patches[index[t]]||``
         """
-        _, index = self.tree.query(self.project(vectors), k=1, eps=eps, workers=workers)
-        index = np.asarray(index, dtype=np.int64)
+        index = self.tree.query(self.project(vectors), 1, eps=eps, workers=workers)[1][:, 0]
         diff = vectors - self.patches[index]
         return index, np.sqrt(np.einsum("ij,ij->i", diff, diff, dtype=np.float64))
 

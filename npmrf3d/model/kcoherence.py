@@ -8,7 +8,8 @@ engine that runs it level by level, with the solver's histograms, is
 * :func:`build_level_model` -- one exemplar at one level: its neighbourhoods (one per *valid
   centre*, the pixels whose window lies inside the exemplar), their PCA projection to about 20
   dimensions, and each valid centre's **k-coherence set** (its ``k`` most similar valid centres
-  in the PCA space, ``scipy.spatial.cKDTree``).
+  in the PCA space, a ``scipy.spatial.cKDTree`` kept bounded on repeated patches,
+  :class:`npmrf3d.model.nearest.PatchIndex`).
 * **source maps** -- for every voxel and view the exemplar pixel it was copied from (flat index
   ``row * W + col``): :func:`random_sources`, :func:`upsample_sources` (``2 * parent + offset``).
 * **candidate sets** -- :func:`candidate_set`, the union over a site's 3 x 3 in-plane neighbours
@@ -31,9 +32,9 @@ from typing import NamedTuple
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
-from scipy.spatial import cKDTree
 
 from .._kernels import kcoherence as _k
+from .nearest import PatchIndex, nearest_others
 from .neighbourhood import VIEW_AXES
 
 __all__ = [
@@ -74,9 +75,9 @@ class LevelModel(NamedTuple):
         k-coherence set of every valid centre, most similar first (rows of other pixels -1).
     valid : (n,) int64 ndarray
         Flat indices of the valid centres, row-major.
-    tree : scipy.spatial.cKDTree
+    tree : npmrf3d.model.nearest.PatchIndex
         The valid centres' projections (rows of ``proj[valid]``), for global searches
-        (:func:`global_matches`).
+        (:func:`global_matches`); ``tree.distinct`` is the number of vectors its k-d tree holds.
     """
 
     exemplar: np.ndarray
@@ -88,7 +89,7 @@ class LevelModel(NamedTuple):
     proj: np.ndarray
     kcoh: np.ndarray
     valid: np.ndarray
-    tree: cKDTree
+    tree: PatchIndex
 
     @property
     def pixels(self) -> int:
@@ -182,8 +183,9 @@ def pca_project(patches: np.ndarray, dims: int = 20) -> tuple[np.ndarray, np.nda
 
 
 def k_coherence_sets(points: np.ndarray, k: int = 5, *, exclude: float = 0.0,
-                     coords: np.ndarray | None = None, tree: cKDTree | None = None) -> np.ndarray:
-    """Indices of the ``k`` nearest other points of every point (``scipy.spatial.cKDTree``).
+                     coords: np.ndarray | None = None, tree: PatchIndex | None = None) -> np.ndarray:
+    """Indices of the ``k`` nearest other points of every point (``scipy.spatial.cKDTree``,
+    through :class:`npmrf3d.model.nearest.PatchIndex`).
 
     Parameters
     ----------
@@ -195,27 +197,30 @@ def k_coherence_sets(points: np.ndarray, k: int = 5, *, exclude: float = 0.0,
         (its own shifted copies) are skipped, so the sets point to other places of the exemplar.
     coords : (n, 2) ndarray, optional
         Pixel coordinates of the points (needed with ``exclude``).
-    tree : cKDTree, optional
-        A tree of ``points`` already built.
+    tree : PatchIndex, optional
+        An index of ``points`` already built.
 
     Returns
     -------
     (n, k) int64 ndarray, nearest first; a point is never in its own set. Ties are broken as
-    ``cKDTree.query`` breaks them (exact Euclidean distances).
+    ``cKDTree.query`` breaks them (exact Euclidean distances); when the index keeps only the
+    distinct vectors (many repeated patches), identical points rank by their index
+    (:func:`npmrf3d.model.nearest.nearest_others`).
 
     The 3D similarity sets (:func:`npmrf3d.methods.volume_lh.similarity_sets`) are another rule
     of the 3D-exemplar method: the point itself first, each later member away from *every*
     earlier one, searched on a lattice among a fixed number of neighbours.
     """
     if tree is None:
-        tree = cKDTree(np.asarray(points, dtype=np.float64))
+        tree = PatchIndex(points)
+    if tree.deduplicated:
+        return nearest_others(tree, k, exclude=exclude, coords=coords)
     n = len(points)
     want = min(n, k + 1 if exclude <= 0 else max(4 * k, k + 1 + int((2 * exclude + 1) ** 2)))
     out = np.empty((n, k), dtype=np.int64)
     todo = np.arange(n)
     while todo.size:
-        _, idx = tree.query(points[todo], k=want)
-        idx = np.asarray(idx, dtype=np.int64).reshape(len(todo), want)
+        _, idx = tree.query(points[todo], want)
         ok = idx != todo[:, None]
         if exclude > 0:
             cheb = np.abs(coords[idx] - coords[todo][:, None, :]).max(axis=2)
@@ -264,7 +269,7 @@ def build_level_model(exemplar: np.ndarray, window: int, *, dims: int = 20, k: i
     proj = np.zeros((h * w, basis.shape[1]), dtype=np.float64)
     proj[flat] = projected
     kcoh = np.full((h * w, k), -1, dtype=np.int32)
-    tree = cKDTree(projected)
+    tree = PatchIndex(projected)
     if k_eff > 0:
         sets = k_coherence_sets(projected, k_eff, exclude=exclude,
                                 coords=np.stack([rows.ravel(), cols.ravel()], axis=1), tree=tree)
@@ -382,9 +387,8 @@ def global_matches(volume: np.ndarray, view: str, model: LevelModel, assign_v: n
     y = np.empty((take, model.basis.shape[1]), dtype=np.float64)
     _k.project_sites(volume, ra, ca, model.window, model.anchor, model.mean, model.basis, worst, y)
     nearest = min(4, len(model.valid))
-    dist, idx = model.tree.query(y, k=nearest)
-    dist = np.asarray(dist, dtype=np.float64).reshape(take, nearest)
-    centres = model.valid[np.asarray(idx, dtype=np.int64).reshape(take, nearest)]
+    dist, idx = model.tree.query(y, nearest)
+    centres = model.valid[idx]
     excess = index_hist[centres] / phi - 1.0
     cost = dist ** 2 * np.where(excess > 0.0, 1.0 + index_weight * excess, 1.0)
     pick = np.argmin(cost, axis=1)
