@@ -25,7 +25,7 @@ ParameterError
 
 from importlib.metadata import PackageNotFoundError, version
 
-from . import data
+from . import _cache_folders, data  # noqa: F401  (_cache_folders first: before matplotlib)
 from .analysis import metrics
 from .config import DEFAULT_SIZE, PRESETS, SUPPORTS, DecisionRule, SynthesisConfig, SynthesisResult
 from .errors import ParameterError

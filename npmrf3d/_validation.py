@@ -76,6 +76,8 @@ def per_level(name: str, value, levels: int, *, low: int | None = None,
     except TypeError:
         fail(f"{name} must be a positive integer or one per level; got {value!r}")
     if len(value) != levels:
+        if levels == 1:
+            fail(f"{name} must be one integer (one level); got {len(value)}: {value!r}")
         fail(f"{name} must be one integer or {levels} integers (one per level, coarsest "
              f"first); got {len(value)}: {value!r}")
     return tuple(integer(name, v, low=low, high=high) for v in value)

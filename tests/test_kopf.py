@@ -414,7 +414,7 @@ def test_identical_volume_with_one_and_two_threads(tmp_path):
         (dict(size=9, levels=2), "size 9 is not divisible by 2\\*\\*\\(levels-1\\) = 2"),
         (dict(size=8, levels=2, window=5), "coarsest level has 4 voxels per side, needs at least 5"),
         (dict(size=10, levels=1, grid=4), "multiple of grid"),
-        (dict(iterations=(1, 2)), "iterations must be one integer or 1 integers"),
+        (dict(iterations=(1, 2)), "iterations must be one integer \\(one level\\)"),
         (dict(iterations=0), "iterations must be >= 1; got 0"),
         (dict(r=3.0), "r must be a finite number in \\(0.0, 2.0\\]; got 3.0"),
         (dict(eps=-1), "eps must be a finite number"),

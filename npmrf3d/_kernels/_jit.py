@@ -17,6 +17,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import NamedTuple
 
+from .._cache_folders import private_temp_folder, writable_folder
 from ..errors import ParameterError
 
 
@@ -67,14 +68,24 @@ def _default_cache_dir() -> str:
     return str(Path(base) / "npmrf3d" / "numba")
 
 
+def _cache_dir() -> str | None:
+    """The folder for numba's cache: ``$NUMBA_CACHE_DIR`` or :func:`_default_cache_dir` when it
+    can be written, else a private folder in the temporary folder, else None (no cache: numba
+    raises when a kernel is decorated if it finds no writable cache folder at all).
+    """
+    chosen = os.environ.get("NUMBA_CACHE_DIR") or _default_cache_dir()
+    return chosen if writable_folder(chosen) else private_temp_folder("numba")
+
+
 # Read by numba when each decorated function is created (its cache locator), so setting it here,
 # before any kernel module decorates a function, is enough even if numba was imported earlier;
 # the environment variable carries the choice to worker processes (dask) too.
-if not os.environ.get("NUMBA_CACHE_DIR"):
-    os.environ["NUMBA_CACHE_DIR"] = _default_cache_dir()
-    numba.config.CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]
+CACHE_DIR = _cache_dir()
+if CACHE_DIR is not None and CACHE_DIR != os.environ.get("NUMBA_CACHE_DIR"):
+    os.environ["NUMBA_CACHE_DIR"] = CACHE_DIR
+    numba.config.CACHE_DIR = CACHE_DIR
 
-JIT_OPTIONS = {"cache": True, "fastmath": False, "nogil": True}
+JIT_OPTIONS = {"cache": CACHE_DIR is not None, "fastmath": False, "nogil": True}
 
 jit = numba.njit(**JIT_OPTIONS)
 jit_parallel = numba.njit(parallel=True, **JIT_OPTIONS)

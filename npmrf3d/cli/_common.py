@@ -224,6 +224,10 @@ def check_checkpoint(path: pathlib.Path | None, out: pathlib.Path | None = None,
         raise ParameterError(f"checkpoint '{path}' exists and is not a file")
     if not path.absolute().parent.is_dir():
         raise ParameterError(f"folder of checkpoint '{path}' does not exist")
+    if not os.access(path.absolute().parent, os.W_OK | os.X_OK):
+        # written after the first level (or training steps): refuse before that work
+        raise ParameterError(f"folder of checkpoint '{path}' is not writable; choose another "
+                             "--checkpoint")
     if out is not None:
         mine, theirs = path.resolve(), out.resolve()
         if mine == theirs:

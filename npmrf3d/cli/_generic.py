@@ -40,8 +40,9 @@ def _parse_tuple(text: str) -> int | tuple[int, ...]:
     parts = [p.strip() for p in str(text).split(",")]
     try:
         numbers = tuple(int(p) for p in parts)
-    except ValueError:
-        raise ParameterError(f"expected an integer or comma-separated integers; got {text!r}") from None
+    except ValueError:  # argparse words it as "argument --window: expected ..."
+        raise argparse.ArgumentTypeError(f"expected an integer or comma-separated integers; "
+                                         f"got {text!r}") from None
     return numbers[0] if len(numbers) == 1 else numbers
 
 

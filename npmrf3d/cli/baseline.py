@@ -228,7 +228,7 @@ def _parse_iterations(text: str):
     return numbers[0] if len(numbers) == 1 else tuple(numbers)
 
 def _parse_mean_shift(text: str):
-    if str(text).strip().lower() in ("none", "off", ""):
+    if str(text).strip().lower() in ("none", "off"):
         return None
     parts = [p.strip() for p in str(text).split(",")]
     try:

@@ -92,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
         return error(problem)
     args.given = given_options(build_parser(), argv)  # what the user wrote, not the defaults
     option_names = {**{name: "--" + name.replace("_", "-") for name in OPTION_NAMES},
-                    **option_strings(parser, args)}
+                    **neural.OPTION_NAMES, **option_strings(parser, args)}
     # Ctrl-C and SIGTERM end a run alike (one line, exit 130), latched so that none is lost
     previous = _interrupt.install()
     try:

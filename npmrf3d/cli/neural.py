@@ -9,6 +9,7 @@ without the extra.
 from __future__ import annotations
 
 import argparse
+import os
 import pathlib
 import time
 
@@ -20,10 +21,19 @@ from ..errors import ParameterError
 from ..io.files import atomic_write, write_volume_tiff
 from ..methods import neural
 from ..methods.neural import _extra
-from ..methods.neural.config import DESCRIPTORS, ZARR_BLOCK, ZARR_WORKERS, NeuralConfig
+from ..methods.neural.config import DESCRIPTORS, ORIGIN_LIMIT, ZARR_BLOCK, ZARR_WORKERS, NeuralConfig
 from ..model.exemplar import BUNDLED_PREFIX
 from ..model.neighbourhood import VIEWS
-from ._common import CountProgress, check_checkpoint, choices, default, parse_size, say, view_sources
+from ._common import (
+    CountProgress,
+    check_checkpoint,
+    choices,
+    default,
+    parse_size,
+    positive_int,
+    say,
+    view_sources,
+)
 
 __all__ = ["register"]
 
@@ -60,6 +70,8 @@ def _check_new_file(path: pathlib.Path, overwrite: bool, what: str) -> None:
         raise ParameterError(f"{what} '{path}' is a folder")
     if not path.absolute().parent.is_dir():
         raise ParameterError(f"folder of {what} '{path}' does not exist")
+    if not os.access(path.absolute().parent, os.W_OK | os.X_OK):
+        raise ParameterError(f"folder of {what} '{path}' is not writable; choose another --out")
 
 
 def _train(args: argparse.Namespace, argv) -> int:
@@ -101,10 +113,16 @@ def _generate(args: argparse.Namespace, argv) -> int:
     if out.suffix.lower() not in VOLUME_SUFFIXES:
         raise ParameterError(f"--out must end in one of {', '.join(VOLUME_SUFFIXES)}; got '{out}'")
     size = parse_size(args.size)
-    from_cli = {"size": size, "origin": parse_size(args.origin)}
+    try:
+        origin = parse_size(args.origin)
+    except ParameterError:
+        raise ParameterError(f"--origin must be an integer or three comma-separated integers "
+                             f"X,Y,Z; got {args.origin!r}") from None
+    from_cli = {"size": size, "origin": origin}
     try:
         size = check.triple("size", from_cli["size"], low=1)
-        origin = check.triple("origin", from_cli["origin"])
+        origin = tuple(check.integer("origin", o, low=-ORIGIN_LIMIT, high=ORIGIN_LIMIT)
+                       for o in check.triple("origin", from_cli["origin"]))
         check.integer("block", args.block, low=1)
         check.integer("workers", args.workers, low=1)
     except ParameterError as exc:
@@ -195,7 +213,7 @@ def register(commands, formatter_class) -> None:
     run.add_argument("--checkpoint", default=None, metavar="PATH",
                      help="file written every --checkpoint-every steps; resumed from if it matches (default: none)")
     run.add_argument("--checkpoint-every", type=int, default=_d("checkpoint_every"), metavar="N", help="steps between checkpoints")
-    run.add_argument("--threads", type=int, default=None, metavar="N", help="torch threads (default: none = torch's choice)")
+    run.add_argument("--threads", type=positive_int, default=None, metavar="N", help="torch threads (default: none = torch's choice)")
     run.add_argument("--overwrite", action="store_true", help="replace an existing model file")
     run.add_argument("--quiet", action="store_true", help="print nothing but errors")
     train.set_defaults(handler=_train)
@@ -218,9 +236,9 @@ def register(commands, formatter_class) -> None:
                      help="noise seed: another volume of the same texture (default: none = the model's)")
     gen.add_argument("--block", type=int, default=ZARR_BLOCK, metavar="N", help="Zarr: block and chunk side")
     gen.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                     help="Zarr: a running Dask scheduler (default: none = a local cluster of --workers)")
+                     help="Zarr: a running Dask scheduler's address, or local (default: none = a local cluster of --workers)")
     gen.add_argument("--workers", type=int, default=ZARR_WORKERS, metavar="N", help="Zarr: local worker processes")
-    gen.add_argument("--threads", type=int, default=None, metavar="N", help="torch threads (default: none = torch's choice)")
+    gen.add_argument("--threads", type=positive_int, default=None, metavar="N", help="torch threads (default: none = torch's choice)")
     gen.add_argument("--overwrite", action="store_true", help="replace an existing output (a Zarr volume: start afresh)")
     gen.add_argument("--quiet", action="store_true", help="print nothing but errors")
     gen.set_defaults(handler=_generate)

@@ -35,13 +35,16 @@ import time
 import numpy as np
 
 from ... import _validation as check
+from ..._cluster import check_scheduler, probe_scheduler
 from ...config import DEFAULT_SIZE, SynthesisMethod, SynthesisResult
+from ...errors import ParameterError
 from ...model.exemplar import resolve_exemplars
 from ...resources import Estimate, check_memory
 from .._api import prepare, seed_of
 from . import _extra
 from ._extra import MissingExtraError
 from .config import (
+    ORIGIN_LIMIT,
     ZARR_BLOCK,
     ZARR_WORKERS,
     NeuralConfig,
@@ -119,7 +122,8 @@ def generate(model, origin=(0, 0, 0), shape=32, *, seed=None) -> np.ndarray:
         Blocks of one model and seed tile exactly: the block at ``o`` of shape ``n`` equals the
         ``[o - p, o - p + n)`` part of any larger block at ``p`` that contains it, bit for bit.
     """
-    origin = check.triple("origin", origin)
+    origin = tuple(check.integer("origin", o, low=-ORIGIN_LIMIT, high=ORIGIN_LIMIT)
+                   for o in check.triple("origin", origin))
     shape = check.triple("shape", shape, low=1)
     if seed is not None:
         seed = check.integer("seed", seed, low=0, high=2**62)
@@ -148,10 +152,20 @@ def write_zarr(model_path, out, *, size, block: int = ZARR_BLOCK, scheduler: str
     size = check.triple("size", size, low=1)
     block = check.integer("block", block, low=1)
     workers = check.integer("workers", workers, low=1)
-    if scheduler is not None and not isinstance(scheduler, str):
-        check.fail(f"scheduler must be None or an address such as 'tcp://HOST:8786'; got {scheduler!r}")
     if not os.path.isfile(model_path):
         check.fail(f"model must be an existing model file (from 'npmrf3d neural train'); got {str(model_path)!r}")
+    if scheduler == "local":  # as the study's option: a local cluster
+        scheduler = None
+    if scheduler is not None:
+        # checked before the Zarr folder is made: a wrong or silent address leaves nothing behind
+        try:
+            if not isinstance(scheduler, str) or scheduler == "serial":
+                raise ParameterError(scheduler)
+            check_scheduler(scheduler)
+        except ParameterError:
+            check.fail(f"scheduler must be 'local' or a Dask scheduler address such as "
+                       f"'tcp://HOST:8786'; got {scheduler!r}")
+        probe_scheduler(scheduler)
     return _extra.zarr_writer().write_zarr(model_path, out, size=size, block=block,
                                            scheduler=scheduler, workers=workers,
                                            overwrite=overwrite, progress=progress)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import io
 import json
 import math
+import pickle
 
 import numpy as np
 import torch
@@ -71,7 +72,7 @@ def load_training_state(path, key, rng: np.random.Generator) -> dict | None:
     try:
         state = torch.load(io.BytesIO(raw.tobytes()), map_location="cpu", weights_only=True)
     except Exception as exc:  # torch raises many kinds on bytes it cannot read
-        raise refusal(path, f"'torch_state' cannot be read: {_first_line(exc)}") from None
+        raise refusal(path, f"'torch_state' cannot be read: {torch_load_failure(exc)}") from None
     if not isinstance(state, dict) or not {"generator", "optimizer"} <= set(state):
         raise refusal(path, "'torch_state' holds no generator and optimizer state")
     data["torch_state"] = state
@@ -81,6 +82,16 @@ def load_training_state(path, key, rng: np.random.Generator) -> dict | None:
 def _first_line(exc: BaseException) -> str:
     text = str(exc).strip()
     return text.splitlines()[0] if text else type(exc).__name__
+
+
+def torch_load_failure(exc: BaseException) -> str:
+    """Why ``torch.load(..., weights_only=True)`` refused a file, in one short clause: a file
+    with pickled objects besides tensors is refused as such (torch's own text would suggest
+    loading it with ``weights_only=False``, which runs code from the file); other reasons keep
+    their first sentence."""
+    if isinstance(exc, pickle.UnpicklingError):
+        return "it holds Python objects besides tensors, which are never loaded"
+    return _first_line(exc).split(". ", 1)[0]
 
 
 def restore_torch_state(path, state: dict, generator, optimizer) -> None:

@@ -15,10 +15,13 @@ from ...config import DEFAULT_SIZE
 from ...model.neighbourhood import VIEWS
 from ...resources import F4, Estimate
 
-__all__ = ["DESCRIPTORS", "ZARR_BLOCK", "ZARR_WORKERS", "NeuralConfig", "make_neural_config", "neural_estimate"]
+__all__ = ["DESCRIPTORS", "ORIGIN_LIMIT", "ZARR_BLOCK", "ZARR_WORKERS", "NeuralConfig", "make_neural_config", "neural_estimate"]
 
 #: Side of the blocks (and Zarr chunks) that ``write_zarr`` writes, and its local Dask workers.
 ZARR_BLOCK = 128
+#: Largest distance of a generated block's first voxel from the lattice origin, per axis: the
+#: noise hashes 64-bit lattice coordinates, so farther blocks cannot be made.
+ORIGIN_LIMIT = 2 ** 40
 ZARR_WORKERS = 2
 #: The texture descriptors training can compare slices with (see :mod:`npmrf3d.methods.neural.descriptor`).
 DESCRIPTORS = ("random", "vgg19")

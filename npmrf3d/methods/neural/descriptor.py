@@ -37,6 +37,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from ...errors import ParameterError
+from .checkpoint import torch_load_failure
 
 __all__ = ["RandomFilterDescriptor", "VGG19Descriptor", "gram", "gram_loss", "histogram_loss", "histogram_target",
            "make_descriptor"]
@@ -93,7 +94,7 @@ def _vgg_state(path: str) -> dict:
         state = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # any unreadable file is a user-facing error
         raise ParameterError(f"vgg19_weights '{path}' cannot be read as a torch state_dict: "
-                             f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from exc
+                             f"{torch_load_failure(exc)}") from exc
     if not isinstance(state, dict):
         raise ParameterError(f"vgg19_weights '{path}' must hold a state_dict (a dict of tensors); "
                              f"got {type(state).__name__}")

@@ -31,7 +31,13 @@ import torch
 from ...errors import ParameterError
 from ...io.files import atomic_write
 from ...model.neighbourhood import VIEW_AXES
-from .checkpoint import load_training_state, restore_torch_state, save_training_state, training_key
+from .checkpoint import (
+    load_training_state,
+    restore_torch_state,
+    save_training_state,
+    torch_load_failure,
+    training_key,
+)
 from .config import NeuralConfig, slice_side
 from .descriptor import gram, gram_loss, histogram_loss, histogram_target, make_descriptor
 from .generator import SolidGenerator
@@ -352,9 +358,19 @@ def load_model(source) -> NeuralModel:
                              map_location="cpu", weights_only=True)
     except Exception as exc:
         raise ParameterError(f"{what} cannot be read as a neural model: "
-                             f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from exc
+                             f"{torch_load_failure(exc)}") from exc
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
         raise ParameterError(f"{what} is not an npmrf3d neural model (written by 'npmrf3d neural train')")
+    try:
+        return _model_from_payload(payload)
+    except Exception as exc:  # a damaged file: missing entries, wrong shapes, bad settings
+        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        raise ParameterError(f"{what} is damaged or not a model of this npmrf3d version "
+                             f"({type(exc).__name__}: {reason[:160]}); train it again with "
+                             "'npmrf3d neural train'") from exc
+
+
+def _model_from_payload(payload: dict) -> NeuralModel:
     settings = json.loads(payload["config"])
     settings["size"] = tuple(settings["size"])
     settings["views"] = tuple(settings["views"])
