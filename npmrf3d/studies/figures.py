@@ -152,7 +152,8 @@ def _temperatures(record) -> list:
 
 
 def _temperature_figure(study_dir, specs, rows):
-
+    """Each method's global temperature after each sweep (its first seed; every seed in the
+    CSV), as a share of the level's first value so that levels of every size read alike."""
     done = {r["run_id"] for r in rows if r["status"] != "failed"}
     exemplars = unique(s.exemplar for s in specs)
     table, curves = [], defaultdict(list)
@@ -161,13 +162,14 @@ def _temperature_figure(study_dir, specs, rows):
         history = _temperatures(record)
         xs, ys, sweep = [], [], 0
         for level_index, level in enumerate(history):
+            start = level[0] if level and level[0] > 0 else 1.0
             for k, t in enumerate(level):
                 table.append({"run_id": s.run_id, "exemplar": s.exemplar, "method": s.method,
                               "seed": s.seed, "level": level_index, "sweep": k, "temperature": t})
                 xs.append(sweep + k)
-                ys.append(t)
+                ys.append(t / start)
             sweep += len(level)
-        if xs:
+        if xs and s.seed == min(x.seed for x in specs if x.method == s.method):
             curves[s.exemplar].append((s.method, s.seed, xs, ys))
     if not table:
         return []
@@ -176,10 +178,10 @@ def _temperature_figure(study_dir, specs, rows):
     axes = np.atleast_1d(fig.subplots(1, len(exemplars), squeeze=False)[0])
     for ax, e in zip(axes, exemplars):
         for method, seed, xs, ys in curves.get(e, []):
-            ax.plot(xs, ys, marker=".", label=f"{method} s{seed}")
+            ax.plot(xs, ys, marker=".", label=f"{method} (seed {seed})")
         ax.set_title(e)
         ax.set_xlabel("sweep (levels one after the other, coarse first)")
-        ax.set_ylabel("global temperature")
+        ax.set_ylabel("global temperature / the level's first")
         ax.grid(alpha=0.3)
         ax.legend(fontsize="small")
     return [save_figure(fig, study_dir / "temperature.png")]
