@@ -74,10 +74,10 @@ def test_synth_help_lists_every_option_with_its_default(capsys):
         if action.option_strings != ["-h", "--help"]:
             assert "default" in action.help or action.default is not None
     for expected in ("(default: 7)", "(default: 64)", "(default: 3)", "(default: ML_H2b)",
-                     "(default: icm)", "(default: -3.0)", "(default: 0.95)", "(default: 30)",
+                     "(default: icm)", "(default: none = -3.0 with support full", "(default: 0.95)", "(default: 30)",
                      "1/8 for icm and 8/8 for anneal", "(default: resynth)", "(default: front,right,top)",
                      "(default: none = coherent)", "(default: 0)", "(default: npmrf3d-synth-out)",
-                     "(default: heat-bath)", "(default: geometric)", "(default: 10)",
+                     "(default: none = heat-bath with support full, metropolis", "(default: geometric)", "(default: 10)",
                      "(default: 0.05)", "(default: exemplar)", "this project's addition",
                      "needs ML_H2a or ML_H2b", "word for word", "docs/quality.md",
                      "preset tuned uses 0.1", "bundled:gravel64"):

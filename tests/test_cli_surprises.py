@@ -249,7 +249,7 @@ def test_options_that_apply_are_still_accepted(place, capsys):
 
 
 def test_progress_shows_no_nan_before_the_first_value(capsys):
-    from npmrf3d.cli._common import LevelProgress
+    from npmrf3d.cli._progress import LevelProgress
 
     progress = LevelProgress((8, 8, 8), enabled=True, unit="pass", symbol="E")
     progress(0, 0, 2, float("nan"))

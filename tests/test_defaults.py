@@ -93,7 +93,8 @@ def test_config_make_config_and_cli_agree_on_every_default(name):
     cli = _cli_defaults(*path)
     made = _signature_defaults(builder)
     # options whose default is decided elsewhere on purpose
-    special = {"upsample", "support", "preset", "temperatures"} if name == "npmrf" else {"iterations"} if name == "kopf" else set()
+    special = ({"upsample", "support", "preset", "temperatures", "xi", "sampler"} if name == "npmrf"
+               else {"iterations"} if name == "kopf" else set())
     checked = 0
     for field, value in fields.items():
         if field in special or field in ("seed", "constrained", "rule"):
@@ -173,3 +174,17 @@ def test_every_method_is_a_command_by_its_registry_name():
     assert set(METHODS) <= set(commands.choices)
     for name in ("kopf", "chen-wang"):  # also under 'baseline', as before
         assert _sub_parser("baseline", name)._actions
+
+
+def test_the_supports_own_defaults_are_written_once():
+    """``xi`` and ``sampler`` default by support (:data:`DEFAULT_XI`, :data:`DEFAULT_SAMPLER`):
+    what a configuration gets, the command line's help says."""
+    from npmrf3d.methods.npmrf_options import DEFAULT_SAMPLER, DEFAULT_XI, make_config
+
+    assert DEFAULT_XI == {"full": -3.0, "coherent": -1.0}
+    assert DEFAULT_SAMPLER == {"full": "heat-bath", "coherent": "metropolis"}
+    for support in ("full", "coherent"):
+        icm = make_config(size=16, levels=2, window=5, support=support, temperatures=True)
+        anneal = make_config(size=16, levels=2, window=5, support=support, relaxation="anneal")
+        assert icm.xi == DEFAULT_XI[support] and anneal.sampler == DEFAULT_SAMPLER[support]
+

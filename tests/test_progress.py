@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 import npmrf3d
-from npmrf3d.cli._common import LevelProgress
+from npmrf3d.cli._progress import LevelProgress
 from npmrf3d.model.relax.icm import expected_sweeps
 
 

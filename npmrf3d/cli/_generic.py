@@ -15,7 +15,6 @@ import dataclasses
 import time
 
 from .. import data
-from ..errors import ParameterError
 from ..io.runs import RUN_FILES
 from ..model.exemplar import BUNDLED_PREFIX
 from ..model.neighbourhood import VIEWS
@@ -26,9 +25,9 @@ from ._common import (
     dry_run,
     parse_size,
     prepare_run,
-    run_method,
     write_result,
 )
+from ._progress import run_method
 
 __all__ = ["add_method_parser"]
 

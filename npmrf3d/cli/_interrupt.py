@@ -5,7 +5,7 @@ that bytecode runs inside a callback from C -- numba compiling (llvmlite's ctype
 numba loading cached code -- the exception is printed as "Exception ignored on calling ctypes
 callback function" and dropped: the run went on and, seen once in CI, exited 0 after its
 SIGINT (or 1 with a cold cache). Here the handler also *latches* the signal: every progress
-tick (:class:`npmrf3d.cli._common.LevelProgress`) and the end of every run call :func:`check`,
+tick (:class:`npmrf3d.cli._progress.LevelProgress`) and the end of every run call :func:`check`,
 which raises ``KeyboardInterrupt`` again while the latch is set, so a swallowed interrupt still
 ends the run at its next step with exit 130 and nothing written. Python reports such a dropped
 exception through :func:`sys.unraisablehook` ("Exception ignored in ..." and a traceback on

@@ -32,11 +32,11 @@ from ._common import (
     dry_run,
     parse_size,
     prepare_run,
-    run_method,
     write_result,
 )
 from ._generic import add_method_parser
 from ._options import given
+from ._progress import run_method
 
 __all__ = ["register"]
 

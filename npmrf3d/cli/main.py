@@ -21,7 +21,17 @@ import warnings
 
 from .. import __version__
 from ..errors import InputNote
-from . import _interrupt, baseline, coherent, info, metrics, neural, study, synth, volume
+from . import (
+    _interrupt,
+    baseline,
+    coherent,
+    info,
+    metrics,
+    neural,
+    study,
+    synth,
+    volume,
+)
 from ._common import PROG, HelpFormatter, Parser, error, guarded, say
 from ._options import environment_problem, given_options, option_strings
 

@@ -21,11 +21,16 @@ from ..errors import ParameterError
 from ..io.files import atomic_write, write_volume_tiff
 from ..methods import neural
 from ..methods.neural import _extra
-from ..methods.neural.config import DESCRIPTORS, ORIGIN_LIMIT, ZARR_BLOCK, ZARR_WORKERS, NeuralConfig
+from ..methods.neural.config import (
+    DESCRIPTORS,
+    ORIGIN_LIMIT,
+    ZARR_BLOCK,
+    ZARR_WORKERS,
+    NeuralConfig,
+)
 from ..model.exemplar import BUNDLED_PREFIX
 from ..model.neighbourhood import VIEWS
 from ._common import (
-    CountProgress,
     check_checkpoint,
     choices,
     default,
@@ -34,6 +39,7 @@ from ._common import (
     say,
     view_sources,
 )
+from ._progress import CountProgress
 
 __all__ = ["register"]
 

@@ -2,7 +2,7 @@
 
 Registered by :data:`npmrf3d.cli.main.COMMANDS`; :func:`study_main` is the entry point of the
 one-line scripts in the repository's ``studies/`` folder. The bar over a study's runs is drawn
-here (:class:`npmrf3d.cli._common.RunsProgress`), called back by the runner.
+here (:class:`npmrf3d.cli._progress.RunsProgress`), called back by the runner.
 """
 
 from __future__ import annotations
@@ -19,12 +19,12 @@ from ._common import (
     PROG,
     HelpFormatter,
     Parser,
-    RunsProgress,
     guarded,
     non_negative_int,
     positive_int,
     say,
 )
+from ._progress import RunsProgress
 from .synth import OPTION_NAMES
 
 __all__ = ["register", "study_main"]

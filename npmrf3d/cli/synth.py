@@ -14,12 +14,19 @@ import time
 import numpy as np
 
 from .. import data
-from ..config import DEFAULT_SIZE, PRESETS, SEGMENTED_MODES, SUPPORTS, VARIANTS, SynthesisConfig
+from ..config import (
+    DEFAULT_SIZE,
+    PRESETS,
+    SEGMENTED_MODES,
+    SUPPORTS,
+    VARIANTS,
+    SynthesisConfig,
+)
 from ..errors import ParameterError
 from ..io.runs import RUN_FILES
 from ..methods.npmrf import METHOD, segmented
-from ..methods.npmrf_options import DEFAULT_XI
 from ..methods.npmrf_coherent import SEGMENTED, SEGMENTED_MAX_VALUES
+from ..methods.npmrf_options import DEFAULT_SAMPLER, DEFAULT_XI
 from ..model.exemplar import BUNDLED_PREFIX
 from ..model.heuristics import DECISIONS, HEURISTICS
 from ..model.neighbourhood import VIEWS
@@ -36,11 +43,11 @@ from ._common import (
     dry_run,
     parse_size,
     prepare_run,
-    run_method,
     say,
     write_result,
 )
 from ._options import given
+from ._progress import run_method
 
 __all__ = ["register", "run"]
 
@@ -127,8 +134,8 @@ def register(commands, formatter_class) -> None:
     method.add_argument(
         "--xi", type=float, default=None, metavar="X",
         help="icm with per-voxel temperatures: cooling step, a negative number (more negative "
-             f"cools faster; default: None = {DEFAULT_XI['full']} with support full, the paper's, "
-             f"{DEFAULT_XI['coherent']} with support coherent, measured)",
+             f"cools faster) (default: none = {DEFAULT_XI['full']} with support full, the "
+             f"paper's; {DEFAULT_XI['coherent']} with support coherent, measured)",
     )
     method.add_argument(
         "--stop", type=float, default=_d("stop"), metavar="F",
@@ -140,11 +147,13 @@ def register(commands, formatter_class) -> None:
         help="icm: hard limit of sweeps per level, a positive integer",
     )
     method.add_argument(
-        "--sampler", default=_d("sampler"), metavar=choices(SAMPLERS),
-        help="anneal: heat-bath (this project's addition and the default, chosen by measurement: "
-             "draw the new value from the tempered objective over all labels) or metropolis (the "
-             "paper: one proposal per voxel and sweep, accepted by the Metropolis rule; needs many "
-             "more proposals)",
+        "--sampler", default=None, metavar=choices(SAMPLERS),
+        help="anneal: heat-bath (this project's addition: draw the new value from the tempered "
+             "objective, over all labels with support full, among the candidates with support "
+             "coherent) or metropolis (the paper: one proposal per voxel and sweep, accepted by "
+             "the Metropolis rule) (default: none = "
+             f"{DEFAULT_SAMPLER['full']} with support full, {DEFAULT_SAMPLER['coherent']} with "
+             "support coherent, each chosen by measurement: docs/quality.md)",
     )
     method.add_argument(
         "--schedule", default=_d("schedule"), metavar=choices(SCHEDULES),

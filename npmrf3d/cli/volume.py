@@ -31,11 +31,11 @@ from ._common import (
     dry_run,
     output_folder,
     parse_size,
-    run_method,
     say,
     write_result,
 )
 from ._options import given
+from ._progress import run_method
 
 __all__ = ["FIELD_HELP", "register"]
 

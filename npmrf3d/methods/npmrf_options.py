@@ -30,7 +30,8 @@ from ..model.pyramid import INHERIT, UPSAMPLING
 from ..model.relax import RELAXATIONS
 from ..model.relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
 
-__all__ = ["APPLIES", "DEFAULT_UPSAMPLE", "DEFAULT_XI", "applies", "combination", "make_config"]
+__all__ = ["APPLIES", "DEFAULT_SAMPLER", "DEFAULT_UPSAMPLE", "DEFAULT_XI", "applies", "combination",
+           "make_config"]
 
 #: Up-sampling used when none is asked for: the paper's choice for each relaxation.
 DEFAULT_UPSAMPLE = {"icm": "1/8", "anneal": "8/8"}
@@ -38,6 +39,10 @@ DEFAULT_UPSAMPLE = {"icm": "1/8", "anneal": "8/8"}
 #: -1 for ``coherent``, whose trust-weighted search needs more than the two sweeps per level
 #: that -3 leaves (docs/quality.md, "Per-voxel temperatures").
 DEFAULT_XI = {"full": SynthesisConfig.xi, "coherent": IcmSchedule.xi}
+#: Annealing's draw when none is asked for, by support: heat-bath for ``full`` (it beats the
+#: paper's Metropolis rule at equal sweeps); Metropolis for ``coherent``, where the heat-bath
+#: draw copies diagonal runs of exemplar pixels (docs/quality.md, "The sampler's combinations").
+DEFAULT_SAMPLER = {"full": SynthesisConfig.sampler, "coherent": "metropolis"}
 
 #: The combinations (support, relaxation) that use an option, for the options that some
 #: combinations cannot use; every other option applies everywhere.
@@ -94,9 +99,9 @@ def applies(name: str, where: tuple) -> bool:
 
 
 def _unset(name: str, value) -> bool:
-    """Whether option ``name`` was left at its default (``xi``'s is None: it depends on the
-    support, so any value given counts)."""
-    return value is None or (name != "xi" and value == getattr(_C, name, None))
+    """Whether option ``name`` was left at its default (``xi``'s and ``sampler``'s are None:
+    they depend on the support, so any value given counts)."""
+    return value is None or (name not in ("xi", "sampler") and value == getattr(_C, name, None))
 
 
 def _refuse_unused(given: dict, support: str, relaxation: str) -> None:
@@ -128,7 +133,7 @@ def _support_and_preset(variant, support, preset) -> tuple[str, str]:
 def make_config(
     *, size=DEFAULT_SIZE, window=_C.window, levels=_C.levels, heuristic=_C.heuristic,
     relaxation=_C.relaxation, views=_C.views, support=None, preset=None, upsample=None,
-    inherit=_C.inherit, xi=None, stop=_C.stop, max_sweeps=_C.max_sweeps, sampler=_C.sampler,
+    inherit=_C.inherit, xi=None, stop=_C.stop, max_sweeps=_C.max_sweeps, sampler=None,
     schedule=_C.schedule, t0=_C.t0, t_end=_C.t_end, proposals=_C.proposals, proposal=_C.proposal,
     variant=None, segmented=_C.segmented, bandwidth=None, centre_bandwidth=None, adaptive=None,
     decision=None, tau=None, histogram_weight=None, outlier=None, grey_levels=None, palette=None,
@@ -140,7 +145,8 @@ def make_config(
     decision rule, :data:`npmrf3d.config.PRESETS`) may also be given together by the older name
     ``variant`` (:data:`npmrf3d.config.VARIANTS`). The rule arguments (``bandwidth`` ...
     ``outlier``) override single fields of the support's rule when not None. ``xi`` (None:
-    :data:`DEFAULT_XI` of the support) is ICM's cooling step. ``temperatures``
+    :data:`DEFAULT_XI` of the support) is ICM's cooling step, ``sampler`` (None:
+    :data:`DEFAULT_SAMPLER` of the support) annealing's draw. ``temperatures``
     (None: True for support ``full`` with ICM, False otherwise): ICM with per-voxel temperatures;
     support ``coherent`` then weights its searches and votes by trust and re-decides warm voxels
     only (``xi``, ``stop``, ``max_sweeps``, ``inherit`` and ``upsample`` 1/8 need it there).
@@ -169,7 +175,7 @@ def make_config(
     xi = check.real("xi", DEFAULT_XI[support] if xi is None else xi, high=0.0, high_open=True)
     stop = check.real("stop", stop, low=0.0, high=1.0, low_open=True)
     max_sweeps = check.integer("max_sweeps", max_sweeps, low=1)
-    sampler = check.choice("sampler", sampler, SAMPLERS)
+    sampler = check.choice("sampler", DEFAULT_SAMPLER[support] if sampler is None else sampler, SAMPLERS)
     schedule = check.choice("schedule", schedule, SCHEDULES)
     t0 = check.real("t0", t0, low=0.0, low_open=True)
     t_end = check.real("t_end", t_end, low=0.0, low_open=schedule == "geometric", high=t0)

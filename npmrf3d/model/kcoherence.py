@@ -8,8 +8,7 @@ engine that runs it level by level, with the solver's histograms, is
 * :func:`build_level_model` -- one exemplar at one level: its neighbourhoods (one per *valid
   centre*, the pixels whose window lies inside the exemplar), their PCA projection to about 20
   dimensions, and each valid centre's **k-coherence set** (its ``k`` most similar valid centres
-  in the PCA space, a ``scipy.spatial.cKDTree`` kept bounded on repeated patches,
-  :class:`npmrf3d.model.nearest.PatchIndex`).
+  in the PCA space; a k-d tree bounded on repeated patches, :class:`~.nearest.PatchIndex`).
 * **source maps** -- for every voxel and view the exemplar pixel it was copied from (flat index
   ``row * W + col``): :func:`random_sources`, :func:`upsample_sources` (``2 * parent + offset``).
 * **candidate sets** -- :func:`candidate_set`, the union over a site's 3 x 3 in-plane neighbours
@@ -184,8 +183,7 @@ def pca_project(patches: np.ndarray, dims: int = 20) -> tuple[np.ndarray, np.nda
 
 def k_coherence_sets(points: np.ndarray, k: int = 5, *, exclude: float = 0.0,
                      coords: np.ndarray | None = None, tree: PatchIndex | None = None) -> np.ndarray:
-    """Indices of the ``k`` nearest other points of every point (``scipy.spatial.cKDTree``,
-    through :class:`npmrf3d.model.nearest.PatchIndex`).
+    """Indices of the ``k`` nearest other points of every point (:class:`~.nearest.PatchIndex`).
 
     Parameters
     ----------
@@ -207,9 +205,7 @@ def k_coherence_sets(points: np.ndarray, k: int = 5, *, exclude: float = 0.0,
     distinct vectors (many repeated patches), identical points rank by their index
     (:func:`npmrf3d.model.nearest.nearest_others`).
 
-    The 3D similarity sets (:func:`npmrf3d.methods.volume_lh.similarity_sets`) are another rule
-    of the 3D-exemplar method: the point itself first, each later member away from *every*
-    earlier one, searched on a lattice among a fixed number of neighbours.
+    (The 3D method's similarity sets follow another rule: :func:`npmrf3d.methods.volume_lh.similarity_sets`.)
     """
     if tree is None:
         tree = PatchIndex(points)
