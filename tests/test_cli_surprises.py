@@ -25,6 +25,7 @@ from npmrf3d import cli
 from npmrf3d.cli.main import build_parser
 from npmrf3d.errors import InputNote
 from npmrf3d.model.exemplar import load_exemplar
+from tests.cli_checks import one_line_error
 
 VTINY = ["--size", "8", "--levels", "1", "--dry-run"]
 TINY = ["--size", "8", "--levels", "1", "--dry-run"]
@@ -143,23 +144,6 @@ def place(tmp_path, monkeypatch) -> pathlib.Path:
     return tmp_path
 
 
-def _listing(root: pathlib.Path) -> set[str]:
-    return {str(p.relative_to(root)) for p in root.rglob("*")}
-
-
-def one_line_error(argv, root, capsys) -> str:
-    """Run ``argv``: exit 2, one line ``npmrf3d...: error: ...`` on stderr, no traceback,
-    nothing new in the folder; return the line."""
-    before = _listing(root)
-    code = cli.main(list(argv))
-    captured = capsys.readouterr()
-    lines = [line for line in captured.err.splitlines() if line.strip()]
-    assert code == 2, (argv, code, captured.err)
-    assert len(lines) == 1, (argv, captured.err)
-    assert lines[0].startswith("npmrf3d") and ": error: " in lines[0], lines
-    assert "Traceback" not in captured.err
-    assert _listing(root) == before, (argv, _listing(root) - before)
-    return lines[0]
 
 
 @pytest.mark.parametrize("argv, words, not_words", ERRORS, ids=[" ".join(a) for a, _, _ in ERRORS])

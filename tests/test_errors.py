@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from npmrf3d import cli
+from tests.cli_checks import one_line_error
 
 TINY = ["--size", "8", "--levels", "1", "--window", "3"]
 KTINY = ["--size", "8", "--levels", "1", "--window", "4", "--iterations", "1"]
@@ -128,21 +129,6 @@ def place(tmp_path, monkeypatch) -> pathlib.Path:
     return tmp_path
 
 
-def _listing(root: pathlib.Path) -> set[str]:
-    return {str(p.relative_to(root)) for p in root.rglob("*")}
-
-
-def check_one_line_error(argv, root, capsys) -> str:
-    before = _listing(root)
-    code = cli.main(list(argv))
-    captured = capsys.readouterr()
-    lines = [line for line in captured.err.splitlines() if line.strip()]
-    assert code == 2, (argv, code, captured.err)
-    assert len(lines) == 1, (argv, captured.err)
-    assert lines[0].startswith("npmrf3d") and ": error: " in lines[0], lines
-    assert "Traceback" not in captured.err and "usage:" not in captured.err
-    assert _listing(root) == before, (argv, _listing(root) - before)
-    return lines[0]
 
 
 def test_bad_inputs_are_distinct_and_many():
@@ -153,7 +139,7 @@ def test_bad_inputs_are_distinct_and_many():
 
 @pytest.mark.parametrize("argv", BAD_INPUTS, ids=lambda a: " ".join(a) or "(none)")
 def test_bad_input_is_one_line_exit_2_nothing_written(argv, place, capsys):
-    check_one_line_error(argv, place, capsys)
+    one_line_error(argv, place, capsys)
 
 
 def test_usage_block_only_with_help(capsys):
@@ -162,14 +148,14 @@ def test_usage_block_only_with_help(capsys):
 
 
 def test_argparse_message_names_the_command(place, capsys):
-    line = check_one_line_error(["baseline", "kopf", "--grid", "z"], place, capsys)
+    line = one_line_error(["baseline", "kopf", "--grid", "z"], place, capsys)
     assert line.startswith("npmrf3d baseline kopf: error: argument --grid: invalid int value")
 
 
 def test_scheduler_that_does_not_answer_fails_fast(place, capsys):
     import time
     t0 = time.perf_counter()
-    line = check_one_line_error(["study", "heuristics", "--quick", "--scheduler", "tcp://127.0.0.1:1"],
+    line = one_line_error(["study", "heuristics", "--quick", "--scheduler", "tcp://127.0.0.1:1"],
                                 place, capsys)
     assert time.perf_counter() - t0 < 10 and "cannot reach the Dask scheduler" in line
 
@@ -185,7 +171,7 @@ def test_full_disk_is_one_line(where, place, capsys, monkeypatch):
     else:
         monkeypatch.setattr("npmrf3d.io.checkpoints.np.savez", full)
         argv = ["synth", *TINY, "good.png", "--out", "out", "--quiet", "--checkpoint", "c.npz"]
-    line = check_one_line_error(argv, place, capsys)
+    line = one_line_error(argv, place, capsys)
     assert "No space left on device" in line and "free some space" in line
 
 
@@ -216,6 +202,6 @@ def test_study_with_failed_runs_exits_non_zero_and_says_how_many(place, capsys, 
 
 
 def test_study_json_report_garbage_message(place, capsys):
-    line = check_one_line_error(["report", "badjson"], place, capsys)
+    line = one_line_error(["report", "badjson"], place, capsys)
     assert "cannot be read" in line and "JSONDecodeError" in line
     json.loads(json.dumps(line))

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from npmrf3d import cli
+from tests.cli_checks import one_line_error
 
 TINY = ["--size", "8", "--levels", "1", "--window", "3", "--dry-run"]
 KTINY = ["--size", "8", "--levels", "1", "--window", "4", "--iterations", "1", "--dry-run"]
@@ -65,22 +66,6 @@ def place(tmp_path, monkeypatch) -> pathlib.Path:
     return tmp_path
 
 
-def _listing(root: pathlib.Path) -> set[str]:
-    return {str(p.relative_to(root)) for p in root.rglob("*")}
-
-
-def one_line_error(argv, root, capsys) -> str:
-    """Run ``argv``: exit 2, one line ``npmrf3d...: error: ...``, no traceback, nothing new."""
-    before = _listing(root)
-    code = cli.main(list(argv))
-    captured = capsys.readouterr()
-    lines = [line for line in captured.err.splitlines() if line.strip()]
-    assert code == 2, (argv, code, captured.err)
-    assert len(lines) == 1, (argv, captured.err)
-    assert lines[0].startswith("npmrf3d") and ": error: " in lines[0], lines
-    assert "Traceback" not in captured.err
-    assert _listing(root) == before, (argv, _listing(root) - before)
-    return lines[0]
 
 
 #: (argv, words the error line holds, words it must not hold)
