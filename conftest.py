@@ -6,9 +6,14 @@ runs them with ``tests_neural``)."""
 from __future__ import annotations
 
 import importlib.util
+import pathlib
+import re
 
-TORCH_MODULES = ["npmrf3d/methods/neural/descriptor.py", "npmrf3d/methods/neural/engine.py",
-                 "npmrf3d/methods/neural/generator.py", "npmrf3d/methods/neural/noise.py",
-                 "npmrf3d/methods/neural/zarr_volume.py"]
+#: The neural method's modules that import torch, found by reading them (so a new one is never
+#: forgotten here).
+TORCH_MODULES = sorted(
+    str(path.relative_to(pathlib.Path(__file__).parent))
+    for path in (pathlib.Path(__file__).parent / "npmrf3d" / "methods" / "neural").glob("*.py")
+    if re.search(r"^(import torch|from torch\b)", path.read_text(encoding="utf-8"), flags=re.M))
 
 collect_ignore = [] if importlib.util.find_spec("torch") is not None else TORCH_MODULES
