@@ -141,7 +141,6 @@ def test_the_refusals_are_distinct():
     assert len({tuple(argv) for argv, _, _ in REFUSALS}) == len(REFUSALS)
 
 
-@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs here")
 @pytest.mark.parametrize("argv", [["synth", "fifo", *TINY], ["kopf", "good.png", *KTINY, "--constraint", "fifo"]])
 def test_a_fifo_is_refused_without_blocking(argv, place, capsys):
     assert "not a file" in one_line_error(argv, place, capsys)
@@ -214,90 +213,3 @@ def test_info_works_when_the_home_folder_cannot_be_written(tmp_path):
     assert done.returncode == 0, done.stderr
     assert done.stderr.strip() == ""
     assert {p.name.rsplit("-", 1)[0] for p in temp.iterdir()} >= {"npmrf3d-numba", "npmrf3d-matplotlib"}
-
-
-# --------------------------------------------------------------------------- neural
-
-@pytest.fixture(scope="module")
-def model_file(tmp_path_factory) -> pathlib.Path:
-    pytest.importorskip("torch")
-    folder = tmp_path_factory.mktemp("model")
-    rng = np.random.default_rng(0)
-    iio.imwrite(folder / "good.png", rng.integers(0, 256, (16, 16, 3), dtype=np.uint8))
-    code = cli.main(["neural", "train", str(folder / "good.png"), "--iterations", "1", "--size", "16",
-                     "--threads", "1", "--out", str(folder / "model.pt"), "--quiet"])
-    assert code == 0
-    return folder / "model.pt"
-
-
-@pytest.fixture
-def neural_place(place, model_file) -> pathlib.Path:
-    import torch
-
-    from npmrf3d.methods.neural.engine import FORMAT
-
-    (place / "model.pt").write_bytes(model_file.read_bytes())
-    payload = torch.load(model_file, weights_only=True)
-    assert payload["format"] == FORMAT
-    torch.save({k: v for k, v in payload.items() if k != "state"}, place / "nostate.pt")
-    torch.save({**payload, "config": "{not json"}, place / "badconfig.pt")
-    torch.save({**payload, "out_channels": 7}, place / "badchannels.pt")
-    (place / "trunc.pt").write_bytes(model_file.read_bytes()[:2000])
-    return place
-
-
-NEURAL = [
-    (["neural", "generate", "good.png", "--size", "8", "--out", "g.npy"],
-     ["cannot be read as a neural model", "Python objects"], ["weights_only"]),
-    (["neural", "generate", "trunc.pt", "--size", "8", "--out", "g.npy"],
-     ["cannot be read as a neural model"], ["If you are seeing"]),
-    (["neural", "generate", "nostate.pt", "--size", "8", "--out", "g.npy"], ["damaged", "'state'"], []),
-    (["neural", "generate", "badconfig.pt", "--size", "8", "--out", "g.npy"], ["damaged"], []),
-    (["neural", "generate", "badchannels.pt", "--size", "8", "--out", "g.npy"], ["damaged"], []),
-    (["neural", "train", "good.png", "--iterations", "1", "--descriptor", "vgg19", "--vgg19", "good.png",
-      "--out", "m.pt"], ["--vgg19 'good.png'"], ["vgg19_weights", "weights_only"]),
-    (["neural", "train", "good.png", "--iterations", "1", "--threads", "0", "--out", "m.pt"],
-     ["--threads", "positive"], []),
-    (["neural", "generate", "model.pt", "--size", "8", "--out", "g.npy", "--threads=-2"],
-     ["--threads", "positive"], []),
-    (["neural", "generate", "model.pt", "--size", "8", "--origin", "99999999999999999999999,0,0",
-      "--out", "g.npy"], ["--origin must be between"], []),
-    (["neural", "generate", "model.pt", "--size", "8", "--origin", "1.5,0,0", "--out", "g.npy"],
-     ["--origin must be"], ["--size"]),
-    (["neural", "generate", "model.pt", "--size", "8", "--out", "g.zarr", "--scheduler", "garbage"],
-     ["--scheduler must be", "'garbage'"], []),
-    (["neural", "generate", "model.pt", "--size", "8", "--out", "g.zarr", "--scheduler", "serial"],
-     ["--scheduler must be"], []),
-    (["neural", "generate", "model.pt", "--size", "8", "--out", "g.zarr", "--scheduler",
-      "tcp://127.0.0.1:1"], ["cannot reach the Dask scheduler"], []),
-    (["neural", "train", "good.png", "--iterations", "0", "--out", "m.pt"], ["--iterations must"], []),
-    (["neural", "generate", "adir", "--size", "8", "--out", "g.npy"], ["model must be an existing"], []),
-]
-
-
-@pytest.mark.parametrize("argv, words, not_words", NEURAL, ids=[" ".join(a) for a, _, _ in NEURAL])
-def test_neural_refusal(argv, words, not_words, neural_place, capsys):
-    line = one_line_error(argv, neural_place, capsys)
-    for word in words:
-        assert word in line, (word, line)
-    for word in not_words:
-        assert word not in line, (word, line)
-
-
-@pytest.mark.parametrize("argv, words", [
-    (["neural", "train", "good.png", "--iterations", "1", "--size", "16", "--out", "ro/m.pt"],
-     "folder of model file 'ro/m.pt' is not writable"),
-    (["neural", "train", "good.png", "--iterations", "1", "--size", "16", "--out", "m.pt",
-      "--checkpoint", "ro/c.ckpt"], "folder of checkpoint 'ro/c.ckpt' is not writable"),
-])
-def test_neural_unwritable_folders_are_refused_before_training(argv, words, neural_place, capsys,
-                                                                monkeypatch):
-    _unwritable(monkeypatch)
-    assert words in one_line_error(argv, neural_place, capsys)
-
-
-def test_neural_far_origin_within_the_bound_works(neural_place, capsys):
-    argv = ["neural", "generate", "model.pt", "--size", "8", "--origin=-1099511627776,5,0",
-            "--out", "g.npy", "--quiet", "--threads", "1"]
-    assert cli.main(argv) == 0, capsys.readouterr().err
-    assert np.load(neural_place / "g.npy").shape[:3] == (8, 8, 8)
