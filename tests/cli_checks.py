@@ -26,3 +26,14 @@ def one_line_error(argv, root: pathlib.Path, capsys) -> str:
     assert "Traceback" not in captured.err and "usage:" not in captured.err
     assert listing(root) == before, (argv, listing(root) - before)
     return lines[0]
+
+
+def refused_naming(argv, root: pathlib.Path, capsys, words=(), not_words=()) -> str:
+    """:func:`one_line_error`, whose line holds every one of ``words`` and none of
+    ``not_words``; return the line."""
+    line = one_line_error(argv, root, capsys)
+    for word in words:
+        assert word in line, (word, line)
+    for word in not_words:
+        assert word not in line, (word, line)
+    return line
