@@ -30,7 +30,7 @@ from ..model.pyramid import INHERIT, UPSAMPLING
 from ..model.relax import RELAXATIONS
 from ..model.relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
 
-__all__ = ["APPLIES", "DEFAULT_SAMPLER", "DEFAULT_UPSAMPLE", "DEFAULT_XI", "applies", "combination",
+__all__ = ["APPLIES", "BY_SUPPORT", "DEFAULT_SAMPLER", "DEFAULT_UPSAMPLE", "DEFAULT_XI", "applies", "combination",
            "make_config"]
 
 #: Up-sampling used when none is asked for: the paper's choice for each relaxation.
@@ -43,6 +43,9 @@ DEFAULT_XI = {"full": SynthesisConfig.xi, "coherent": IcmSchedule.xi}
 #: paper's Metropolis rule at equal sweeps); Metropolis for ``coherent``, where the heat-bath
 #: draw copies diagonal runs of exemplar pixels (docs/quality.md, "The sampler's combinations").
 DEFAULT_SAMPLER = {"full": SynthesisConfig.sampler, "coherent": "metropolis"}
+#: The options whose default depends on the support (None in :func:`make_config` means "the
+#: support's"): any value given for them counts as given.
+BY_SUPPORT = {"xi": DEFAULT_XI, "sampler": DEFAULT_SAMPLER}
 
 #: The combinations (support, relaxation) that use an option, for the options that some
 #: combinations cannot use; every other option applies everywhere.
@@ -99,9 +102,9 @@ def applies(name: str, where: tuple) -> bool:
 
 
 def _unset(name: str, value) -> bool:
-    """Whether option ``name`` was left at its default (``xi``'s and ``sampler``'s are None:
-    they depend on the support, so any value given counts)."""
-    return value is None or (name not in ("xi", "sampler") and value == getattr(_C, name, None))
+    """Whether option ``name`` was left at its default (for the :data:`BY_SUPPORT` options: not
+    given at all)."""
+    return value is None or (name not in BY_SUPPORT and value == getattr(_C, name, None))
 
 
 def _refuse_unused(given: dict, support: str, relaxation: str) -> None:
@@ -172,10 +175,10 @@ def make_config(
         upsample = "8/8" if support == "coherent" else DEFAULT_UPSAMPLE[relaxation]
     upsample = check.choice("upsample", upsample, UPSAMPLING)
     inherit = check.choice("inherit", inherit, INHERIT)
-    xi = check.real("xi", DEFAULT_XI[support] if xi is None else xi, high=0.0, high_open=True)
+    xi = check.real("xi", BY_SUPPORT["xi"][support] if xi is None else xi, high=0.0, high_open=True)
     stop = check.real("stop", stop, low=0.0, high=1.0, low_open=True)
     max_sweeps = check.integer("max_sweeps", max_sweeps, low=1)
-    sampler = check.choice("sampler", DEFAULT_SAMPLER[support] if sampler is None else sampler, SAMPLERS)
+    sampler = check.choice("sampler", BY_SUPPORT["sampler"][support] if sampler is None else sampler, SAMPLERS)
     schedule = check.choice("schedule", schedule, SCHEDULES)
     t0 = check.real("t0", t0, low=0.0, low_open=True)
     t_end = check.real("t_end", t_end, low=0.0, low_open=schedule == "geometric", high=t0)
