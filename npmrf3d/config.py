@@ -127,6 +127,7 @@ class SynthesisConfig:
     palette: int | None = None
     toroidal_exemplar: bool = False
     temperatures: bool = False
+    blockwise: bool = False
     seed: int | None = None
 
     def to_dict(self) -> dict:
@@ -210,6 +211,12 @@ class SynthesisMethod:
         ``unavailable() -> str | None``: why the method cannot run in this environment (an
         optional extra is not installed), or None when it can; checked without importing the
         extra. None: always available. The studies leave unavailable methods out and say so.
+    aprons : callable, optional
+        ``aprons(config, per_view_exemplars) -> tuple[int, ...] | None``: per level (0 the
+        finest), how far a level's result reaches over its iterations, for a run whose blocks
+        can be made alone (:mod:`npmrf3d.model.regions`); ``run`` then takes ``region=`` (a
+        :class:`npmrf3d.model.regions.RegionPlan`) and returns that block. None, or a None
+        result: the method runs on the whole volume only.
     """
 
     name: str
@@ -221,3 +228,4 @@ class SynthesisMethod:
     description: str = ""
     resources: Callable[[Any, dict], Any] | None = None
     unavailable: Callable[[], str | None] | None = None
+    aprons: Callable[[Any, Any], Any] | None = None

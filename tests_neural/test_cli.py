@@ -100,4 +100,4 @@ def test_generate_zarr_on_a_local_cluster_resumes(tmp_path, model_file, capsys):
     np.testing.assert_array_equal(zarr.open_array(out, mode="r")[...], expected)
     # another size into the same folder is refused
     assert main([*argv[:3], "--size", "16", "--block", "16", "--out", str(out)]) == 2
-    assert "another model, size or block" in capsys.readouterr().err
+    assert "holds a volume of another size" in capsys.readouterr().err

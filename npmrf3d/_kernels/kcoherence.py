@@ -75,7 +75,9 @@ class SearchRule(NamedTuple):
         distance is multiplied by ``1 + index_weight * max(0, index_hist[e] / phi - 1)``
     r, floor : float, IRLS exponent and distance floor, ``omega = max(dist, floor) ** (r - 2)``
     n_random, salt : int, extra uniformly random valid centres per site (:func:`random_centres`
-        with the flat voxel index as site; 0 = none, the paper)
+        with the voxel's :func:`global_flat` index as site; 0 = none, the paper)
+    origin, extent : (3,) int64 each, where the volume lies in the level's whole grid
+        (:func:`global_flat`; the default ``extent`` 0: the volume is the whole grid)
     """
 
     grid: int
@@ -86,6 +88,30 @@ class SearchRule(NamedTuple):
     floor: float
     n_random: int
     salt: int
+    origin: np.ndarray = np.zeros(3, dtype=np.int64)
+    extent: np.ndarray = np.zeros(3, dtype=np.int64)
+
+
+@jit
+def global_flat(p0, p1, p2, shape, origin, extent):
+    """The flat index ``(g0 * E1 + g1) * E2 + g2`` of voxel ``(p0, p1, p2)`` of a volume of
+    ``shape`` that is the region of a level's grid ``extent`` starting at ``origin`` (toroidal:
+    ``g = (origin + p) % extent``); with ``extent[0] == 0`` the volume is the whole grid. The
+    random numbers of a voxel hash this index, so a region made alone draws those of the whole."""
+    if extent[0] == 0:
+        return (p0 * shape[1] + p1) * shape[2] + p2
+    g0 = (origin[0] + p0) % extent[0]
+    g1 = (origin[1] + p1) % extent[1]
+    g2 = (origin[2] + p2) % extent[2]
+    return (g0 * extent[1] + g1) * extent[2] + g2
+
+
+@jit
+def grid_voxels(shape, extent):
+    """Voxels of the level's whole grid: ``extent``'s product, or ``shape``'s when ``extent[0]`` is 0."""
+    if extent[0] == 0:
+        return shape[0] * shape[1] * shape[2]
+    return extent[0] * extent[1] * extent[2]
 
 
 @jit
@@ -328,8 +354,8 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
                         project(volume, ra, ca, n, u_r, u_c, window, anchor, mean, basis, vec, y)
                     count = candidates(src_v, ra, ca, p0, p1, p2, exemplar, cand)
                     if n_random > 0:
-                        count = random_centres(salt, (p0 * shape[1] + p1) * shape[2] + p2, n_random,
-                                               exemplar, cand, count)
+                        count = random_centres(salt, global_flat(p0, p1, p2, shape, rule.origin, rule.extent),
+                                               n_random, exemplar, cand, count)
                     best = -1
                     best_cost = np.inf
                     best_d2 = 0.0

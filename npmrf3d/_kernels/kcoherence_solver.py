@@ -29,7 +29,7 @@ import numpy as np
 from . import candidate_decision as _decide
 from ._jit import jit, jit_parallel, prange
 from .candidate_decision import HEAT_BATH, METROPOLIS, ML_H1A, ML_H1B, ML_H2B, value_prior
-from .kcoherence import mix, value_bin
+from .kcoherence import global_flat, grid_voxels, mix, value_bin
 
 
 class PackedViews(NamedTuple):
@@ -93,6 +93,8 @@ class SolverRule(NamedTuple):
     h2c, outlier : float, the NP-MRF rule's centre kernel ``2 h_c^2`` and outlier share
     temperature, salt : float and int, the annealed draw (temperature 0: the highest score)
     sampler : int, the annealed draw's rule, ``HEAT_BATH`` or ``METROPOLIS``
+    origin, extent : (3,) int64 each, where the volume lies in the level's whole grid (the
+        draws hash :func:`npmrf3d._kernels.kcoherence.global_flat`; ``extent`` 0: the whole grid)
     """
 
     medoid: int
@@ -103,6 +105,8 @@ class SolverRule(NamedTuple):
     temperature: float
     salt: int
     sampler: int = HEAT_BATH
+    origin: np.ndarray = np.zeros(3, dtype=np.int64)
+    extent: np.ndarray = np.zeros(3, dtype=np.int64)
 
 
 class VoteTrust(NamedTuple):
@@ -317,7 +321,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
     hist_args = (val_hist, val_target, val_unit, val_prior, val_lo, val_scale)
     n_views = assign.shape[0]
     n0, n1, n2, channels = volume.shape
-    n_vox = n0 * n1 * n2
+    n_vox = grid_voxels(volume.shape, rule.extent)
     cap = n_views * views.window * views.window
     changed = 0
     for b in range(batch_bounds.shape[0] - 1):
@@ -437,7 +441,8 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                     elif likelihood and temperature > 0.0 and sampler == METROPOLIS:
                         current = _decide.colour_score(volume[p0, p1, p2], ex_flat, ug, uv, uw, u, vsum, h2c,
                                                        outlier, likelihood, hist_args, bins, lik)
-                        pick = _decide.metropolis(scores, n_try, current, temperature, salt * n_vox + flat)
+                        key = salt * n_vox + global_flat(p0, p1, p2, volume.shape, rule.origin, rule.extent)
+                        pick = _decide.metropolis(scores, n_try, current, temperature, key)
                         if pick < 0:
                             continue
                         best = uarg[tops[pick]]
@@ -449,7 +454,8 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                             total = 0.0
                             for a in range(n_try):
                                 total += np.exp((scores[a] - top_l) / temperature)
-                            x = (mix(salt * n_vox + flat) + 0.5) / 2147483648.0 * total
+                            key = salt * n_vox + global_flat(p0, p1, p2, volume.shape, rule.origin, rule.extent)
+                            x = (mix(key) + 0.5) / 2147483648.0 * total
                             acc = 0.0
                             pick = n_try - 1
                             for a in range(n_try):

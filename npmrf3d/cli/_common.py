@@ -42,14 +42,17 @@ class Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {line} (see '{self.prog} --help')\n")
 
 
-def add_run_options(parser: argparse.ArgumentParser, *, out: str) -> argparse._ArgumentGroup:
+def add_run_options(parser: argparse.ArgumentParser, *, out: str, zarr: bool = False) -> argparse._ArgumentGroup:
     """The options of every command that makes a volume, defined once: ``--seed``, ``--out``
-    (default ``out``), ``--overwrite``, ``--quiet``, ``--dry-run`` and ``--checkpoint``."""
+    (default ``out``; with ``zarr`` also a Zarr volume made in blocks), ``--overwrite``,
+    ``--quiet``, ``--dry-run`` and ``--checkpoint``."""
     run = parser.add_argument_group("run")
     run.add_argument("--seed", type=int, default=0, metavar="S",
                      help="random seed, a non-negative integer; the result depends on it only")
     run.add_argument("--out", default=out, metavar="DIR",
-                     help="output folder for the run files; created if missing")
+                     help="output folder for the run files; created if missing" + (
+                         "; a name ending in .zarr: the volume made in blocks into that Zarr array "
+                         "(any size that fits on disk; see --block, --workers, --scheduler)" if zarr else ""))
     run.add_argument("--overwrite", action="store_true",
                      help="replace the files of a previous run in --out instead of refusing")
     run.add_argument("--quiet", action="store_true",
@@ -267,22 +270,24 @@ def view_sources(args: argparse.Namespace):
     return exemplar, per_view_sources, lambda views: {v: names.get(v, exemplar_name) for v in views}
 
 
-def prepare_run(args: argparse.Namespace, method, config):
+def prepare_run(args: argparse.Namespace, method, config, *, whole: bool = True):
     """Checks and inputs shared by every command that runs a method of the registry, in the
     order that keeps user errors ahead of any work: the ``--out`` folder, the ``--checkpoint``,
-    the exemplars. Returns (out, checkpoint, per-view exemplars, per-view names for run.json)."""
+    the exemplars, and (``whole``: the volume made at once) the memory. Returns (out,
+    checkpoint, per-view exemplars, per-view names for run.json)."""
     out = output_folder(args)
     checkpoint = pathlib.Path(args.checkpoint) if getattr(args, "checkpoint", None) is not None else None
     check_checkpoint(checkpoint, out)
     exemplar, per_view_sources, source_names = view_sources(args)
     per_view = resolve_exemplars(exemplar, per_view_sources, config.views, **method.fit(config),
                                  exemplar_kind=getattr(args, "exemplar_kind", "auto"))
-    if not getattr(args, "dry_run", False):
+    if whole and not getattr(args, "dry_run", False):
         check_resources(method, config, per_view, hint=_RESOURCE_HINT)
     return out, checkpoint, per_view, source_names(config.views)
 
 
-_RESOURCE_HINT = "lower --size (or --levels, the exemplar size); --dry-run shows the estimate"
+_RESOURCE_HINT = ("lower --size (or --levels, the exemplar size), or make it in blocks with --out VOL.zarr; "
+                  "--dry-run shows the estimate")
 
 
 class claim_output:

@@ -46,6 +46,7 @@ from ._common import (
     say,
     write_result,
 )
+from ._blocks import add_block_options, blockwise_requested, run_zarr, zarr_output
 from ._options import given
 from ._progress import run_method
 
@@ -76,7 +77,8 @@ def register(commands, formatter_class) -> None:
             "examples:\n"
             "  npmrf3d synth                                  # bundled exemplar, 64^3\n"
             "  npmrf3d synth wood.png --size 64 --out wood    # your own image\n"
-            "  npmrf3d synth --size 8 --levels 1 --window 3   # a tiny, quick run"
+            "  npmrf3d synth --size 8 --levels 1 --window 3   # a tiny, quick run\n"
+            "  npmrf3d synth --size 512 --out big.zarr        # any size, in blocks, into Zarr"
         ),
         formatter_class=formatter_class,
     )
@@ -281,7 +283,7 @@ def register(commands, formatter_class) -> None:
              "support coherent, which re-decides every voxel in each of a level's iterations)",
     )
 
-    add_run_options(synth, out="npmrf3d-synth-out")
+    add_block_options(add_run_options(synth, out="npmrf3d-synth-out", zarr=True))
 
     synth.set_defaults(handler=run)
 
@@ -332,10 +334,14 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
         tau=args.tau, histogram_weight=args.histogram_weight, outlier=args.outlier,
         grey_levels=args.grey_levels,
         palette=args.palette, toroidal_exemplar=args.toroidal_exemplar, temperatures=args.temperatures,
-        seed=args.seed,
+        blockwise=blockwise_requested(args), seed=args.seed,
     )
-    out, checkpoint, per_view, sources = prepare_run(args, METHOD, config)
+    out, checkpoint, per_view, sources = prepare_run(args, METHOD, config, whole=not zarr_output(args))
     _check_segmented_window(args, config, per_view)
+    if zarr_output(args):
+        window = SEGMENTED.window if segmented(config, per_view) else config.window
+        return run_zarr(args, argv, "synth", METHOD, config, per_view, sources,
+                        f"npmrf3d {config.heuristic}, blockwise, window {window}, seed {config.seed}")
     if args.dry_run:
         return dry_run(METHOD, config, per_view)
     if not args.quiet and config.palette is None and config.grey_levels is None:

@@ -72,6 +72,7 @@ from .. import _validation as check
 from ..config import DEFAULT_SIZE, SynthesisMethod, SynthesisResult
 from ..model.kcoherence_engine import KCoherenceLevels
 from ..model.neighbourhood import VIEWS
+from ..model.kcoherence_engine import block_aprons
 from ..model.pyramid import run_pyramid
 from ..resources import coherent_estimate
 from ._api import prepare
@@ -112,6 +113,9 @@ class ChenWangConfig:
     batches: int = 8
     solver: str = "medoid"
     balance_views: bool = False
+    # block-local runs: the coarsest level whole, the finer ones with its histograms frozen and
+    # random numbers hashed from grid positions, so any block can be made alone (model.regions)
+    blockwise: bool = False
     seed: int | None = None
 
     def to_dict(self) -> dict:
@@ -131,12 +135,17 @@ def make_chen_wang_config(
     global_share=DEFAULTS.global_share, coherence_bias=DEFAULTS.coherence_bias,
     value_weight=DEFAULTS.value_weight, value_prior=DEFAULTS.value_prior, value_bins=DEFAULTS.value_bins,
     phase_weight=DEFAULTS.phase_weight, batches=DEFAULTS.batches, solver=DEFAULTS.solver, balance_views=DEFAULTS.balance_views,
-    seed=None,
+    blockwise=DEFAULTS.blockwise, seed=None,
 ) -> ChenWangConfig:
     """Validate plain keyword arguments into a frozen :class:`ChenWangConfig`.
 
     ``window`` and ``iterations`` take one integer or one per level (coarsest first); when the
     default per-level tuples meet another level count, the last ``levels`` entries are used.
+    ``blockwise``: the coarsest level runs whole with every histogram, the finer ones in blocks
+    with the coarsest level's position and value histograms frozen and no index histogram
+    (:class:`npmrf3d.model.kcoherence_engine.FrozenHistograms`); the global search and the
+    phase control, which read the whole volume, are off (``global_share`` and
+    ``phase_weight`` recorded as 0).
     """
     levels = check.integer("levels", levels, low=1, high=8)
     if window is DEFAULTS.window and levels != len(DEFAULTS.window):
@@ -177,6 +186,9 @@ def make_chen_wang_config(
     views = check.views(views, VIEWS)
     if seed is not None:
         seed = check.integer("seed", seed, low=0)
+    blockwise = check.boolean("blockwise", blockwise)
+    if blockwise:
+        phase_weight = global_share = 0.0
     return ChenWangConfig(size=dims, window=window, levels=levels, views=views,
                           iterations=iterations, k=k, pca_dims=pca_dims, r=r, grid=grid,
                           index_weight=index_weight, position_weight=position_weight,
@@ -184,7 +196,8 @@ def make_chen_wang_config(
                           random_candidates=random_candidates, global_share=global_share,
                           coherence_bias=coherence_bias, value_weight=value_weight,
                           value_prior=value_prior, value_bins=value_bins, phase_weight=phase_weight,
-                          batches=batches, solver=solver, balance_views=bool(balance_views), seed=seed)
+                          batches=batches, solver=solver, balance_views=bool(balance_views), blockwise=blockwise,
+                          seed=seed)
 
 
 def _check_exemplar_levels(config: ChenWangConfig, per_view: Mapping[str, np.ndarray]) -> None:
@@ -327,13 +340,13 @@ def chen_wang_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress
 
 def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rng: np.random.Generator, *,
         progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
-        t_start: float | None = None) -> SynthesisResult:
+        t_start: float | None = None, region=None) -> SynthesisResult:
     """Run a validated configuration on validated float32 ``(H, W, C)`` exemplars (one per view):
     the k-coherence engine (:class:`npmrf3d.model.kcoherence_engine.KCoherenceLevels`) with its
     own solver. The body of :func:`chen_wang_synthesize`."""
     t_start = time.perf_counter() if t_start is None else t_start
     levels = KCoherenceLevels("chen-wang", config, per_view_exemplars)
-    out = run_pyramid(levels, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
+    out = run_pyramid(levels, rng, progress=progress, checkpoint=checkpoint, t_start=t_start, region=region)
     return SynthesisResult(volume=out.state.volume, history=out.history, config=config,
                            timings=out.timings, labels=levels.labels, stats=out.stats)
 
@@ -345,10 +358,11 @@ def _fit(config) -> dict:
 
 
 def chen_wang_method(per_view, config: ChenWangConfig, rng: np.random.Generator, *,
-                     progress=None, checkpoint=None, t_start=None) -> SynthesisResult:
-    """The registered form of :func:`run` (exemplars first, as every method of the registry)."""
+                     progress=None, checkpoint=None, t_start=None, region=None) -> SynthesisResult:
+    """The registered form of :func:`run` (exemplars first, as every method of the registry);
+    ``region`` (a ``blockwise`` configuration): one block from its dependency cone."""
     _check_exemplar_levels(config, per_view)
-    return run(config, per_view, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
+    return run(config, per_view, rng, progress=progress, checkpoint=checkpoint, t_start=t_start, region=region)
 
 
 METHOD = SynthesisMethod(
@@ -356,4 +370,5 @@ METHOD = SynthesisMethod(
     config_class=ChenWangConfig, synthesize=chen_wang_synthesize, fit=_fit,
     description="Chen & Wang 2010: k-coherence search, discrete solver, position and index histograms",
     resources=coherent_estimate,
+    aprons=lambda config, per_view: block_aprons(config),
 )

@@ -252,15 +252,17 @@ def _config_key(config: SynthesisConfig) -> str:
 
 def npmrf_method(per_view: dict[str, np.ndarray], config: SynthesisConfig, rng: np.random.Generator, *,
                  progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
-                 t_start: float | None = None) -> SynthesisResult:
+                 t_start: float | None = None, region=None) -> SynthesisResult:
     """The NP-MRF sampler in the common method signature (:data:`npmrf3d.methods.METHODS`).
 
     ``t_start`` (optional, every method accepts it): ``time.perf_counter()`` when the caller
-    started, so that ``timings["setup"]`` includes loading the exemplars.
+    started, so that ``timings["setup"]`` includes loading the exemplars. ``region`` (a
+    ``blockwise`` configuration): one block from its dependency cone
+    (:mod:`npmrf3d.methods.blocks`).
     """
     if config.support == "coherent":
         return _run_coherent(per_view, config, rng, progress=progress, checkpoint=checkpoint,
-                             t_start=t_start)
+                             t_start=t_start, region=region)
     return run(config, per_view, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
 
 
@@ -288,16 +290,28 @@ def _coherent_options(config: SynthesisConfig, phases: bool, levels: int) -> npm
         size=config.size, window=(window,) * levels, levels=levels,
         views=config.views, heuristic=config.heuristic, centre_bandwidth=config.rule.centre_bandwidth,
         outlier=config.rule.outlier, value_weight=value_weight, t0=config.t0 if anneal else 0.0,
-        t_end=config.t_end, schedule=config.schedule, sampler=config.sampler, seed=config.seed,
+        t_end=config.t_end, schedule=config.schedule, sampler=config.sampler, blockwise=config.blockwise,
+        seed=config.seed,
         **({"iterations": (config.proposals,) * levels} if anneal else {}),
         **({"icm": True, "xi": config.xi, "stop": config.stop, "max_sweeps": config.max_sweeps,
             "upsample": config.upsample, "inherit": config.inherit} if config.temperatures else {}))
 
 
 def _coherent_runs(config: SynthesisConfig, phases: bool) -> list[npmrf_coherent.CoherentConfig]:
-    """The coherent sampler's runs: one, or the segmented preset's pyramids, deepest first."""
+    """The coherent sampler's runs: one, or the segmented preset's pyramids, deepest first (a
+    ``blockwise`` run: the deepest only, since the choice between them reads the whole volume)."""
     levels = npmrf_coherent.SEGMENTED.pyramids(config.levels) if phases else (config.levels,)
+    if config.blockwise:
+        levels = levels[:1]
     return [_coherent_options(config, phases, n) for n in levels]
+
+
+def npmrf_aprons(config: SynthesisConfig, per_view) -> tuple[int, ...] | None:
+    """Per level, how far a ``blockwise`` run reaches (:func:`npmrf3d.methods.npmrf_coherent.coherent_aprons`);
+    None for any other run."""
+    if not config.blockwise or config.support != "coherent":
+        return None
+    return npmrf_coherent.coherent_aprons(_coherent_runs(config, segmented(config, per_view))[0])
 
 
 def npmrf_resources(config: SynthesisConfig, per_view):
@@ -309,7 +323,8 @@ def npmrf_resources(config: SynthesisConfig, per_view):
     return npmrf_estimate(config, per_view)
 
 
-def _run_coherent(per_view, config: SynthesisConfig, rng, *, progress, checkpoint, t_start) -> SynthesisResult:
+def _run_coherent(per_view, config: SynthesisConfig, rng, *, progress, checkpoint, t_start,
+                  region=None) -> SynthesisResult:
     """The ``coherent`` support: :mod:`npmrf3d.methods.npmrf_coherent` with the options of :func:`_coherent_options`
     (decided on the exemplars as given); the exemplars reduced to ``grey_levels`` or a
     ``palette`` first when asked. ``stats["segmented"]`` says whether the segmented preset ran;
@@ -321,8 +336,13 @@ def _run_coherent(per_view, config: SynthesisConfig, rng, *, progress, checkpoin
                                      palette=config.palette, rng=rng)
         reduced = {key: labels[image] for key, image in zip(distinct, images)}
         per_view = {v: reduced[id(a)] for v, a in per_view.items()}
-    result = npmrf_coherent.best_of_pyramids(per_view, _coherent_runs(config, phases), rng, progress=progress,
-                                       checkpoint=checkpoint, t_start=t_start)
+    runs = _coherent_runs(config, phases)
+    if region is not None:
+        result = npmrf_coherent.coherent_method(per_view, runs[0], rng, progress=progress, t_start=t_start,
+                                                region=region)
+    else:
+        result = npmrf_coherent.best_of_pyramids(per_view, runs, rng, progress=progress,
+                                                 checkpoint=checkpoint, t_start=t_start)
     return dataclasses.replace(result, config=config, stats={**result.stats, "segmented": phases})
 
 
@@ -332,6 +352,7 @@ METHOD = SynthesisMethod(
     synthesize=npmrf_synthesize,
     fit=lambda c: {"window": c.window, "levels": c.levels, "toroidal": c.toroidal_exemplar},
     resources=npmrf_resources,
+    aprons=npmrf_aprons,
     description="the NP-MRF sampler (Urs, Da Costa and Germain 2014): Parzen LCPDFs of three 2D views, "
                 "four heuristics, ICM or annealing",
 )

@@ -56,6 +56,7 @@ from ..model.kcoherence_engine import (
     PER_VIEW_HEURISTICS,
     CandidateDecision,
     KCoherenceLevels,
+    block_aprons,
 )
 from ..model.kcoherence_icm import IcmSchedule
 from ..model.neighbourhood import VIEWS
@@ -167,6 +168,8 @@ class CoherentConfig:
     max_sweeps: int = IcmSchedule.max_sweeps
     upsample: str = IcmSchedule.upsample
     inherit: str = IcmSchedule.inherit
+    # block-local (Chen–Wang's field): no global histograms, any block can be made alone
+    blockwise: bool = _CW.blockwise
     seed: int | None = None
 
     def to_dict(self) -> dict:
@@ -177,7 +180,7 @@ class CoherentConfig:
 DEFAULTS = CoherentConfig()
 _SHARED = ("size", "window", "levels", "views", "iterations", "k", "index_weight", "position_weight",
            "position_boost", "random_candidates", "global_share", "coherence_bias", "value_weight",
-           "value_prior", "value_bins", "phase_weight", "seed")
+           "value_prior", "value_bins", "phase_weight", "blockwise", "seed")
 
 
 def make_coherent_config(
@@ -190,7 +193,8 @@ def make_coherent_config(
     value_weight=DEFAULTS.value_weight, value_prior=DEFAULTS.value_prior, value_bins=DEFAULTS.value_bins,
     phase_weight=DEFAULTS.phase_weight, t0=DEFAULTS.t0, t_end=DEFAULTS.t_end, schedule=DEFAULTS.schedule,
     sampler=DEFAULTS.sampler, icm=DEFAULTS.icm, xi=DEFAULTS.xi, stop=DEFAULTS.stop,
-    max_sweeps=DEFAULTS.max_sweeps, upsample=DEFAULTS.upsample, inherit=DEFAULTS.inherit, seed=None,
+    max_sweeps=DEFAULTS.max_sweeps, upsample=DEFAULTS.upsample, inherit=DEFAULTS.inherit,
+    blockwise=DEFAULTS.blockwise, seed=None,
 ) -> CoherentConfig:
     """Validate plain keyword arguments into a frozen :class:`CoherentConfig` (the shared
     coherence fields are validated as Chen–Wang's, the ICM ones as the NP-MRF sampler's).
@@ -200,7 +204,7 @@ def make_coherent_config(
         index_weight=index_weight, position_weight=position_weight, position_boost=position_boost,
         random_candidates=random_candidates, global_share=global_share,
         coherence_bias=coherence_bias, value_weight=value_weight, value_prior=value_prior,
-        value_bins=value_bins, phase_weight=phase_weight, seed=seed)
+        value_bins=value_bins, phase_weight=phase_weight, blockwise=blockwise, seed=seed)
     heuristic = check.choice("heuristic", heuristic, tuple(COHERENT_HEURISTICS))
     centre_bandwidth = check.real("centre_bandwidth", centre_bandwidth, low=0.0, low_open=True)
     outlier = check.real("outlier", outlier, low=0.0, high=1.0, high_open=True)
@@ -218,6 +222,9 @@ def make_coherent_config(
     xi = check.real("xi", xi, high=0.0, high_open=True)
     stop = check.real("stop", stop, low=0.0, high=1.0, low_open=True)
     max_sweeps = check.integer("max_sweeps", max_sweeps, low=1)
+    if icm and cw.blockwise:
+        check.fail("icm=True cannot run blockwise: its stop rule reads every voxel's temperature; "
+                   "use icm=False (the fixed iterations) or blockwise=False")
     if icm and t0 > 0.0:
         check.fail(f"icm=True and t0={t0:g} are two relaxations: ICM decides by the highest score "
                    "(set t0=0), annealing runs the fixed iterations (set icm=False)")
@@ -254,7 +261,8 @@ def icm_schedule(config: CoherentConfig) -> IcmSchedule | None:
 
 
 def run(config: CoherentConfig, per_view_exemplars: Mapping[str, np.ndarray], rng: np.random.Generator, *,
-        progress=None, checkpoint: str | Path | None = None, t_start: float | None = None) -> SynthesisResult:
+        progress=None, checkpoint: str | Path | None = None, t_start: float | None = None,
+        region=None) -> SynthesisResult:
     """Run a validated configuration on validated float32 ``(H, W, C)`` exemplars (one per view):
     the k-coherence engine (:class:`npmrf3d.model.kcoherence_engine.KCoherenceLevels`) deciding
     by the NP-MRF rule; the signature of a registered method."""
@@ -263,7 +271,7 @@ def run(config: CoherentConfig, per_view_exemplars: Mapping[str, np.ndarray], rn
                                  None if config.icm else temperatures(config), config.sampler)
     levels = KCoherenceLevels("coherent", _chen_wang_config(config), per_view_exemplars, decision,
                               icm_schedule(config))
-    out = run_pyramid(levels, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
+    out = run_pyramid(levels, rng, progress=progress, checkpoint=checkpoint, t_start=t_start, region=region)
     return SynthesisResult(volume=out.state.volume, history=out.history, config=config,
                            timings=out.timings, labels=levels.labels, stats=out.stats)
 
@@ -293,10 +301,16 @@ def coherent_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress=
 
 
 def coherent_method(per_view, config: CoherentConfig, rng: np.random.Generator, *,
-                    progress=None, checkpoint=None, t_start=None) -> SynthesisResult:
-    """The registered form of :func:`run` (exemplars first, as every method of the registry)."""
+                    progress=None, checkpoint=None, t_start=None, region=None) -> SynthesisResult:
+    """The registered form of :func:`run` (exemplars first, as every method of the registry);
+    ``region`` (a ``blockwise`` configuration): one block from its dependency cone."""
     chen_wang._check_exemplar_levels(_chen_wang_config(config), per_view)
-    return run(config, per_view, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
+    return run(config, per_view, rng, progress=progress, checkpoint=checkpoint, t_start=t_start, region=region)
+
+
+def coherent_aprons(config: CoherentConfig, per_view=None) -> tuple[int, ...] | None:
+    """Per level, how far a ``blockwise`` run reaches (:func:`npmrf3d.model.kcoherence_engine.block_aprons`)."""
+    return block_aprons(config, icm_schedule(config))
 
 
 def trial_checkpoint(checkpoint: str | Path | None, index: int, levels: int) -> Path | None:
@@ -361,4 +375,5 @@ METHOD = SynthesisMethod(
     config_class=CoherentConfig, synthesize=coherent_synthesize, fit=chen_wang._fit,
     description="the coherent NP-MRF sampler: the NP-MRF likelihood over k-coherent candidates",
     resources=coherent_estimate,
+    aprons=coherent_aprons,
 )

@@ -140,7 +140,7 @@ def make_config(
     schedule=_C.schedule, t0=_C.t0, t_end=_C.t_end, proposals=_C.proposals, proposal=_C.proposal,
     variant=None, segmented=_C.segmented, bandwidth=None, centre_bandwidth=None, adaptive=None,
     decision=None, tau=None, histogram_weight=None, outlier=None, grey_levels=None, palette=None,
-    toroidal_exemplar=False, temperatures=None, seed=None,
+    toroidal_exemplar=False, temperatures=None, blockwise=False, seed=None,
 ) -> SynthesisConfig:
     """Validate plain keyword arguments into a frozen :class:`SynthesisConfig`.
 
@@ -153,6 +153,10 @@ def make_config(
     (None: True for support ``full`` with ICM, False otherwise): ICM with per-voxel temperatures;
     support ``coherent`` then weights its searches and votes by trust and re-decides warm voxels
     only (``xi``, ``stop``, ``max_sweeps``, ``inherit`` and ``upsample`` 1/8 need it there).
+    ``blockwise`` (support ``coherent`` without per-voxel temperatures): the block-local sampler
+    (the coarsest level whole, the finer ones with its histograms frozen, random numbers hashed
+    from voxel positions), whose volume can be made in blocks (:mod:`npmrf3d.methods.blocks`); a
+    segmented exemplar then runs the segmented preset's deeper pyramid only.
     """
     levels = check.integer("levels", levels, low=1, high=8)
     window = check.window(window)
@@ -225,11 +229,18 @@ def make_config(
         palette = check.integer("palette", palette, low=2, high=65536)
     if seed is not None:
         seed = check.integer("seed", seed, low=0)
+    blockwise = check.boolean("blockwise", blockwise)
+    if blockwise and support != "coherent":
+        check.fail("blockwise runs need support 'coherent' (the full-Parzen sampler's estimates "
+                   "read the whole exemplar and its ICM stop rule the whole volume)")
+    if blockwise and temperatures:
+        check.fail("blockwise runs cannot use per-voxel temperatures (their stop rule reads the "
+                   "whole volume); drop temperatures=True (--temperatures)")
     return SynthesisConfig(
         size=dims, window=window, levels=levels, heuristic=heuristic, relaxation=relaxation,
         views=views, upsample=upsample, inherit=inherit, xi=xi, stop=stop, max_sweeps=max_sweeps,
         sampler=sampler, schedule=schedule, t0=t0, t_end=t_end, proposals=proposals,
         proposal=proposal, support=support, preset=preset_name, segmented=segmented, rule=rule,
         grey_levels=grey_levels, palette=palette, toroidal_exemplar=bool(toroidal_exemplar),
-        temperatures=temperatures, seed=seed,
+        temperatures=temperatures, blockwise=blockwise, seed=seed,
     )

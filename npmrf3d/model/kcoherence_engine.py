@@ -45,7 +45,7 @@ from .neighbourhood import VIEW_AXES
 from .phases import PhaseControl, bin_phase_error, bin_phases, phase_prior_target
 from .pyramid import ArraySpec, Levels
 
-__all__ = ["CANDIDATE_HEURISTICS", "CANDIDATE_SAMPLERS", "COHERENT_HEURISTICS", "PER_VIEW_HEURISTICS",
+__all__ = ["block_aprons", "FrozenHistograms", "CANDIDATE_HEURISTICS", "CANDIDATE_SAMPLERS", "COHERENT_HEURISTICS", "PER_VIEW_HEURISTICS",
            "CandidateDecision", "CoherentState", "KCoherenceLevels", "ValueHistogram",
            "initial_colours", "pack_exemplars", "position_histogram", "value_counts", "value_scale"]
 
@@ -219,7 +219,81 @@ def position_histogram(src_v: np.ndarray, pixels: int) -> np.ndarray:
     return np.bincount(np.asarray(src_v).ravel(), minlength=pixels).astype(np.float64)
 
 
+class FrozenHistograms(NamedTuple):
+    """The histograms a ``blockwise`` run's finer levels keep from its coarsest level, which
+    runs whole: per view the position counts of the coarsest level's sources, and the volume's
+    value histogram (in units of an even bin's share, so the same at every level).
+
+    A finer level's position counts are the coarsest ones up-sampled as the sources are (each
+    coarse pixel's count goes, doubled, to the four pixels ``2 * p + offset``:
+    :meth:`positions_at`), which is what the level's starting sources hold; the solver's votes
+    are weighed by them (and the histogram prior by the value histogram) without updates, so
+    that every voxel depends on its neighbourhood alone.
+    """
+
+    positions: tuple[np.ndarray, ...]
+    shapes: tuple[tuple[int, int], ...]
+    values: np.ndarray
+
+    @classmethod
+    def of(cls, state: "CoherentState", models, lo, span, bins: int) -> "FrozenHistograms":
+        """The histograms of the coarsest level's finished whole ``state`` (its level ``models``)."""
+        ex_flat, _, _ = pack_exemplars(models)
+        values = ValueHistogram.build([m.exemplar for m in models], ex_flat, state.volume, bins=bins,
+                                      lo=lo, span=span)
+        positions = tuple(position_histogram(state.sources[vi], m.pixels) for vi, m in enumerate(models))
+        return cls(positions, tuple((int(m.exemplar.shape[0]), int(m.exemplar.shape[1])) for m in models),
+                   values.hist)
+
+    def positions_at(self, view: int, fine_shapes) -> np.ndarray:
+        """View ``view``'s counts up-sampled once per exemplar shape of ``fine_shapes`` (the
+        view's exemplar at each finer level in turn, down to the one wanted).
+
+        >>> frozen = FrozenHistograms((np.array([1.0, 0.0, 0.0, 3.0]),), ((2, 2),), np.zeros((1, 2)))
+        >>> frozen.positions_at(0, [(4, 4)]).reshape(4, 4)
+        array([[2., 2., 0., 0.],
+               [2., 2., 0., 0.],
+               [0., 0., 6., 6.],
+               [0., 0., 6., 6.]])
+        """
+        counts, (h, w) = self.positions[view], self.shapes[view]
+        rows, cols = np.divmod(np.arange(h * w), w)
+        for fh, fw in fine_shapes:
+            fine = np.zeros(fh * fw, dtype=np.float64)
+            for a in (0, 1):
+                for b in (0, 1):
+                    np.add.at(fine, np.minimum(2 * rows + a, fh - 1) * fw + np.minimum(2 * cols + b, fw - 1),
+                              2.0 * counts)
+            counts, h, w = fine, fh, fw
+            rows, cols = np.divmod(np.arange(h * w), w)
+        return counts
+
+
 # --------------------------------------------------------------------------- the level loop's side
+
+
+def block_aprons(config, icm: IcmSchedule | None = None) -> tuple[int, ...] | None:
+    """Per level (0 the finest), a ``blockwise`` configuration's iterations times the reach of
+    one iteration (:meth:`KCoherenceLevels.aprons`), None for the coarsest level, which runs
+    whole with the global histograms (its result is shared by all blocks); None without
+    ``blockwise`` or with ICM's per-voxel temperatures (whose stop rule reads the whole level).
+
+    One iteration reaches ``window - 1`` voxels: a site's match reads the window at the site
+    (``anchor`` before it, ``window - 1 - anchor`` after) and the neighbours' shifted sources
+    one step away, and a voxel is decided by the sites of every window that holds it. A window
+    of 2 (anchor 0) reaches one further, to the source one step before the site.
+
+    >>> from npmrf3d.methods.chen_wang import make_chen_wang_config
+    >>> block_aprons(make_chen_wang_config(size=32, blockwise=True))
+    (9, 20, None)
+    """
+    if not getattr(config, "blockwise", False) or icm is not None:
+        return None
+    last = config.levels - 1
+    reach = [w - 1 + (w < 3) for w in config.window]
+    return tuple(config.iterations[last - level] * reach[last - level] if level < last else None
+                 for level in range(config.levels))
+
 
 
 class KCoherenceLevels(Levels):
@@ -270,8 +344,44 @@ class KCoherenceLevels(Levels):
                 pooled, self.value_lo, value_scale(self.value_span, config.value_bins), config.value_bins)[1])
             self.control = [PhaseControl.start(2) for _ in range(channels)]
         self.level_ex = self.vmodels = None
+        self.blockwise = bool(getattr(config, "blockwise", False))
+        self.frozen: FrozenHistograms | None = None
+        self.prepared: int | None = None
+
+    def aprons(self):
+        """With ``blockwise`` (no global histograms, random numbers hashed from grid positions)
+        and fixed iterations, per level (0 the finest) its iterations times its window: a voxel
+        after one search and solve depends on voxels at most ``window - 1`` away (the search
+        reads a window around each site, the solve the sites of every window that holds the
+        voxel), plus one for the neighbours' shifted sources. None otherwise."""
+        return block_aprons(self.config, self.icm)
+
+    def _exemplar_shape(self, view: str, level: int) -> tuple[int, int]:
+        """The view's exemplar's (H, W) at ``level`` (:func:`npmrf3d.model.kcoherence.downsample_exemplar`)."""
+        f = 2 ** level
+        return self.per_view[view].shape[0] // f, self.per_view[view].shape[1] // f
+
+    def after_level(self, level, state):
+        """``blockwise``: the coarsest level's position and value histograms, which the finer
+        levels keep (:class:`FrozenHistograms`)."""
+        if self.blockwise and level == self.levels - 1:
+            if self.prepared != level:  # resumed from a checkpoint: the level's models first
+                self.prepare(level, state.volume.shape[:3])
+            self.frozen = FrozenHistograms.of(state, self.vmodels, self.value_lo, self.value_span,
+                                              self.config.value_bins)
+
+    def crop(self, state, index):
+        ix = np.ix_(*index)
+        return CoherentState(np.ascontiguousarray(state.volume[ix]),
+                             np.ascontiguousarray(state.sources[(slice(None), *ix)]), state.widths,
+                             np.ascontiguousarray(state.temps[ix]), np.ascontiguousarray(state.inherited[ix]))
+
+    def _grid(self):
+        """The current frame's origin and extent as the kernels take them."""
+        return np.array(self.frame.origin, dtype=np.int64), np.array(self.frame.extent, dtype=np.int64)
 
     def prepare(self, level, shape):
+        self.prepared = level
         window = self.config.window[self.config.levels - 1 - level]
         self.level_ex = {id(a): coh.downsample_exemplar(a, level) for a in self.distinct}
         models = {key: coh.build_level_model(ex, window, dims=self.config.pca_dims, k=self.config.k,
@@ -322,8 +432,19 @@ class KCoherenceLevels(Levels):
                                           bins=config.value_bins, lo=self.value_lo, span=self.value_span)
         packed = _solver.PackedViews(self.view_axes, ex_flat, ex_off, np.array(widths, dtype=np.int64), window,
                                      int(vmodels[0].anchor), config.grid)
-        pos_hist = np.concatenate([position_histogram(src[vi], m.pixels) for vi, m in enumerate(vmodels)])
-        theta = np.array([volume.shape[0] * volume.shape[1] * volume.shape[2] / m.pixels for m in vmodels])
+        # blockwise below the coarsest level: every voxel reads only its neighbourhood and the
+        # coarsest level's histograms, frozen (one batch, no index histogram, no reordering)
+        local = self.blockwise and level < self.levels - 1
+        grid_voxels = float(np.prod(self.frame.extent)) if local else float(np.prod(shape))
+        if local:
+            finer = range(self.levels - 2, level - 1, -1)
+            pos_hist = np.concatenate([self.frozen.positions_at(vi, [self._exemplar_shape(v, lev) for lev in finer])
+                                       for vi, v in enumerate(views)])
+            values = values._replace(hist=self.frozen.values.copy(), unit=grid_voxels / config.value_bins)
+        else:
+            pos_hist = np.concatenate([position_histogram(src[vi], m.pixels) for vi, m in enumerate(vmodels)])
+        frozen_positions, frozen_values = pos_hist.copy(), values.hist.copy()
+        theta = np.array([grid_voxels / m.pixels for m in vmodels])
         histograms = _solver.SolverHistograms(
             pos_hist, hist_off, theta, config.position_weight, config.position_boost, values.ex_bins,
             values.hist, values.target, config.value_weight, config.value_prior, values.lo, values.scale,
@@ -339,7 +460,10 @@ class KCoherenceLevels(Levels):
         icm = None if self.icm is None else IcmLevel(self.icm, state.temps, state.inherited, self.view_axes,
                                                        window, int(vmodels[0].anchor))
         n_iter = config.iterations[li] if icm is None else self.icm.max_sweeps
-        bounds = np.linspace(0, n_vox, min(config.batches, n_vox) + 1).astype(np.int64)
+        origin, extent = self._grid() if local else (np.zeros(3, dtype=np.int64), np.zeros(3, dtype=np.int64))
+        batches = 1 if local else min(config.batches, n_vox)
+        bounds = np.linspace(0, n_vox, batches + 1).astype(np.int64)
+        index_weight = 0.0 if local else config.index_weight
         likelihood = _decide.OWN_SOLVER if decision.heuristic is None else COHERENT_HEURISTICS[decision.heuristic]
         medoid = MEDOID_CANDIDATES if config.solver == "medoid" or decision.heuristic is not None else 0
         h2c = 2.0 * (decision.centre_bandwidth * self.sigma) ** 2 or 1.0
@@ -360,8 +484,9 @@ class KCoherenceLevels(Levels):
                 energy = np.zeros(shape[na], dtype=np.float64)
                 n_sites = shape[na] * (shape[ra] // config.grid) * (shape[ca] // config.grid)
                 phi = n_sites / m.centres
-                rule = _search.SearchRule(config.grid, min(config.batches, shape[na]), phi, config.index_weight,
-                                          config.r, floor, config.random_candidates, int(rng.integers(0, 2**31)))
+                rule = _search.SearchRule(config.grid, min(config.batches, shape[na]), phi, index_weight,
+                                          config.r, floor, config.random_candidates, int(rng.integers(0, 2**31)),
+                                          origin, extent)
                 _search.search_view(volume, src[vi], ra, ca, exemplars[vi], rule, index_hist[vi], assign[vi],
                                     fresh, omega[vi], energy, trust)
                 energy_sum += float(energy.sum())
@@ -376,7 +501,12 @@ class KCoherenceLevels(Levels):
             global_counts.append(global_count)
             t_search += time.perf_counter() - ts
             ts = time.perf_counter()
-            order = rng.permutation(n_vox).astype(np.int64)
+            if local:  # the histograms as the coarsest level left them, in every pass
+                order = np.arange(n_vox, dtype=np.int64)
+                histograms.positions[:] = frozen_positions
+                values.hist[:] = frozen_values
+            else:
+                order = rng.permutation(n_vox).astype(np.int64)
             if icm is not None:
                 order = icm.visit(order)
                 bounds = np.linspace(0, len(order), min(config.batches, len(order)) + 1).astype(np.int64)
@@ -390,7 +520,7 @@ class KCoherenceLevels(Levels):
                 # and the votes, so visiting a batch in memory order gives the same volume faster
                 order[bounds[b]:bounds[b + 1]].sort()
             rule = _solver.SolverRule(medoid, config.balance_views, likelihood, h2c, decision.outlier,
-                                      temperature, salt, CANDIDATE_SAMPLERS[decision.sampler])
+                                      temperature, salt, CANDIDATE_SAMPLERS[decision.sampler], origin, extent)
             votes_trust = _solver.NO_TRUST if icm is None else icm.vote_trust()
             changed.append(int(_solver.solve(volume, src, assign, omega, packed,
                                              histograms._replace(value_target=target), votes_trust, rule, order,

@@ -30,6 +30,7 @@ import numpy as np
 from scipy import ndimage
 
 from .._kernels._jit import thread_count
+from .regions import Frame, RegionPlan, whole_frame
 from ..io.checkpoints import (KEY, check_array, check_members, check_rng_state, load_run_state,
                               refusal, save_run_state)
 
@@ -178,6 +179,25 @@ class Levels(ABC):
     levels: int
     key: str
     fingerprint: dict[str, np.ndarray] = {}
+    #: The region of the current level's grid the loop runs (:mod:`npmrf3d.model.regions`); set
+    #: by :func:`run_pyramid` before each level's :meth:`prepare`.
+    frame: Frame | None = None
+
+    def aprons(self) -> tuple[int | None, ...] | None:
+        """Per level (0 the finest), how far a level's result reaches over its iterations (a
+        region grown by it gives its core exactly: :mod:`npmrf3d.model.regions`), None for a
+        level that runs whole; None when the method cannot run on a region at all."""
+        return None
+
+    def after_level(self, level: int, state: Any) -> None:
+        """Called with each finished level's whole or regional state (also one resumed from a
+        checkpoint), before it is cut to a region and up-sampled: a method may keep what its
+        finer levels need from it (statistics of a level that runs whole)."""
+
+    def crop(self, state: Any, index: tuple[np.ndarray, np.ndarray, np.ndarray]) -> Any:
+        """The part of a level's ``state`` at the per-axis array indices ``index`` (methods with
+        :meth:`aprons` only)."""
+        raise NotImplementedError(f"{type(self).__name__} does not run on regions")
 
     def prepare(self, level: int, shape: tuple[int, int, int]) -> None:
         """Per-level set-up that draws no random numbers (models, exemplar pyramids)."""
@@ -229,7 +249,8 @@ class PyramidRun:
 
 def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressCallback | None = None,
                 checkpoint: str | Path | None = None, timings: dict | None = None,
-                stats: dict | None = None, t_start: float | None = None) -> PyramidRun:
+                stats: dict | None = None, t_start: float | None = None,
+                region: RegionPlan | None = None) -> PyramidRun:
     """Run ``method`` from its coarsest level to level 0.
 
     Parameters
@@ -249,6 +270,13 @@ def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressC
         ``t_start`` and the ``threads`` numba's loops use.
     t_start : float, optional
         ``time.perf_counter()`` when the run started (for ``timings["total"]``).
+    region : RegionPlan, optional
+        Make one block of the finest level from its dependency cone (a method with
+        :meth:`Levels.aprons`): every level runs its region, a finished level is cut to the
+        parents of the next one's, and the returned state is the block's. The levels that run
+        whole (the coarsest ones) come from the checkpoint ``region.start``, made by the first
+        block that finds none and resumed by every other, so all blocks share them; no
+        ``checkpoint`` then. None: the whole grid.
     """
     t_start = time.perf_counter() if t_start is None else t_start
     timings = {"setup": time.perf_counter() - t_start} if timings is None else dict(timings)
@@ -257,15 +285,24 @@ def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressC
     history: list[list[float]] = []
     state = None
     first_level = method.levels - 1
+    if region is not None:
+        if checkpoint is not None or method.aprons() is None:
+            raise ValueError("a region runs without a checkpoint, for a method with aprons only")
+        checkpoint = region.start
     resumed = _load(checkpoint, method, rng)
     if resumed is not None:
         state, done_level, rng_state, history, timings, stats = resumed
         rng.bit_generator.state = rng_state
         first_level = done_level - 1
+        method.after_level(done_level, state)
     for level in range(first_level, -1, -1):
         t0 = time.perf_counter()
-        shape = level_shape(method.size, level)
+        frame = None if region is None else region.frames[level]
+        method.frame = whole_frame(level_shape(method.size, level)) if frame is None else frame
+        shape = method.frame.shape
         method.prepare(level, shape)
+        if state is not None and frame is not None:
+            state = method.crop(state, region.parents(level))
         state = method.initial(shape, rng) if state is None else method.upsample(state, rng)
         steps, value = method.start(level, state)
 
@@ -279,13 +316,16 @@ def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressC
         history.append(level_history)
         timings[f"level_{level}"] = time.perf_counter() - t0
         stats["levels"][f"level_{level}"] = level_stats
-        if checkpoint is not None:
+        method.after_level(level, state)
+        if checkpoint is not None and frame is None:  # a region's own levels are not kept
             save_run_state(
                 checkpoint, method.key, **method.fingerprint, **method.to_arrays(state),
                 level=level, rng_state=json.dumps(rng.bit_generator.state),
                 history=json.dumps(history), timings=json.dumps(timings),
                 stats=json.dumps(stats, default=str),
             )
+    if region is not None:
+        state = method.crop(state, region.block_indices())
     timings["total"] = time.perf_counter() - t_start
     return PyramidRun(state, history, timings, stats)
 

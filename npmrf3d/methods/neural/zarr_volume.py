@@ -1,14 +1,11 @@
-"""Big volumes into Zarr, block by block, on a Dask cluster.
+"""Big volumes of the neural generator into Zarr, block by block, on a Dask cluster.
 
-The volume ``[0, size)^3`` is cut into ``block``-sided cubes aligned with the Zarr chunks, so
-every task writes whole chunks of its own and tasks never touch the same file. A task loads
-the model (once per worker process), generates its block with
-:func:`npmrf3d.methods.neural.engine.generate_block` (tiles of the model's canonical grid: the result
-does not depend on the block size or the worker) and writes it, then an empty marker file
-``.npmrf3d-done/I.J.K`` inside the array's folder. A rerun of the same command skips the blocks
-with a marker (resume after an interruption); a Zarr folder made by another model or size is
-refused. The array is Zarr format 2, ``(N1, N2, N3, C)`` float32, which napari opens directly
-(``napari vol.zarr``; C = 3 shows as RGB).
+The array, its blocks and their markers are :mod:`npmrf3d.io.zarr_blocks`'s. A task loads the
+model (once per worker process), generates its block with
+:func:`npmrf3d.methods.neural.engine.generate_block` (tiles of the model's canonical grid: the
+result does not depend on the block size or the worker) and writes it; a rerun of the same
+command skips the finished blocks (resume after an interruption); a Zarr folder made by another
+model or size is refused.
 
 On a real cluster (``scheduler="tcp://HOST:8786"``) the model file and the output folder must be
 on storage every worker sees.
@@ -17,34 +14,25 @@ on storage every worker sees.
 from __future__ import annotations
 
 import hashlib
-import itertools
 import os
 import pathlib
-import shutil
 
 import torch
-import zarr
 from dask.distributed import Client, as_completed
 
 from ..._cluster import local_cluster
 from ...errors import ParameterError
+from ...io.zarr_blocks import DONE, block_box, block_indices, finished_blocks, open_blocks, write_block
 from .config import ZARR_BLOCK, ZARR_WORKERS
 from .engine import generate_block, load_model
 
-__all__ = ["block_indices", "write_zarr"]
+__all__ = ["DONE", "block_indices", "write_zarr"]
 
-DONE = ".npmrf3d-done"
 _MODELS: dict[str, object] = {}
 
 
 def _digest(path) -> str:
     return hashlib.sha256(pathlib.Path(path).read_bytes()).hexdigest()
-
-
-def block_indices(size, block: int) -> list[tuple[int, int, int]]:
-    """Block indices ``(I, J, K)`` covering ``size`` with cubes of side ``block``."""
-    counts = [-(-int(n) // block) for n in size]
-    return list(itertools.product(*(range(c) for c in counts)))
 
 
 def _write_block(model_path: str, digest: str, out: str, index, block: int, size, threads: int) -> tuple:
@@ -53,37 +41,9 @@ def _write_block(model_path: str, digest: str, out: str, index, block: int, size
     model = _MODELS.get(digest)
     if model is None:
         model = _MODELS[digest] = load_model(model_path)
-    origin = tuple(i * block for i in index)
-    shape = tuple(min(block, n - o) for o, n in zip(origin, size))
-    values = generate_block(model, origin, shape)
-    array = zarr.open_array(out, mode="r+")
-    array[tuple(slice(o, o + s) for o, s in zip(origin, shape))] = values
-    pathlib.Path(out, DONE, ".".join(map(str, index))).touch()
+    origin, shape = block_box(index, block, size)
+    write_block(out, index, block, generate_block(model, origin, shape))
     return index
-
-
-def _prepare(model_path, out: pathlib.Path, size, block: int, channels: int, overwrite: bool):
-    attrs = {"npmrf3d_model_sha256": _digest(model_path), "npmrf3d_size": list(size),
-             "npmrf3d_block": block}
-    if out.exists():
-        if overwrite:
-            shutil.rmtree(out) if out.is_dir() else out.unlink()
-        else:
-            try:
-                existing = dict(zarr.open_array(out, mode="r").attrs)
-            except Exception:
-                raise ParameterError(f"output '{out}' exists and is not a Zarr array of this "
-                                     f"command; pass --overwrite or choose another --out") from None
-            if any(existing.get(k) != v for k, v in attrs.items()):
-                raise ParameterError(f"output '{out}' holds a volume of another model, size or "
-                                     f"block; pass --overwrite or choose another --out")
-            return attrs
-    array = zarr.create_array(out, shape=(*size, channels), chunks=(block, block, block, channels),
-                              dtype="float32", zarr_format=2, fill_value=0.0)
-    array.attrs.update(attrs)
-    os.makedirs(out / DONE, exist_ok=True)
-    return attrs
-
 
 def write_zarr(model_path, out, *, size, block: int = ZARR_BLOCK, scheduler: str | None = None,
                workers: int = ZARR_WORKERS, overwrite: bool = False, progress=None) -> dict:
@@ -115,10 +75,11 @@ def write_zarr(model_path, out, *, size, block: int = ZARR_BLOCK, scheduler: str
                              f"(each tile is computed once); got {block}")
     out = pathlib.Path(out)
     size = tuple(int(n) for n in size)
-    _prepare(model_path, out, size, block, model.channels, overwrite)
     digest = _digest(model_path)
+    open_blocks(out, size=size, channels=model.channels, block=block,
+                attrs={"npmrf3d_model_sha256": digest}, overwrite=overwrite)
     indices = block_indices(size, block)
-    finished = {tuple(int(x) for x in p.name.split(".")) for p in (out / DONE).iterdir()}
+    finished = finished_blocks(out)
     todo = [i for i in indices if i not in finished]
     cluster = None
     if scheduler is None:

@@ -1,0 +1,146 @@
+"""Volumes in blocks from the command line: ``--out VOL.zarr``, ``--block``, ``--workers``,
+``--scheduler`` and ``--blockwise`` of ``synth`` and the coherent samplers' commands.
+
+An ``--out`` ending in ``.zarr`` makes the volume block by block into a chunked Zarr array
+(:func:`npmrf3d.methods.blocks.write_zarr`) with the block-local sampler, on a local Dask
+cluster or a running scheduler; a rerun of the same command makes only the missing blocks. The
+array's attributes hold the run record; ``preview.png`` inside the folder shows the exemplar,
+the three centre slices and the cube's faces of a corner block.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import pathlib
+import secrets
+import sys
+
+import numpy as np
+import zarr
+from tqdm import tqdm
+
+from .._cluster import check_scheduler, probe_scheduler
+from ..errors import ParameterError
+from ..io.runs import run_record
+from ..methods.blocks import block_plan, write_zarr
+from ..plotting import preview_figure, save_figure
+from ._common import PROG, positive_int, say
+
+__all__ = ["DEFAULT_BLOCK", "add_block_options", "blockwise_requested", "run_zarr", "zarr_output"]
+
+#: Side of the blocks (and Zarr chunks) when none is asked for: large against the default's
+#: aprons (18 to 24 voxels a side per level), so the cones repeat little work, and about
+#: 0.5 GiB per worker.
+DEFAULT_BLOCK = 128
+#: Local workers when none is asked for.
+DEFAULT_WORKERS = 2
+
+
+def add_block_options(group: argparse._ArgumentGroup) -> None:
+    """``--blockwise``, ``--block``, ``--workers`` and ``--scheduler`` into ``group``."""
+    group.add_argument(
+        "--blockwise", action="store_true", default=None,
+        help="the block-local sampler (the coarsest level whole, the finer levels with its "
+             "histograms frozen, random numbers hashed from voxel positions): the same volume as "
+             "--out VOL.zarr makes in blocks (default: none = on with --out VOL.zarr, off otherwise)")
+    group.add_argument(
+        "--block", type=positive_int, default=DEFAULT_BLOCK, metavar="N",
+        help="--out VOL.zarr: side of the blocks and of the Zarr chunks; each worker holds one "
+             "block's dependency cone (--dry-run shows its memory)")
+    group.add_argument(
+        "--workers", type=positive_int, default=DEFAULT_WORKERS, metavar="N",
+        help="--out VOL.zarr: processes of the local Dask cluster, one numba thread each")
+    group.add_argument(
+        "--scheduler", default=None, metavar="ADDRESS",
+        help="--out VOL.zarr: a running Dask scheduler (tcp://HOST:8786) whose workers make the "
+             "blocks; they must see the exemplar's values (sent with the tasks) and the --out "
+             "folder (default: none = a local cluster of --workers)")
+
+
+def zarr_output(args: argparse.Namespace) -> bool:
+    """Whether ``--out`` names a Zarr volume (ends in ``.zarr``)."""
+    return str(args.out).rstrip("/\\").lower().endswith(".zarr")
+
+
+def blockwise_requested(args: argparse.Namespace) -> bool:
+    """``--blockwise`` as given, else whether ``--out`` is a Zarr volume; block options without
+    a Zarr ``--out`` are refused."""
+    zarr_out = zarr_output(args)
+    if not zarr_out:
+        for name, option in (("scheduler", "--scheduler"),):
+            if getattr(args, name) is not None:
+                raise ParameterError(f"{option} needs --out VOL.zarr (blocks are written into a Zarr "
+                                     f"array); got --out {args.out}")
+    if args.blockwise is None:
+        return zarr_out
+    return True
+
+
+def _seeded(config):
+    """The configuration with a seed: every block must draw the same random numbers."""
+    if config.seed is not None:
+        return config
+    return dataclasses.replace(config, seed=secrets.randbelow(2**31))
+
+
+def run_zarr(args: argparse.Namespace, argv: list[str], command: str, method, config, per_view: dict,
+             sources: dict, title: str) -> int:
+    """Make ``config``'s volume into the Zarr array ``--out`` in blocks; ``--dry-run`` prints the
+    block plan and whether one block fits a worker."""
+    if getattr(args, "checkpoint", None) is not None:
+        raise ParameterError("--checkpoint does not apply to --out VOL.zarr: the Zarr volume keeps its "
+                             "finished blocks, and the same command resumes it")
+    scheduler = check_scheduler(args.scheduler)
+    if scheduler in ("local", "serial"):
+        scheduler = None
+    if scheduler is not None:
+        probe_scheduler(scheduler)
+    out = pathlib.Path(args.out)
+    config = _seeded(config)
+    plan = block_plan(method, per_view, config, block=args.block)
+    if args.dry_run:
+        say(f"{method.name} {'x'.join(map(str, config.size))} into {out}: {plan.describe()}")
+        return 0
+    record = run_record(command, None, exemplars=sources, method=method.name, argv=[PROG, *argv],
+                        block=args.block, workers=None if scheduler else args.workers, scheduler=scheduler)
+    record["config"], record["seed"] = json.loads(json.dumps(config.to_dict(), default=str)), config.seed
+    bar = None
+    if not args.quiet:
+        say(f"{method.name}: {plan.describe()}")
+
+    def progress(done, total):
+        nonlocal bar
+        if args.quiet:
+            return
+        if bar is None:
+            bar = tqdm(total=total, initial=done, desc="blocks", unit="block", file=sys.stderr,
+                       dynamic_ncols=True)
+        else:
+            bar.update(done - bar.n)
+
+    try:
+        summary = write_zarr(method, per_view, config, out, block=args.block, record=record,
+                             workers=args.workers, scheduler=scheduler, overwrite=args.overwrite,
+                             progress=progress)
+    finally:
+        if bar is not None:
+            bar.close()
+    array = zarr.open_array(out, mode="r+")
+    array.attrs["npmrf3d_block_seconds"] = float(array.attrs.get("npmrf3d_block_seconds", 0.0)) + summary["seconds"]
+    _preview(out, array, per_view, title, args.block)
+    if not args.quiet:
+        say(f"wrote {out}: {summary['written']} blocks written, {summary['skipped']} already done; "
+            f"volume {'x'.join(map(str, array.shape))} (N1xN2xN3xC) float32, Zarr format 2 "
+            f"(napari {out}), preview.png inside")
+    return 0
+
+
+def _preview(out: pathlib.Path, array, per_view: dict, title: str, block: int) -> None:
+    """``preview.png`` in the Zarr folder: the exemplar(s) and the centre slices and faces of the
+    volume's first corner, at most two blocks a side (a volume of any size is not read whole)."""
+    side = [min(n, 2 * block) for n in array.shape[:3]]
+    corner = np.asarray(array[: side[0], : side[1], : side[2]])
+    fig = preview_figure(corner, per_view, title=f"{title} (the first {'x'.join(map(str, side))} corner)")
+    save_figure(fig, out / "preview.png")

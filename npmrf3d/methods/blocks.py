@@ -1,0 +1,231 @@
+"""Volumes of any size made block by block: in memory, or into a Zarr array on a Dask cluster.
+
+A registered method with ``aprons`` (:class:`npmrf3d.config.SynthesisMethod`; the block-local
+configurations of the coherent samplers, ``blockwise=True``) makes any block of its volume from
+the block's dependency cone (:mod:`npmrf3d.model.regions`), every random number a hash of the
+seed and a grid position: a volume made as blocks equals, bit for bit, the volume made at once
+with the same seed, whatever the block size, the order of the blocks or the worker that makes
+them. :func:`make_block` makes one block; :func:`synthesize_blocks` a whole volume in memory;
+:func:`write_zarr` a volume of any size that fits on disk, each block a task of a local Dask
+cluster (``workers``) or of a running scheduler, into a chunked Zarr array
+(:mod:`npmrf3d.io.zarr_blocks`: resumable, the run's record in its attributes).
+
+The cost of a block is its cone: the block grown at every level by that level's apron
+(iterations times the window's reach), so blocks much larger than the aprons waste least
+(:func:`block_plan` reports the share).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import os
+import pathlib
+import time
+from collections.abc import Callable, Mapping
+
+import numpy as np
+
+from .. import _validation as check
+from .._cluster import dask_client
+from .._kernels._jit import use_threads
+from ..config import SynthesisMethod
+from ..io.zarr_blocks import block_box, block_indices, finished_blocks, open_blocks, write_block
+from ..model.regions import RegionPlan, plan_region
+from ..resources import Estimate, available_memory, check_memory, format_bytes
+from . import METHODS
+
+__all__ = ["BlockPlan", "block_plan", "blockwise_method", "make_block", "shared_exemplars", "synthesize_blocks",
+           "write_zarr"]
+
+
+def blockwise_method(method: SynthesisMethod, config, per_view) -> tuple[int, ...]:
+    """The method's aprons for ``config``; a clear error when it cannot run in blocks."""
+    aprons = None if method.aprons is None else method.aprons(config, per_view)
+    if aprons is None:
+        check.fail(f"method {method.name} with these settings cannot be made in blocks: only the "
+                   f"block-local coherent samplers can (blockwise=True, fixed iterations, no per-voxel "
+                   f"temperatures)")
+    return tuple(None if a is None else int(a) for a in aprons)
+
+
+def _levels(config) -> int:
+    return int(config.levels)
+
+
+def make_block(method: SynthesisMethod, per_view: Mapping[str, np.ndarray], config, origin, shape,
+               start) -> np.ndarray:
+    """Block ``origin .. origin + shape - 1`` of the volume ``config`` makes (its ``size`` and
+    ``seed``; the seed must be set), from its dependency cone alone: ``(*shape, C)`` float32.
+    ``start`` is the checkpoint of the levels that run whole, shared by all blocks: made by the
+    first block that finds none, read by the others."""
+    if config.seed is None:
+        raise ValueError("a block needs the run's seed")
+    per_view = shared_exemplars(per_view)
+    plan = plan_region(config.size, _levels(config), blockwise_method(method, config, per_view), origin, shape,
+                       start=start)
+    return method.run(per_view, config, np.random.default_rng(config.seed), region=plan).volume
+
+
+def shared_exemplars(per_view: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """``per_view`` with views of equal exemplars sharing one array: the methods treat an
+    exemplar shared by views once (random numbers are drawn per distinct exemplar), and a task
+    sent to a worker arrives with a copy per view."""
+    seen: dict[str, np.ndarray] = {}
+    return {v: seen.setdefault(_digest(a), a) for v, a in per_view.items()}
+
+
+def synthesize_blocks(method: SynthesisMethod, per_view, config, *, block: int, start) -> np.ndarray:
+    """The whole volume of ``config``, made as blocks of side ``block`` one after the other
+    (``start``: the shared checkpoint of :func:`make_block`)."""
+    size = tuple(config.size)
+    out = None
+    for index in block_indices(size, block):
+        origin, shape = block_box(index, block, size)
+        values = make_block(method, per_view, config, origin, shape, start)
+        if out is None:
+            out = np.empty((*size, values.shape[-1]), dtype=np.float32)
+        out[tuple(slice(o, o + s) for o, s in zip(origin, shape))] = values
+    return out
+
+
+@dataclasses.dataclass(frozen=True)
+class BlockPlan:
+    """What a block run costs: the blocks, the largest cone, one block's memory estimate and the
+    share of the work that is the cones' overlap."""
+
+    blocks: int
+    cone: RegionPlan
+    memory: Estimate
+    overhead: float
+
+    def describe(self) -> str:
+        frames = " < ".join("x".join(map(str, f.shape)) for f in reversed(self.cone.frames) if f is not None)
+        whole = sum(f is None for f in self.cone.frames)
+        shared = f"the coarsest {whole} level{'s' * (whole > 1)} made once, whole; " if whole else ""
+        return (f"{self.blocks} blocks; {shared}each block made from a cone of {frames} voxels, "
+                f"{self.overhead:.1f}x the voxels of the volume's own levels; one block "
+                f"{self.memory.describe()}")
+
+
+def block_plan(method: SynthesisMethod, per_view, config, *, block: int) -> BlockPlan:
+    """The :class:`BlockPlan` of making ``config``'s volume in blocks of side ``block``: the
+    memory of the first (largest) block's cone from the method's estimate at the cone's finest
+    region, and the voxels of all cones against the pyramid's."""
+    size = tuple(config.size)
+    aprons = blockwise_method(method, config, per_view)
+    levels = _levels(config)
+    indices = block_indices(size, block)
+    biggest = None
+    whole = sum(int(np.prod([n // 2 ** level for n in size])) for level, a in enumerate(aprons) if a is None)
+    cone_voxels = whole
+    for index in indices:
+        plan = plan_region(size, levels, aprons, *block_box(index, block, size))
+        voxels = sum(int(np.prod(f.shape)) for f in plan.frames if f is not None)
+        cone_voxels += voxels
+        if biggest is None or voxels > biggest[0]:
+            biggest = (voxels, plan)
+    pyramid = sum(int(np.prod([n // 2 ** level for n in size])) for level in range(levels))
+    cone = biggest[1]
+    # the larger of the finest region and the finest whole level, each as a one-level run
+    sizes = [cone.frames[0].shape] + [tuple(n // 2 ** level for n in size)
+                                      for level, f in enumerate(cone.frames) if f is None][:1]
+    memory = max((method.resources(dataclasses.replace(config, size=shape, levels=1), per_view) for shape in sizes),
+                 key=lambda e: e.bytes)
+    return BlockPlan(len(indices), cone, memory, cone_voxels / pyramid)
+
+
+#: The checkpoint of the levels that run whole, inside the Zarr folder (shared by all blocks).
+START = ".npmrf3d-coarse.npz"
+
+
+def _task(method_name: str, per_view, config, out: str, index, block: int, threads: int) -> float:
+    """One task on a worker: make block ``index`` and write it and its marker; its seconds."""
+    t0 = time.perf_counter()
+    use_threads(threads)
+    origin, shape = block_box(index, block, config.size)
+    write_block(out, index, block, make_block(METHODS[method_name], per_view, config, origin, shape,
+                                              os.path.join(out, START)))
+    return time.perf_counter() - t0
+
+
+def write_zarr(method: SynthesisMethod, per_view, config, out, *, block: int, record: dict,
+               workers: int = 1, threads: int = 1, scheduler: str | None = None, overwrite: bool = False,
+               memory_per_worker: int | None = None,
+               progress: Callable[[int, int], None] | None = None) -> dict:
+    """Make ``config``'s volume (its seed set) into the Zarr array ``out``, block by block.
+
+    Parameters
+    ----------
+    method, per_view, config
+        A registered method with aprons, its exemplars and a configuration with ``blockwise``.
+    out : path
+        The Zarr folder: created, or resumed when it holds this run's unfinished volume.
+    block : int
+        Side of the blocks and of the Zarr chunks.
+    record : dict
+        The run's record (JSON values), kept in the array's attributes.
+    workers, threads : int
+        A local cluster of ``workers`` processes with ``threads`` numba threads each (ignored
+        with ``scheduler``).
+    scheduler : str, optional
+        Address of a running Dask scheduler (``tcp://HOST:8786``); every worker must see ``out``.
+    memory_per_worker : int, optional
+        Bytes one worker may use; a block whose estimate exceeds it is refused before anything
+        is written. None: the machine's available memory divided by ``workers``.
+    progress : callable, optional
+        ``progress(done, total)`` once before the first block and after each one.
+
+    Returns
+    -------
+    dict
+        ``blocks``, ``skipped`` (already done), ``written``, ``seconds`` (of the blocks made here,
+        summed over workers) and ``plan`` (:meth:`BlockPlan.describe`).
+    """
+    plan = block_plan(method, per_view, config, block=block)
+    if memory_per_worker is None:
+        available = available_memory()
+        memory_per_worker = None if available is None else available // max(1, workers if scheduler is None else 1)
+    check_memory(plan.memory, available=memory_per_worker,
+                 hint="use a smaller --block (each worker holds one block's cone), or fewer --workers")
+    out = pathlib.Path(out)
+    identity = json.dumps({"method": method.name, "config": config.to_dict(),
+                           "exemplars": {v: _digest(a) for v, a in per_view.items()}}, sort_keys=True, default=str)
+    open_blocks(out, size=config.size, channels=next(iter(per_view.values())).shape[-1], block=block,
+                attrs={"npmrf3d_run": identity, "npmrf3d_record": json.loads(json.dumps(record, default=str))},
+                overwrite=overwrite)
+    indices = block_indices(config.size, block)
+    finished = finished_blocks(out)
+    todo = [i for i in indices if i not in finished]
+    done = len(indices) - len(todo)
+    written = len(todo)
+    seconds = 0.0
+    if progress is not None:
+        progress(done, len(indices))
+    if todo and not (out / START).exists():
+        # the first block makes the shared coarse levels here, before the others need them
+        seconds += _task(method.name, per_view, config, os.fspath(out), todo[0], block, max(threads, workers))
+        todo = todo[1:]
+        done += 1
+        if progress is not None:
+            progress(done, len(indices))
+    if todo:
+        with dask_client(scheduler, workers) as client:
+            from distributed import as_completed
+
+            futures = [client.submit(_task, method.name, per_view, config, os.fspath(out), i, block, threads,
+                                     pure=False) for i in todo]
+            for future in as_completed(futures):
+                seconds += future.result()
+                done += 1
+                if progress is not None:
+                    progress(done, len(indices))
+    return {"blocks": len(indices), "skipped": len(indices) - written, "written": written,
+            "seconds": seconds, "plan": plan.describe(), "block_bytes": plan.memory.bytes,
+            "block_memory": format_bytes(plan.memory.bytes)}
+
+
+def _digest(array: np.ndarray) -> str:
+    a = np.ascontiguousarray(array)
+    return hashlib.sha256(a.tobytes() + str((a.shape, a.dtype.str)).encode()).hexdigest()
