@@ -982,3 +982,12 @@ def naive_cool(temps, visited, inherited, xi):
 def naive_window_trust(trust, view, site, window):
     """Sum of ``trust`` over the window of ``view`` at ``site``."""
     return float(naive_volume_patch(trust[..., None], view, site, window).sum())
+
+
+def naive_global_flat(p, shape, origin, extent):
+    """The flat index of voxel ``p`` of a region (``origin``, ``extent``: the level's grid, 0 =
+    the region is the grid) in that grid, toroidal: the kernels' random-number key."""
+    if extent[0] == 0:
+        return (p[0] * shape[1] + p[1]) * shape[2] + p[2]
+    g = [(o + q) % e for o, q, e in zip(origin, p, extent)]
+    return (g[0] * extent[1] + g[1]) * extent[2] + g[2]

@@ -201,16 +201,16 @@ def check_out(out: pathlib.Path, overwrite: bool, files: tuple[str, ...] = RUN_F
         raise ParameterError(f"output folder '{out}' cannot be created: '{ancestor}' is not writable")
 
 
-def output_folder(args: argparse.Namespace) -> pathlib.Path:
+def output_folder(args: argparse.Namespace, files: tuple[str, ...] = RUN_FILES) -> pathlib.Path:
     """The checked ``--out`` folder of a command that writes a run folder (with ``--overwrite``
     never the working folder, one of its parents or the home folder: the swap would pull the
-    folder away from under the calling shell)."""
+    folder away from under the calling shell); ``files``: the run's files it must not hold."""
     if not args.out.strip():
         raise ParameterError("--out must name a folder; got an empty string")
     out = pathlib.Path(args.out)
     if args.overwrite:
         check_replaceable(out)
-    check_out(out, args.overwrite)
+    check_out(out, args.overwrite, files)
     return out
 
 
@@ -275,7 +275,7 @@ def prepare_run(args: argparse.Namespace, method, config, *, whole: bool = True)
     order that keeps user errors ahead of any work: the ``--out`` folder, the ``--checkpoint``,
     the exemplars, and (``whole``: the volume made at once) the memory. Returns (out,
     checkpoint, per-view exemplars, per-view names for run.json)."""
-    out = output_folder(args)
+    out = output_folder(args, RUN_FILES if whole else ())  # a Zarr volume checks its own identity
     checkpoint = pathlib.Path(args.checkpoint) if getattr(args, "checkpoint", None) is not None else None
     check_checkpoint(checkpoint, out)
     exemplar, per_view_sources, source_names = view_sources(args)

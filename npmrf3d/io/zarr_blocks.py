@@ -54,10 +54,12 @@ def block_box(index, block: int, size) -> tuple[tuple[int, int, int], tuple[int,
     return origin, tuple(min(block, int(n) - o) for o, n in zip(origin, size))
 
 
-def open_blocks(out, *, size, channels: int, block: int, attrs: dict, overwrite: bool = False) -> None:
+def open_blocks(out, *, size, channels: int, block: int, attrs: dict, overwrite: bool = False,
+                record: dict | None = None) -> None:
     """Create the Zarr array ``out`` for a ``size`` volume of ``channels`` channels in chunks of
-    ``block``, with ``attrs``; or, when ``out`` holds an array of this run (the same ``attrs``
-    items, which must be JSON values), keep it to resume. Anything else at ``out`` is refused
+    ``block``, with ``attrs`` (the run's identity) and ``record`` (what is said about it); or,
+    when ``out`` holds an array of this run (the same ``attrs`` items, which must be JSON
+    values), keep it to resume. Anything else at ``out`` is refused
     (:class:`npmrf3d.ParameterError`) unless ``overwrite``."""
     out = pathlib.Path(out)
     attrs = {**attrs, "npmrf3d_size": [int(n) for n in size], "npmrf3d_block": int(block)}
@@ -77,7 +79,7 @@ def open_blocks(out, *, size, channels: int, block: int, attrs: dict, overwrite:
     array = zarr.create_array(out, shape=(*(int(n) for n in size), int(channels)),
                               chunks=(block, block, block, int(channels)), dtype="float32",
                               zarr_format=2, fill_value=0.0)
-    array.attrs.update(attrs)
+    array.attrs.update({**attrs, **({} if record is None else {"npmrf3d_record": record})})
     os.makedirs(out / DONE, exist_ok=True)
 
 

@@ -31,7 +31,13 @@ from .. import _validation as check
 from .._cluster import dask_client
 from .._kernels._jit import use_threads
 from ..config import SynthesisMethod
-from ..io.zarr_blocks import block_box, block_indices, finished_blocks, open_blocks, write_block
+from ..io.zarr_blocks import (
+    block_box,
+    block_indices,
+    finished_blocks,
+    open_blocks,
+    write_block,
+)
 from ..model.regions import RegionPlan, plan_region
 from ..resources import Estimate, available_memory, check_memory, format_bytes
 from . import METHODS
@@ -193,7 +199,7 @@ def write_zarr(method: SynthesisMethod, per_view, config, out, *, block: int, re
     identity = json.dumps({"method": method.name, "config": config.to_dict(),
                            "exemplars": {v: _digest(a) for v, a in per_view.items()}}, sort_keys=True, default=str)
     open_blocks(out, size=config.size, channels=next(iter(per_view.values())).shape[-1], block=block,
-                attrs={"npmrf3d_run": identity, "npmrf3d_record": json.loads(json.dumps(record, default=str))},
+                attrs={"npmrf3d_run": identity}, record=json.loads(json.dumps(record, default=str)),
                 overwrite=overwrite)
     indices = block_indices(config.size, block)
     finished = finished_blocks(out)

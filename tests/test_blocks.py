@@ -1,0 +1,167 @@
+"""Volumes made in blocks: each block from its dependency cone equals, bit for bit, the same
+part of the volume made at once (default sampler, coherent sampler and Chen–Wang; grey and
+colour; 1 and 2 threads), and the Zarr writer resumes a cut-off run to the same volume."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import zarr
+
+from npmrf3d import ParameterError
+from npmrf3d._kernels import kcoherence as _k
+from npmrf3d._kernels._jit import use_threads
+from npmrf3d.cli.main import main
+from npmrf3d.io.zarr_blocks import DONE, block_indices
+from npmrf3d.methods import METHODS
+from npmrf3d.methods.blocks import block_plan, make_block, synthesize_blocks, write_zarr
+from npmrf3d.model.regions import plan_region
+from npmrf3d.resources import ResourceError
+from npmrf3d.studies.catalog import load_exemplar
+
+from .cli_checks import refused_naming
+from .naive import naive_global_flat
+
+#: A cone that is a true part of its level at the two finer levels: window 3 (reach 2), one
+#: iteration per level, blocks of 16 in a 48 x 32 x 32 volume.
+SMALL = dict(size=(48, 32, 32), window=3, levels=3, iterations=1, blockwise=True, seed=11)
+
+
+def _exemplar(name: str) -> np.ndarray:
+    """A 32 x 32 crop of a bundled exemplar: ``gravel64`` is grey, ``ihc64`` colour."""
+    return np.ascontiguousarray(load_exemplar(name)[:32, :32], dtype=np.float32)
+
+
+def _views(image):
+    return {v: image for v in ("front", "right", "top")}
+
+
+def _whole(method, per_view, config, threads):
+    use_threads(threads)
+    return method.run(per_view, config, np.random.default_rng(config.seed)).volume
+
+
+@pytest.mark.parametrize("name", ["coherent", "chen-wang"])
+@pytest.mark.parametrize("exemplar", ["gravel64", "ihc64"])
+@pytest.mark.parametrize("threads", [1, 2])
+def test_blocks_equal_the_volume_made_at_once(tmp_path, name, exemplar, threads):
+    method = METHODS[name]
+    per_view = _views(_exemplar(exemplar))
+    config = method.make_config(**SMALL)
+    whole = _whole(method, per_view, config, 3 - threads)
+    plan = plan_region(config.size, config.levels, method.aprons(config, per_view), (16, 16, 0), (16, 16, 16))
+    assert plan.frames[0].shape != plan.frames[0].extent and plan.frames[1].shape != plan.frames[1].extent
+    use_threads(threads)
+    blocks = synthesize_blocks(method, per_view, config, block=16, start=tmp_path / "start.npz")
+    np.testing.assert_array_equal(blocks, whole)
+
+
+def test_the_apron_is_needed_in_full(tmp_path):
+    """One voxel less of apron at the finest level and a block differs from the whole volume:
+    the test above could fail."""
+    method = METHODS["coherent"]
+    per_view = _views(_exemplar("gravel64"))
+    config = method.make_config(**{**SMALL, "window": 5})
+    whole = _whole(method, per_view, config, 2)
+    aprons = method.aprons(config, per_view)
+    short = (aprons[0] - 2, *aprons[1:])  # regions are rounded to even sides: two voxels less
+    plan = plan_region(config.size, config.levels, short, (16, 0, 0), (16, 16, 16), start=tmp_path / "s.npz")
+    block = method.run(per_view, config, np.random.default_rng(config.seed), region=plan).volume
+    assert not np.array_equal(block, whole[16:32, :16, :16])
+    exact = make_block(method, per_view, config, (16, 0, 0), (16, 16, 16), tmp_path / "s.npz")
+    np.testing.assert_array_equal(exact, whole[16:32, :16, :16])
+
+
+@pytest.mark.parametrize("exemplar", ["gravel64", "ihc64"])
+def test_the_default_sampler_blockwise_in_blocks(tmp_path, exemplar):
+    method = METHODS["npmrf"]
+    per_view = _views(_exemplar(exemplar))
+    config = method.make_config(size=(32, 32, 32), window=3, levels=2, blockwise=True, seed=4)
+    whole = _whole(method, per_view, config, 2)
+    np.testing.assert_array_equal(synthesize_blocks(method, per_view, config, block=16, start=tmp_path / "s.npz"),
+                                  whole)
+
+
+def test_blockwise_keeps_the_exemplar_colours_and_differs_from_the_seedless_run(tmp_path):
+    method = METHODS["coherent"]
+    image = _exemplar("ihc64")
+    config = method.make_config(**SMALL)
+    volume = _whole(method, _views(image), config, 2)
+    colours = {tuple(c) for c in image.reshape(-1, 3).tolist()}
+    assert {tuple(c) for c in volume.reshape(-1, 3).tolist()} <= colours
+    other = _whole(method, _views(image), method.make_config(**{**SMALL, "seed": 12}), 2)
+    assert not np.array_equal(volume, other)
+
+
+def test_global_flat_matches_its_twin():
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        extent = rng.integers(1, 9, 3)
+        shape = rng.integers(1, 9, 3)
+        origin = rng.integers(0, 20, 3)
+        p = [int(rng.integers(0, n)) for n in shape]
+        for e in (extent, np.zeros(3, dtype=np.int64)):
+            got = _k.global_flat(p[0], p[1], p[2], tuple(int(n) for n in shape), origin.astype(np.int64),
+                                 e.astype(np.int64))
+            assert got == naive_global_flat(p, shape, origin, e)
+
+
+def test_methods_that_cannot_run_in_blocks_say_so():
+    per_view = _views(_exemplar("gravel64"))
+    with pytest.raises(ParameterError, match="cannot be made in blocks"):
+        block_plan(METHODS["coherent"], per_view, METHODS["coherent"].make_config(size=32, window=3), block=16)
+    with pytest.raises(ParameterError, match="per-voxel temperatures"):
+        METHODS["npmrf"].make_config(size=32, blockwise=True, temperatures=True)
+    with pytest.raises(ParameterError, match="support 'coherent'"):
+        METHODS["npmrf"].make_config(size=32, blockwise=True, support="full")
+
+
+def test_a_block_that_cannot_fit_a_worker_is_refused_before_anything_is_written(tmp_path):
+    method = METHODS["coherent"]
+    per_view = _views(_exemplar("gravel64"))
+    config = method.make_config(**SMALL)
+    with pytest.raises(ResourceError, match="needs about"):
+        write_zarr(method, per_view, config, tmp_path / "v.zarr", block=16, record={}, memory_per_worker=10**6)
+    assert not (tmp_path / "v.zarr").exists()
+
+
+SYNTH = ["synth", "bundled:gravel64", "--size", "32", "--window", "3", "--levels", "2", "--seed", "3"]
+
+
+def test_synth_into_zarr_equals_the_blockwise_run_and_resumes(tmp_path, capsys):
+    out = tmp_path / "v.zarr"
+    argv = [*SYNTH, "--out", str(out), "--block", "16", "--workers", "1"]
+    assert main(argv) == 0
+    assert "8 blocks written, 0 already done" in capsys.readouterr().out
+    assert main([*SYNTH, "--blockwise", "--out", str(tmp_path / "whole"), "--quiet"]) == 0
+    expected = np.load(tmp_path / "whole" / "volume.npy")
+    array = zarr.open_array(out, mode="r")
+    assert array.shape == (32, 32, 32, 1) and array.chunks == (16, 16, 16, 1)
+    assert "npmrf3d_record" in array.attrs and (out / "preview.png").is_file()
+    np.testing.assert_array_equal(array[...], expected)
+    # a run cut off after some blocks: their markers are there, the others not
+    for index in block_indices((32, 32, 32), 16)[3:]:
+        (out / DONE / ".".join(map(str, index))).unlink()
+    zarr.open_array(out, mode="r+")[16:, :, :] = 0.0
+    assert main(argv) == 0
+    assert "5 blocks written, 3 already done" in capsys.readouterr().out
+    np.testing.assert_array_equal(zarr.open_array(out, mode="r")[...], expected)
+
+
+def test_synth_zarr_refusals(tmp_path, capsys):
+    refused_naming([*SYNTH, "--scheduler", "tcp://127.0.0.1:1", "--out", str(tmp_path / "d")], tmp_path, capsys,
+                   words=("--scheduler", ".zarr"))
+    refused_naming([*SYNTH, "--out", str(tmp_path / "v.zarr"), "--checkpoint", str(tmp_path / "c.npz")], tmp_path,
+                   capsys, words=("--checkpoint",))
+    refused_naming([*SYNTH, "--out", str(tmp_path / "v.zarr"), "--temperatures"], tmp_path, capsys,
+                   words=("temperatures",))
+    (tmp_path / "v.zarr").mkdir()
+    (tmp_path / "v.zarr" / "notes.txt").write_text("mine")
+    refused_naming([*SYNTH, "--out", str(tmp_path / "v.zarr")], tmp_path, capsys, words=("not a Zarr volume",))
+
+
+def test_dry_run_prints_the_block_plan(tmp_path, capsys):
+    assert main([*SYNTH, "--size", "1024", "--out", str(tmp_path / "big.zarr"), "--block", "256", "--dry-run"]) == 0
+    text = capsys.readouterr().out
+    assert "64 blocks" in text and "made once, whole" in text and "needs about" in text
+    assert not (tmp_path / "big.zarr").exists()
