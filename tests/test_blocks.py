@@ -130,7 +130,7 @@ SYNTH = ["synth", "bundled:gravel64", "--size", "32", "--window", "3", "--levels
 
 def test_synth_into_zarr_equals_the_blockwise_run_and_resumes(tmp_path, capsys):
     out = tmp_path / "v.zarr"
-    argv = [*SYNTH, "--out", str(out), "--block", "16", "--workers", "1"]
+    argv = [*SYNTH, "--out", str(out), "--blockwise", "--block", "16", "--workers", "1"]
     assert main(argv) == 0
     assert "8 blocks written, 0 already done" in capsys.readouterr().out
     assert main([*SYNTH, "--blockwise", "--out", str(tmp_path / "whole"), "--quiet"]) == 0
@@ -151,17 +151,30 @@ def test_synth_into_zarr_equals_the_blockwise_run_and_resumes(tmp_path, capsys):
 def test_synth_zarr_refusals(tmp_path, capsys):
     refused_naming([*SYNTH, "--scheduler", "tcp://127.0.0.1:1", "--out", str(tmp_path / "d")], tmp_path, capsys,
                    words=("--scheduler", ".zarr"))
-    refused_naming([*SYNTH, "--out", str(tmp_path / "v.zarr"), "--checkpoint", str(tmp_path / "c.npz")], tmp_path,
-                   capsys, words=("--checkpoint",))
-    refused_naming([*SYNTH, "--out", str(tmp_path / "v.zarr"), "--temperatures"], tmp_path, capsys,
+    refused_naming([*SYNTH, "--out", str(tmp_path / "v.zarr"), "--blockwise", "--checkpoint", str(tmp_path / "c.npz")],
+                   tmp_path, capsys, words=("--checkpoint",))
+    refused_naming([*SYNTH, "--out", str(tmp_path / "v.zarr"), "--blockwise", "--temperatures"], tmp_path, capsys,
                    words=("temperatures",))
+    refused_naming([*SYNTH, "--out", str(tmp_path / "v.zarr"), "--workers", "2"], tmp_path, capsys,
+                   words=("--workers", "--blockwise"))
     (tmp_path / "v.zarr").mkdir()
     (tmp_path / "v.zarr" / "notes.txt").write_text("mine")
     refused_naming([*SYNTH, "--out", str(tmp_path / "v.zarr")], tmp_path, capsys, words=("not a Zarr volume",))
 
 
 def test_dry_run_prints_the_block_plan(tmp_path, capsys):
-    assert main([*SYNTH, "--size", "1024", "--out", str(tmp_path / "big.zarr"), "--block", "256", "--dry-run"]) == 0
+    assert main([*SYNTH, "--size", "1024", "--out", str(tmp_path / "big.zarr"), "--blockwise", "--block", "256",
+                 "--dry-run"]) == 0
     text = capsys.readouterr().out
-    assert "64 blocks" in text and "made once, whole" in text and "needs about" in text
+    assert "64 blocks" in text and "coarsest level made once, whole" in text and "needs about" in text
     assert not (tmp_path / "big.zarr").exists()
+
+
+def test_synth_into_zarr_at_once_is_the_default_volume(tmp_path, capsys):
+    """Without --blockwise a Zarr --out holds the default sampler's volume, made at once."""
+    assert main([*SYNTH, "--out", str(tmp_path / "v.zarr"), "--quiet"]) == 0
+    assert main([*SYNTH, "--out", str(tmp_path / "run"), "--quiet"]) == 0
+    np.testing.assert_array_equal(zarr.open_array(tmp_path / "v.zarr", mode="r")[...],
+                                  np.load(tmp_path / "run" / "volume.npy"))
+    refused_naming([*SYNTH, "--size", "4096", "--out", str(tmp_path / "huge.zarr")], tmp_path, capsys,
+                   words=("needs about", "--blockwise"))

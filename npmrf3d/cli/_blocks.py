@@ -1,11 +1,12 @@
 """Volumes in blocks from the command line: ``--out VOL.zarr``, ``--block``, ``--workers``,
 ``--scheduler`` and ``--blockwise`` of ``synth`` and the coherent samplers' commands.
 
-An ``--out`` ending in ``.zarr`` makes the volume block by block into a chunked Zarr array
+An ``--out`` ending in ``.zarr`` writes the volume into a chunked Zarr array: made at once
+when it fits in memory, or with ``--blockwise`` block by block
 (:func:`npmrf3d.methods.blocks.write_zarr`) with the block-local sampler, on a local Dask
-cluster or a running scheduler; a rerun of the same command makes only the missing blocks. The
-array's attributes hold the run record; ``preview.png`` inside the folder shows the exemplar,
-the three centre slices and the cube's faces of a corner block.
+cluster or a running scheduler, where a rerun of the same command makes only the missing
+blocks. The array's attributes hold the run record; ``preview.png`` inside the folder shows
+the exemplar, the three centre slices and the cube's faces of a corner.
 """
 
 from __future__ import annotations
@@ -24,9 +25,13 @@ from tqdm import tqdm
 from .._cluster import check_scheduler, probe_scheduler
 from ..errors import ParameterError
 from ..io.runs import run_record
+from ..io.zarr_blocks import block_box, block_indices, open_blocks, write_block
+from ..methods import check_resources
 from ..methods.blocks import block_plan, write_zarr
 from ..plotting import preview_figure, save_figure
-from ._common import PROG, positive_int, say
+from ._common import PROG, dry_run, positive_int, say
+from ._options import given
+from ._progress import run_method
 
 __all__ = ["DEFAULT_BLOCK", "add_block_options", "blockwise_requested", "run_zarr", "zarr_output"]
 
@@ -41,22 +46,23 @@ DEFAULT_WORKERS = 2
 def add_block_options(group: argparse._ArgumentGroup) -> None:
     """``--blockwise``, ``--block``, ``--workers`` and ``--scheduler`` into ``group``."""
     group.add_argument(
-        "--blockwise", action="store_true", default=None,
+        "--blockwise", action="store_true", default=False,
         help="the block-local sampler (the coarsest level whole, the finer levels with its "
-             "histograms frozen, random numbers hashed from voxel positions): the same volume as "
-             "--out VOL.zarr makes in blocks (default: none = on with --out VOL.zarr, off otherwise)")
+             "histograms frozen, random numbers hashed from voxel positions), which makes a volume "
+             "of any size in blocks with --out VOL.zarr, bit for bit the volume it makes at once; "
+             "it loses colour fidelity against the default (docs/blocks.md)")
     group.add_argument(
         "--block", type=positive_int, default=DEFAULT_BLOCK, metavar="N",
-        help="--out VOL.zarr: side of the blocks and of the Zarr chunks; each worker holds one "
-             "block's dependency cone (--dry-run shows its memory)")
+        help="--out VOL.zarr --blockwise: side of the blocks and of the Zarr chunks; each worker "
+             "holds one block's dependency cone (--dry-run shows its memory)")
     group.add_argument(
         "--workers", type=positive_int, default=DEFAULT_WORKERS, metavar="N",
-        help="--out VOL.zarr: processes of the local Dask cluster, one numba thread each")
+        help="--out VOL.zarr --blockwise: processes of the local Dask cluster, one numba thread each")
     group.add_argument(
         "--scheduler", default=None, metavar="ADDRESS",
-        help="--out VOL.zarr: a running Dask scheduler (tcp://HOST:8786) whose workers make the "
-             "blocks; they must see the exemplar's values (sent with the tasks) and the --out "
-             "folder (default: none = a local cluster of --workers)")
+        help="--out VOL.zarr --blockwise: a running Dask scheduler (tcp://HOST:8786) whose workers "
+             "make the blocks; they must see the --out folder (the exemplar's values are sent with "
+             "the tasks) (default: none = a local cluster of --workers)")
 
 
 def zarr_output(args: argparse.Namespace) -> bool:
@@ -65,17 +71,14 @@ def zarr_output(args: argparse.Namespace) -> bool:
 
 
 def blockwise_requested(args: argparse.Namespace) -> bool:
-    """``--blockwise`` as given, else whether ``--out`` is a Zarr volume; block options without
-    a Zarr ``--out`` are refused."""
-    zarr_out = zarr_output(args)
-    if not zarr_out:
-        for name, option in (("scheduler", "--scheduler"),):
-            if getattr(args, name) is not None:
-                raise ParameterError(f"{option} needs --out VOL.zarr (blocks are written into a Zarr "
-                                     f"array); got --out {args.out}")
-    if args.blockwise is None:
-        return zarr_out
-    return True
+    """Whether ``--blockwise`` was given; the options of block runs without it (or without a
+    Zarr ``--out``) are refused."""
+    blocks = bool(args.blockwise) and zarr_output(args)
+    for name in ("scheduler", "workers", "block"):
+        if not blocks and (given(args, name) or (name == "scheduler" and args.scheduler is not None)):
+            need = "--blockwise" if zarr_output(args) else "--out VOL.zarr --blockwise"
+            raise ParameterError(f"--{name} applies to volumes made in blocks: add {need}")
+    return bool(args.blockwise)
 
 
 def _seeded(config):
@@ -87,11 +90,14 @@ def _seeded(config):
 
 def run_zarr(args: argparse.Namespace, argv: list[str], command: str, method, config, per_view: dict,
              sources: dict, title: str) -> int:
-    """Make ``config``'s volume into the Zarr array ``--out`` in blocks; ``--dry-run`` prints the
-    block plan and whether one block fits a worker."""
+    """Make ``config``'s volume into the Zarr array ``--out``: at once when it is not
+    ``blockwise`` (the memory checked first), else in blocks; ``--dry-run`` prints the estimate
+    or the block plan."""
+    if not getattr(config, "blockwise", False):
+        return _zarr_at_once(args, argv, command, method, config, per_view, sources, title)
     if getattr(args, "checkpoint", None) is not None:
-        raise ParameterError("--checkpoint does not apply to --out VOL.zarr: the Zarr volume keeps its "
-                             "finished blocks, and the same command resumes it")
+        raise ParameterError("--checkpoint does not apply to --out VOL.zarr --blockwise: the Zarr volume "
+                             "keeps its finished blocks, and the same command resumes it")
     scheduler = check_scheduler(args.scheduler)
     if scheduler in ("local", "serial"):
         scheduler = None
@@ -134,6 +140,34 @@ def run_zarr(args: argparse.Namespace, argv: list[str], command: str, method, co
         say(f"wrote {out}: {summary['written']} blocks written, {summary['skipped']} already done; "
             f"volume {'x'.join(map(str, array.shape))} (N1xN2xN3xC) float32, Zarr format 2 "
             f"(napari {out}), preview.png inside")
+    return 0
+
+
+def _zarr_at_once(args, argv, command, method, config, per_view, sources, title) -> int:
+    """The volume made at once (as a run folder would hold it) and written into the Zarr array
+    ``--out`` in chunks of ``DEFAULT_BLOCK``, with the run record in its attributes."""
+    check_resources(method, config, per_view, hint="lower --size, or make it in blocks with --blockwise "
+                                                    "(the block-local sampler: docs/blocks.md)")
+    if args.dry_run:
+        return dry_run(method, config, per_view)
+    out = pathlib.Path(args.out)
+    block = min(DEFAULT_BLOCK, max(config.size))
+    record = run_record(command, None, exemplars=sources, method=method.name, argv=[PROG, *argv])
+    record["config"], record["seed"] = json.loads(json.dumps(config.to_dict(), default=str)), config.seed
+    identity = json.dumps({"method": method.name, "config": record["config"]}, sort_keys=True)
+    open_blocks(out, size=config.size, channels=next(iter(per_view.values())).shape[-1], block=block,
+                attrs={"npmrf3d_run": identity}, record=record, overwrite=args.overwrite)
+    checkpoint = pathlib.Path(args.checkpoint) if getattr(args, "checkpoint", None) else None
+    result = run_method(args, method, config, per_view, checkpoint=checkpoint)
+    for index in block_indices(config.size, block):
+        origin, shape = block_box(index, block, config.size)
+        write_block(out, index, block, result.volume[tuple(slice(o, o + n) for o, n in zip(origin, shape))])
+    array = zarr.open_array(out, mode="r+")
+    array.attrs["npmrf3d_seconds"] = float(result.timings["total"])
+    _preview(out, array, per_view, title, block)
+    if not args.quiet:
+        say(f"wrote {out}: volume {'x'.join(map(str, array.shape))} (N1xN2xN3xC) float32, Zarr format 2 "
+            f"(napari {out}), preview.png inside; {result.timings['total']:.1f} s")
     return 0
 
 

@@ -32,6 +32,8 @@ from . import (
     synth,
     volume,
 )
+from ..io.zarr_blocks import finished_blocks
+from ._blocks import zarr_output
 from ._common import PROG, HelpFormatter, Parser, error, guarded, say
 from ._options import environment_problem, given_options, option_strings
 
@@ -62,6 +64,12 @@ def build_parser() -> argparse.ArgumentParser:
 def interrupted_message(args) -> str:
     """One line after Ctrl-C or SIGTERM: where the checkpoint is and how to resume."""
     checkpoint = getattr(args, "checkpoint", None)
+    if hasattr(args, "block") and zarr_output(args):
+        done = len(finished_blocks(args.out))
+        if done:
+            return (f"interrupted; the {done} finished block{'s' * (done != 1)} are kept in '{args.out}': "
+                    f"run the same command again to make the others")
+        return f"interrupted before the first block finished; nothing to resume in '{args.out}'"
     if checkpoint and os.path.isfile(checkpoint):
         return (f"interrupted; the levels finished so far are in the checkpoint '{checkpoint}': "
                 f"run the same command again to resume")

@@ -22,6 +22,7 @@ import hashlib
 import json
 import os
 import pathlib
+import resource
 import time
 from collections.abc import Callable, Mapping
 
@@ -109,7 +110,8 @@ class BlockPlan:
     def describe(self) -> str:
         frames = " < ".join("x".join(map(str, f.shape)) for f in reversed(self.cone.frames) if f is not None)
         whole = sum(f is None for f in self.cone.frames)
-        shared = f"the coarsest {whole} level{'s' * (whole > 1)} made once, whole; " if whole else ""
+        shared = ("the coarsest level made once, whole; " if whole == 1 else
+                  f"the coarsest {whole} levels made once, whole; " if whole else "")
         return (f"{self.blocks} blocks; {shared}each block made from a cone of {frames} voxels, "
                 f"{self.overhead:.1f}x the voxels of the volume's own levels; one block "
                 f"{self.memory.describe()}")
@@ -146,14 +148,15 @@ def block_plan(method: SynthesisMethod, per_view, config, *, block: int) -> Bloc
 START = ".npmrf3d-coarse.npz"
 
 
-def _task(method_name: str, per_view, config, out: str, index, block: int, threads: int) -> float:
-    """One task on a worker: make block ``index`` and write it and its marker; its seconds."""
+def _task(method_name: str, per_view, config, out: str, index, block: int, threads: int) -> tuple[float, int]:
+    """One task on a worker: make block ``index`` and write it and its marker; its seconds and
+    the worker process's peak resident memory so far (bytes)."""
     t0 = time.perf_counter()
     use_threads(threads)
     origin, shape = block_box(index, block, config.size)
     write_block(out, index, block, make_block(METHODS[method_name], per_view, config, origin, shape,
                                               os.path.join(out, START)))
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 
 
 def write_zarr(method: SynthesisMethod, per_view, config, out, *, block: int, record: dict,
@@ -187,7 +190,9 @@ def write_zarr(method: SynthesisMethod, per_view, config, out, *, block: int, re
     -------
     dict
         ``blocks``, ``skipped`` (already done), ``written``, ``seconds`` (of the blocks made here,
-        summed over workers) and ``plan`` (:meth:`BlockPlan.describe`).
+        summed over workers), ``worker_peak_bytes`` (the largest peak resident memory a worker
+        reported; 0 when every block was made here), ``plan`` (:meth:`BlockPlan.describe`) and
+        the estimate of one block (``block_bytes``, ``block_memory``).
     """
     plan = block_plan(method, per_view, config, block=block)
     if memory_per_worker is None:
@@ -207,11 +212,13 @@ def write_zarr(method: SynthesisMethod, per_view, config, out, *, block: int, re
     done = len(indices) - len(todo)
     written = len(todo)
     seconds = 0.0
+    worker_peak = 0
     if progress is not None:
         progress(done, len(indices))
     if todo and not (out / START).exists():
         # the first block makes the shared coarse levels here, before the others need them
-        seconds += _task(method.name, per_view, config, os.fspath(out), todo[0], block, max(threads, workers))
+        took, _ = _task(method.name, per_view, config, os.fspath(out), todo[0], block, max(threads, workers))
+        seconds += took
         todo = todo[1:]
         done += 1
         if progress is not None:
@@ -223,12 +230,15 @@ def write_zarr(method: SynthesisMethod, per_view, config, out, *, block: int, re
             futures = [client.submit(_task, method.name, per_view, config, os.fspath(out), i, block, threads,
                                      pure=False) for i in todo]
             for future in as_completed(futures):
-                seconds += future.result()
+                took, peak = future.result()
+                seconds += took
+                worker_peak = max(worker_peak, peak)
                 done += 1
                 if progress is not None:
                     progress(done, len(indices))
     return {"blocks": len(indices), "skipped": len(indices) - written, "written": written,
-            "seconds": seconds, "plan": plan.describe(), "block_bytes": plan.memory.bytes,
+            "seconds": seconds, "worker_peak_bytes": worker_peak, "plan": plan.describe(),
+            "block_bytes": plan.memory.bytes,
             "block_memory": format_bytes(plan.memory.bytes)}
 
 

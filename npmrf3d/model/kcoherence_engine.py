@@ -45,7 +45,7 @@ from .neighbourhood import VIEW_AXES
 from .phases import PhaseControl, bin_phase_error, bin_phases, phase_prior_target
 from .pyramid import ArraySpec, Levels
 
-__all__ = ["block_aprons", "FrozenHistograms", "CANDIDATE_HEURISTICS", "CANDIDATE_SAMPLERS", "COHERENT_HEURISTICS", "PER_VIEW_HEURISTICS",
+__all__ = ["block_aprons", "FrozenHistograms", "held_values", "CANDIDATE_HEURISTICS", "CANDIDATE_SAMPLERS", "COHERENT_HEURISTICS", "PER_VIEW_HEURISTICS",
            "CandidateDecision", "CoherentState", "KCoherenceLevels", "ValueHistogram",
            "initial_colours", "pack_exemplars", "position_histogram", "value_counts", "value_scale"]
 
@@ -219,37 +219,52 @@ def position_histogram(src_v: np.ndarray, pixels: int) -> np.ndarray:
     return np.bincount(np.asarray(src_v).ravel(), minlength=pixels).astype(np.float64)
 
 
+def held_values(positions: np.ndarray, position_offsets, texel_bins: np.ndarray, texel_offsets, pixels,
+                bins: int) -> np.ndarray:
+    """The value histogram ``(C, bins)`` (in voxels) of a volume whose every voxel holds the
+    texel its source names, from each view's position counts (``positions`` packed per view at
+    ``position_offsets``, ``pixels`` each; their texels' bins ``texel_bins`` at
+    ``texel_offsets``), the views averaged.
+
+    >>> held_values(np.array([2.0, 0.0, 1.0]), [0], np.array([[0], [1], [1]]), [0], [3], 2)
+    array([[2., 1.]])
+    """
+    channels = texel_bins.shape[1]
+    out = np.zeros((channels, bins), dtype=np.float64)
+    for start, offset, n in zip(position_offsets, texel_offsets, pixels):
+        counts = positions[start:start + n]
+        for ch in range(channels):
+            out[ch] += np.bincount(texel_bins[offset:offset + n, ch], weights=counts, minlength=bins)
+    return out / len(pixels)
+
+
 class FrozenHistograms(NamedTuple):
     """The histograms a ``blockwise`` run's finer levels keep from its coarsest level, which
-    runs whole: per view the position counts of the coarsest level's sources, and the volume's
-    value histogram (in units of an even bin's share, so the same at every level).
+    runs whole: per view the position counts of the coarsest level's sources.
 
     A finer level's position counts are the coarsest ones up-sampled as the sources are (each
     coarse pixel's count goes, doubled, to the four pixels ``2 * p + offset``:
-    :meth:`positions_at`), which is what the level's starting sources hold; the solver's votes
-    are weighed by them (and the histogram prior by the value histogram) without updates, so
-    that every voxel depends on its neighbourhood alone.
+    :meth:`positions_at`), which is what the level's starting sources hold, and its value
+    histogram that of the texels they name (:func:`held_values`): the histograms of that
+    level's exemplar, not of the coarsest level's smoother one. The solver's votes and its
+    histogram prior read them without updates, so that every voxel depends on its
+    neighbourhood alone.
     """
 
     positions: tuple[np.ndarray, ...]
     shapes: tuple[tuple[int, int], ...]
-    values: np.ndarray
 
     @classmethod
-    def of(cls, state: "CoherentState", models, lo, span, bins: int) -> "FrozenHistograms":
-        """The histograms of the coarsest level's finished whole ``state`` (its level ``models``)."""
-        ex_flat, _, _ = pack_exemplars(models)
-        values = ValueHistogram.build([m.exemplar for m in models], ex_flat, state.volume, bins=bins,
-                                      lo=lo, span=span)
+    def of(cls, state: "CoherentState", models) -> "FrozenHistograms":
+        """The position counts of the coarsest level's finished whole ``state`` (its level ``models``)."""
         positions = tuple(position_histogram(state.sources[vi], m.pixels) for vi, m in enumerate(models))
-        return cls(positions, tuple((int(m.exemplar.shape[0]), int(m.exemplar.shape[1])) for m in models),
-                   values.hist)
+        return cls(positions, tuple((int(m.exemplar.shape[0]), int(m.exemplar.shape[1])) for m in models))
 
     def positions_at(self, view: int, fine_shapes) -> np.ndarray:
         """View ``view``'s counts up-sampled once per exemplar shape of ``fine_shapes`` (the
         view's exemplar at each finer level in turn, down to the one wanted).
 
-        >>> frozen = FrozenHistograms((np.array([1.0, 0.0, 0.0, 3.0]),), ((2, 2),), np.zeros((1, 2)))
+        >>> frozen = FrozenHistograms((np.array([1.0, 0.0, 0.0, 3.0]),), ((2, 2),))
         >>> frozen.positions_at(0, [(4, 4)]).reshape(4, 4)
         array([[2., 2., 0., 0.],
                [2., 2., 0., 0.],
@@ -347,6 +362,8 @@ class KCoherenceLevels(Levels):
         self.blockwise = bool(getattr(config, "blockwise", False))
         self.frozen: FrozenHistograms | None = None
         self.prepared: int | None = None
+        #: blockwise: the finest level that runs whole, with every histogram (the coarsest)
+        self.lowest_whole = config.levels - 1
 
     def aprons(self):
         """With ``blockwise`` (no global histograms, random numbers hashed from grid positions)
@@ -362,13 +379,12 @@ class KCoherenceLevels(Levels):
         return self.per_view[view].shape[0] // f, self.per_view[view].shape[1] // f
 
     def after_level(self, level, state):
-        """``blockwise``: the coarsest level's position and value histograms, which the finer
-        levels keep (:class:`FrozenHistograms`)."""
-        if self.blockwise and level == self.levels - 1:
+        """``blockwise``: the coarsest level's position counts, which the finer levels keep
+        (:class:`FrozenHistograms`)."""
+        if self.blockwise and level == self.lowest_whole:
             if self.prepared != level:  # resumed from a checkpoint: the level's models first
                 self.prepare(level, state.volume.shape[:3])
-            self.frozen = FrozenHistograms.of(state, self.vmodels, self.value_lo, self.value_span,
-                                              self.config.value_bins)
+            self.frozen = FrozenHistograms.of(state, self.vmodels)
 
     def crop(self, state, index):
         ix = np.ix_(*index)
@@ -434,13 +450,16 @@ class KCoherenceLevels(Levels):
                                      int(vmodels[0].anchor), config.grid)
         # blockwise below the coarsest level: every voxel reads only its neighbourhood and the
         # coarsest level's histograms, frozen (one batch, no index histogram, no reordering)
-        local = self.blockwise and level < self.levels - 1
+        local = self.blockwise and level < self.lowest_whole
         grid_voxels = float(np.prod(self.frame.extent)) if local else float(np.prod(shape))
         if local:
-            finer = range(self.levels - 2, level - 1, -1)
+            finer = range(self.lowest_whole - 1, level - 1, -1)
             pos_hist = np.concatenate([self.frozen.positions_at(vi, [self._exemplar_shape(v, lev) for lev in finer])
                                        for vi, v in enumerate(views)])
-            values = values._replace(hist=self.frozen.values.copy(), unit=grid_voxels / config.value_bins)
+            values = values._replace(hist=held_values(pos_hist, hist_off, values.ex_bins, ex_off,
+                                                      [m.pixels for m in vmodels], config.value_bins) / (
+                                                          grid_voxels / config.value_bins),
+                                     unit=grid_voxels / config.value_bins)
         else:
             pos_hist = np.concatenate([position_histogram(src[vi], m.pixels) for vi, m in enumerate(vmodels)])
         frozen_positions, frozen_values = pos_hist.copy(), values.hist.copy()

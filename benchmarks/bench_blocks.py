@@ -1,0 +1,246 @@
+"""Volumes in blocks: equality with the volume made at once, the block rate, scaling over
+workers, a cut-off Zarr run resumed, and seams.
+
+The default sampler with ``blockwise=True`` (``npmrf3d synth --blockwise``, the sampler of
+``--out VOL.zarr``) on a 64 x 64 exemplar: a crop of the bundled grey ``gravel`` photograph
+(``--exemplar`` for another image), seed 0. Parts (each ``--parts`` name):
+
+* ``equal``: ``--size`` (default 128) at once and as blocks of ``--block`` (default 64), the
+  blocks made one after the other in this process at 1 and at 2 numba threads: equal or not,
+  and the seconds of each (the blocks' share over the whole is the cones' overlap).
+* ``scaling``: the same volume into Zarr on a local cluster of 1, then 2 workers: wall time,
+  the speed-up (the first block, which also makes the shared coarsest level, runs before the
+  cluster starts and is left out of the speed-up), peak resident memory of a worker.
+* ``resume``: the Zarr command run as a subprocess, interrupted (SIGINT) once a third of the
+  blocks are done, then run again: equal to the uninterrupted volume or not.
+* ``big``: ``--big`` (default 256) into Zarr with 2 workers: wall time, block rate, worker
+  peak memory, and the time 512^3 and 1024^3 would take at that rate (their cones counted by
+  the block plan).
+* ``seams``: slices of the ``equal`` volume that cross block borders (the planes through the
+  block corners) against slices inside blocks: the slice metrics of
+  :func:`npmrf3d.analysis.metrics` (histogram KL, autocorrelation error, sliced Wasserstein
+  of patches) of each set against the exemplar, and ``figures/blocks/seams.png``: a slice
+  through four block corners beside the exemplar.
+
+Prints a table and writes ``figures/blocks/blocks.json``.
+
+Usage: ``python benchmarks/bench_blocks.py [--parts equal,scaling,resume,big,seams] [--size 128]
+[--block 64] [--big 256] [--out figures/blocks]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import zarr
+from _common import hardware
+
+import npmrf3d
+from npmrf3d import data
+from npmrf3d._kernels._jit import use_threads
+from npmrf3d.analysis.metrics import autocorrelation_error, histogram_kl, sliced_wasserstein
+from npmrf3d.methods import METHODS
+from npmrf3d.methods.blocks import block_plan, synthesize_blocks, write_zarr
+from npmrf3d.plotting import save_figure
+
+PARTS = ("equal", "scaling", "resume", "big", "seams")
+METHOD = METHODS["npmrf"]
+
+
+def exemplar(path: str | None) -> np.ndarray:
+    image = npmrf3d.load_exemplar(path or data.path("gravel"))
+    return np.ascontiguousarray(image[:64, :64], dtype=np.float32)
+
+
+def views(image):
+    return {v: image for v in ("front", "right", "top")}
+
+
+def config(size: int):
+    return METHOD.make_config(size=size, blockwise=True, seed=0)
+
+
+def part_equal(image, size: int, block: int) -> dict:
+    cfg = config(size)
+    out = {}
+    use_threads(2)
+    t0 = time.perf_counter()
+    whole = METHOD.run(views(image), cfg, np.random.default_rng(cfg.seed)).volume
+    out["whole_seconds"] = time.perf_counter() - t0
+    for threads in (1, 2):
+        use_threads(threads)
+        with tempfile.TemporaryDirectory() as tmp:
+            t0 = time.perf_counter()
+            blocks = synthesize_blocks(METHOD, views(image), cfg, block=block, start=Path(tmp) / "start.npz")
+            out[f"blocks_seconds_{threads}_threads"] = time.perf_counter() - t0
+        out[f"equal_{threads}_threads"] = bool(np.array_equal(blocks, whole))
+    out["plan"] = block_plan(METHOD, views(image), cfg, block=block).describe()
+    out["us_per_voxel_whole_2_threads"] = 1e6 * out["whole_seconds"] / size ** 3
+    print(f"equal: {size}^3 at once {out['whole_seconds']:.1f} s (2 threads); blocks of {block}: "
+          f"{out['blocks_seconds_1_threads']:.1f} s (1 thread, equal {out['equal_1_threads']}), "
+          f"{out['blocks_seconds_2_threads']:.1f} s (2 threads, equal {out['equal_2_threads']})")
+    np.save(Path(tempfile.gettempdir()) / "npmrf3d_bench_blocks_whole.npy", whole)
+    return out
+
+
+def _zarr(image, size: int, block: int, workers: int, out: Path) -> dict:
+    cfg = config(size)
+    t0 = time.perf_counter()
+    summary = write_zarr(METHOD, views(image), cfg, out, block=block, record={}, workers=workers, overwrite=True)
+    summary["wall_seconds"] = time.perf_counter() - t0
+    return summary
+
+
+def part_scaling(image, size: int, block: int, out: Path) -> dict:
+    rows = {}
+    for workers in (1, 2):
+        path = out / f"scaling_{workers}.zarr"
+        first = _zarr(image, size, block, workers, path)  # makes the shared start and block 0 first
+        # the cluster's part alone: the blocks after the first, with the start already there
+        for index in sorted(p.name for p in (path / ".npmrf3d-done").iterdir())[1:]:
+            (path / ".npmrf3d-done" / index).unlink()
+        t0 = time.perf_counter()
+        again = write_zarr(METHOD, views(image), config(size), path, block=block, record={}, workers=workers)
+        rows[workers] = {"cluster_seconds": time.perf_counter() - t0, "blocks": again["written"],
+                         "worker_peak_bytes": again["worker_peak_bytes"], "first_run_seconds": first["wall_seconds"]}
+    speedup = rows[1]["cluster_seconds"] / rows[2]["cluster_seconds"]
+    print(f"scaling: {rows[1]['blocks']} blocks of {block} ({size}^3): 1 worker {rows[1]['cluster_seconds']:.1f} s, "
+          f"2 workers {rows[2]['cluster_seconds']:.1f} s, speed-up {speedup:.2f}; worker peak "
+          f"{rows[2]['worker_peak_bytes'] / 2**30:.2f} GiB")
+    return {"workers": rows, "speedup": speedup}
+
+
+def _command(size: int, block: int, out: Path, exemplar_path: str | None) -> list[str]:
+    return [sys.executable, "-m", "npmrf3d", "synth", exemplar_path or f"bundled:{data.DEFAULT_EXEMPLAR}",
+            "--size", str(size), "--block", str(block), "--workers", "2", "--seed", "0", "--quiet", "--out", str(out)]
+
+
+def part_resume(size: int, block: int, out: Path, exemplar_path: str | None) -> dict:
+    whole, cut = out / "resume_whole.zarr", out / "resume_cut.zarr"
+    for path in (whole, cut):
+        subprocess.run(["rm", "-rf", str(path)], check=True)
+    subprocess.run(_command(size, block, whole, exemplar_path), check=True)
+    blocks = len(list((whole / ".npmrf3d-done").iterdir()))
+    process = subprocess.Popen(_command(size, block, cut, exemplar_path))
+    done = cut / ".npmrf3d-done"
+    while process.poll() is None and (not done.is_dir() or len(list(done.iterdir())) < max(1, blocks // 3)):
+        time.sleep(0.2)
+    process.send_signal(signal.SIGINT)
+    code = process.wait()
+    kept = len(list(done.iterdir()))
+    subprocess.run(_command(size, block, cut, exemplar_path), check=True)
+    equal = bool(np.array_equal(zarr.open_array(whole, mode="r")[...], zarr.open_array(cut, mode="r")[...]))
+    print(f"resume: {size}^3 in blocks of {block} interrupted (exit {code}) with {kept} of {blocks} blocks "
+          f"done, run again: equal to the uninterrupted volume {equal}")
+    return {"blocks": blocks, "kept": kept, "exit": code, "equal": equal}
+
+
+def part_big(image, size: int, block: int, out: Path) -> dict:
+    summary = _zarr(image, size, block, 2, out / "big.zarr")
+    per_block = summary["wall_seconds"] / summary["blocks"]
+    rate = size ** 3 / summary["wall_seconds"]
+    row = {"size": size, "block": block, "wall_seconds": summary["wall_seconds"], "voxels_per_second": rate,
+           "worker_peak_bytes": summary["worker_peak_bytes"], "plan": summary["plan"]}
+    for target in (512, 1024):
+        plan = block_plan(METHOD, views(image), config(target), block=block)
+        ours = block_plan(METHOD, views(image), config(size), block=block)
+        # time scales with the cones' voxels: the target's per volume voxel against ours
+        row[f"estimated_seconds_{target}"] = (summary["wall_seconds"] * (target / size) ** 3
+                                              * plan.overhead / ours.overhead)
+    print(f"big: {size}^3 in blocks of {block}, 2 workers: {summary['wall_seconds']:.0f} s "
+          f"({1e6 / rate:.1f} us per voxel, {per_block:.1f} s per block), worker peak "
+          f"{summary['worker_peak_bytes'] / 2**30:.2f} GiB; at this rate 512^3 takes about "
+          f"{row['estimated_seconds_512'] / 60:.0f} min and 1024^3 about {row['estimated_seconds_1024'] / 3600:.1f} h")
+    return row
+
+
+def slice_scores(one: np.ndarray, image: np.ndarray) -> dict:
+    """Histogram KL, autocorrelation error and sliced Wasserstein distance of patches of one
+    slice ``(N, N, C)`` against the exemplar (a one-slice volume seen from the view whose
+    slices it is)."""
+    thin = one[None]
+    return {"hist_kl": histogram_kl(image, thin), "autocorrelation": autocorrelation_error(image, thin, "right"),
+            "sliced_wasserstein": sliced_wasserstein(image, thin, "right")}
+
+
+def part_seams(image, block: int, out: Path) -> dict:
+    whole = np.load(Path(tempfile.gettempdir()) / "npmrf3d_bench_blocks_whole.npy")
+    n = whole.shape[0]
+    borders = [i for i in range(block, n, block)]
+    inside = [i + block // 2 for i in range(0, n, block)]
+    rows = {}
+    for name, planes in (("across block borders", borders), ("inside blocks", inside)):
+        slices = [whole[i] for i in planes] + [whole[:, i] for i in planes] + [whole[:, :, i] for i in planes]
+        scores = [slice_scores(one, image) for one in slices]
+        rows[name] = {k: (float(np.mean([s[k] for s in scores])), float(np.std([s[k] for s in scores])))
+                      for k in scores[0]}
+    print("seams (mean +- sd over the slices): " + "; ".join(
+        f"{name}: " + ", ".join(f"{k} {m:.4f} +- {sd:.4f}" for k, (m, sd) in r.items()) for name, r in rows.items()))
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(12, 4.3))
+    lo, hi = float(image.min()), float(image.max())
+    axes[0].imshow(image[..., 0], cmap="gray", vmin=lo, vmax=hi)
+    axes[0].set_title("exemplar 64 x 64")
+    axes[1].imshow(whole[block, :, :, 0], cmap="gray", vmin=lo, vmax=hi)
+    axes[1].set_title(f"slice x1 = {block}: a block border")
+    axes[2].imshow(whole[:, :, block, 0], cmap="gray", vmin=lo, vmax=hi)
+    axes[2].set_title(f"slice x3 = {block}: a block border")
+    for ax in axes[1:]:
+        for b in borders:
+            ax.axhline(b - 0.5, color="tab:red", lw=0.6, alpha=0.6)
+            ax.axvline(b - 0.5, color="tab:red", lw=0.6, alpha=0.6)
+    for ax in axes:
+        ax.set_xticks([])
+        ax.set_yticks([])
+    fig.suptitle(f"{n}^3 made as blocks of {block} (red: block borders; the volume equals the one made at once)")
+    save_figure(fig, out / "seams.png")
+    return rows
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--parts", default=",".join(PARTS))
+    parser.add_argument("--size", type=int, default=128)
+    parser.add_argument("--block", type=int, default=64)
+    parser.add_argument("--big", type=int, default=256)
+    parser.add_argument("--big-block", type=int, default=128)
+    parser.add_argument("--exemplar", default=None)
+    parser.add_argument("--out", default="figures/blocks")
+    args = parser.parse_args(argv)
+    parts = [p for p in args.parts.split(",") if p]
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    image = exemplar(args.exemplar)
+    record = {"hardware": hardware(), "size": args.size, "block": args.block}
+    results_path = out / "blocks.json"
+    if results_path.is_file():
+        record = {**json.loads(results_path.read_text()), **record}
+    work = Path(os.environ.get("NPMRF3D_BENCH_WORK", tempfile.gettempdir())) / "npmrf3d_bench_blocks"
+    work.mkdir(parents=True, exist_ok=True)
+    if "equal" in parts:
+        record["equal"] = part_equal(image, args.size, args.block)
+    if "scaling" in parts:
+        record["scaling"] = part_scaling(image, args.size, args.block, work)
+    if "resume" in parts:
+        record["resume"] = part_resume(args.size, args.block, work, args.exemplar)
+    if "big" in parts:
+        record["big"] = part_big(image, args.big, args.big_block, work)
+    if "seams" in parts:
+        record["seams"] = part_seams(image, args.block, out)
+    results_path.write_text(json.dumps(record, indent=2, default=str) + "\n")
+    print(f"wrote {results_path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
