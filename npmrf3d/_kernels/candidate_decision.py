@@ -63,6 +63,36 @@ def view_likelihoods(colour, ex_flat, ug, uv, uw, u, vsum, h2c, outlier, lik):
 
 
 @jit
+def kernel_table(ex_flat, reps, h2c, out):
+    """The Parzen kernel of :func:`view_likelihoods` between every two of the distinct colours
+    ``ex_flat[reps]`` into ``out`` (n, n): ``out[a, b] = exp(-||e_a - e_b||^2 / h2c)``, computed
+    as :func:`view_likelihoods` computes it (float32 differences, squares summed over the
+    channels in float64), so a look-up gives the same bits as the exponential."""
+    for a in range(reps.shape[0]):
+        colour = ex_flat[reps[a]]
+        for b in range(reps.shape[0]):
+            dd = 0.0
+            for ch in range(ex_flat.shape[1]):
+                diff = colour[ch] - ex_flat[reps[b], ch]
+                dd += diff * diff
+            out[a, b] = np.exp(-dd / h2c)
+
+
+@jit
+def view_likelihoods_table(row, uid, uv, uw, u, vsum, outlier, lik):
+    """:func:`view_likelihoods` with the kernels looked up: ``row`` the candidate colour's row of
+    :func:`kernel_table`, ``uid[q]`` the colour index of merged vote ``q``. Same sums in the same
+    order, so the same bits."""
+    n_views = lik.shape[0]
+    for v in range(n_views):
+        lik[v] = 0.0
+    for q in range(u):
+        lik[uv[q]] += uw[q] * row[uid[q]]
+    for v in range(n_views):
+        lik[v] = (1.0 - outlier) * lik[v] / vsum[v] + outlier if vsum[v] > 0.0 else outlier
+
+
+@jit
 def objective(lik, likelihood, prior):
     """The score of the rules with an objective from the views' estimates ``lik``: ML_H2b's
     ``sum_v log L_v + prior``, or ML_H2a's ``min_v L_v * exp(prior)`` (``prior`` 0: none)."""

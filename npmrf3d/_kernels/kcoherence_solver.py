@@ -95,6 +95,10 @@ class SolverRule(NamedTuple):
     sampler : int, the annealed draw's rule, ``HEAT_BATH`` or ``METROPOLIS``
     origin, extent : (3,) int64 each, where the volume lies in the level's whole grid (the
         draws hash :func:`npmrf3d._kernels.kcoherence.global_flat`; ``extent`` 0: the whole grid)
+    colour_ids, kernel : (G,) int64 and (n, n) float64, optional: every packed texel's index
+        among the distinct colours and the NP-MRF rule's kernel between them
+        (:func:`npmrf3d._kernels.candidate_decision.kernel_table` with ``h2c``), looked up instead
+        of computed (same bits); empty: computed
     """
 
     medoid: int
@@ -107,6 +111,8 @@ class SolverRule(NamedTuple):
     sampler: int = HEAT_BATH
     origin: np.ndarray = np.zeros(3, dtype=np.int64)
     extent: np.ndarray = np.zeros(3, dtype=np.int64)
+    colour_ids: np.ndarray = np.zeros(0, dtype=np.int64)
+    kernel: np.ndarray = np.zeros((0, 0), dtype=np.float64)
 
 
 class VoteTrust(NamedTuple):
@@ -319,6 +325,8 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
     medoid, balance, likelihood, h2c = rule.medoid, rule.balance, rule.likelihood, rule.h2c
     outlier, temperature, salt, sampler = rule.outlier, rule.temperature, rule.salt, rule.sampler
     hist_args = (val_hist, val_target, val_unit, val_prior, val_lo, val_scale)
+    colour_ids, kernel = rule.colour_ids, rule.kernel
+    tabled = kernel.shape[0] > 0
     n_views = assign.shape[0]
     n0, n1, n2, channels = volume.shape
     n_vox = grid_voxels(volume.shape, rule.extent)
@@ -345,6 +353,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
             uw = np.empty(cap, dtype=np.float64)
             umax = np.empty(cap, dtype=np.float64)
             uarg = np.empty(cap, dtype=np.int64)
+            uid = np.empty(cap, dtype=np.int64)
             tops = np.empty(max(medoid, 1), dtype=np.int64)
             lik = np.empty(n_views, dtype=np.float64)
             scores = np.empty(max(medoid, 1), dtype=np.float64)
@@ -397,10 +406,17 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                             vsum[v] = 0.0
                         for q in range(count):
                             vsum[vv[q]] += vw[q]
+                        if tabled:
+                            for q in range(u):
+                                uid[q] = colour_ids[ug[q]]
                     for a in range(n_try):
                         ga = ug[tops[a]]
                         if likelihood:
-                            _decide.view_likelihoods(ex_flat[ga], ex_flat, ug, uv, uw, u, vsum, h2c, outlier, lik)
+                            if tabled:
+                                _decide.view_likelihoods_table(kernel[colour_ids[ga]], uid, uv, uw, u, vsum, outlier,
+                                                               lik)
+                            else:
+                                _decide.view_likelihoods(ex_flat[ga], ex_flat, ug, uv, uw, u, vsum, h2c, outlier, lik)
                             prior = 0.0
                             if val_prior > 0.0:
                                 prior = value_prior(ex_bins[ga], val_hist, val_target, val_unit, val_prior)
