@@ -295,6 +295,74 @@ def trusted_distance(vec, weights, exemplar, e):
     return d2
 
 
+@jit
+def distinct_blocks(cand, count, kk, keep):
+    """The candidates ``cand[:count]`` of :func:`candidates` (and :func:`random_centres`) into
+    ``keep`` without the neighbours' blocks that repeat an earlier block: a block is a coherent
+    shift and its k-coherence set (``kk`` entries), so one whose shift equals an earlier block's
+    repeats it entirely. A repeated candidate has the cost of its first occurrence, so an
+    argmin that keeps the first minimum is the same over ``keep``. Returns the number kept."""
+    blocks = min(9, count // kk)
+    n = 0
+    for bi in range(blocks):
+        centre = cand[bi * kk]
+        repeat = False
+        for bj in range(bi):
+            if cand[bj * kk] == centre:
+                repeat = True
+                break
+        if repeat:
+            continue
+        for t in range(bi * kk, (bi + 1) * kk):
+            keep[n] = cand[t]
+            n += 1
+    for t in range(blocks * kk, count):
+        keep[n] = cand[t]
+        n += 1
+    return n
+
+
+@jit
+def pca_distances(y, proj, keep, count, out):
+    """Squared distances ``sum_j (y[j] - proj[e, j])**2`` (summed in ``j`` order) of ``y`` to the
+    projections of the centres ``keep[:count]`` into ``out``; four centres at a time, each its
+    own sum, so the same bits as one at a time with four times the independent work."""
+    dims = y.shape[0]
+    i = 0
+    while i + 4 <= count:
+        e0 = keep[i]
+        e1 = keep[i + 1]
+        e2 = keep[i + 2]
+        e3 = keep[i + 3]
+        s0 = 0.0
+        s1 = 0.0
+        s2 = 0.0
+        s3 = 0.0
+        for j in range(dims):
+            yj = y[j]
+            d0 = yj - proj[e0, j]
+            d1 = yj - proj[e1, j]
+            d2 = yj - proj[e2, j]
+            d3 = yj - proj[e3, j]
+            s0 += d0 * d0
+            s1 += d1 * d1
+            s2 += d2 * d2
+            s3 += d3 * d3
+        out[i] = s0
+        out[i + 1] = s1
+        out[i + 2] = s2
+        out[i + 3] = s3
+        i += 4
+    while i < count:
+        e = keep[i]
+        d2 = 0.0
+        for j in range(dims):
+            diff = y[j] - proj[e, j]
+            d2 += diff * diff
+        out[i] = d2
+        i += 1
+
+
 @jit_parallel
 def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fresh_v, omega_v, energy, trust):
     """Search phase of one view (paper section 4.3 with eq. 5-6).
@@ -329,7 +397,8 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
     channels = shape[3]
     d = window * window * channels
     dims = basis.shape[1]
-    cap = 9 * (1 + exemplar.kcoh.shape[1]) + n_random
+    kk = 1 + exemplar.kcoh.shape[1]
+    cap = 9 * kk + n_random
     gr = nr // grid
     gc = nc // grid
     for b in range(batches):
@@ -339,6 +408,8 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
             vec = np.empty(d, dtype=np.float64)
             y = np.empty(dims, dtype=np.float64)
             cand = np.empty(cap, dtype=np.int64)
+            keep = np.empty(cap, dtype=np.int64)
+            dists = np.empty(cap, dtype=np.float64)
             weights = np.empty(window * window, dtype=np.float32)
             acc = 0.0
             for ar in range(gr):
@@ -356,18 +427,18 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
                     if n_random > 0:
                         count = random_centres(salt, global_flat(p0, p1, p2, shape, rule.origin, rule.extent),
                                                n_random, exemplar, cand, count)
+                    count = distinct_blocks(cand, count, kk, keep)
+                    if weighted:
+                        for t2 in range(count):
+                            dists[t2] = trusted_distance(vec, weights, exemplar, keep[t2])
+                    else:
+                        pca_distances(y, proj, keep, count, dists)
                     best = -1
                     best_cost = np.inf
                     best_d2 = 0.0
                     for t2 in range(count):
-                        e = cand[t2]
-                        d2 = 0.0
-                        if weighted:
-                            d2 = trusted_distance(vec, weights, exemplar, e)
-                        else:
-                            for j in range(dims):
-                                diff = y[j] - proj[e, j]
-                                d2 += diff * diff
+                        e = keep[t2]
+                        d2 = dists[t2]
                         excess = index_hist[e] / phi - 1.0
                         cost = d2 * (1.0 + index_weight * excess) if excess > 0.0 else d2
                         if cost < best_cost:
