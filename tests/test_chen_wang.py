@@ -405,6 +405,15 @@ def test_kernel_table_matches_twin(rng, channels, levels):
         _decide.view_likelihoods(texels[ga], texels, ug, uv, uw, u, vsum, 0.05, 0.01, want)
         _decide.view_likelihoods_table(table[ids[ga]], ids[ug], uv, uw, u, vsum, 0.01, got)
         np.testing.assert_array_equal(got, want)
+    # every candidate at once (votes sorted by view, and not), the same bits again
+    rows = ids[rng.permutation(len(texels))[:7]].astype(np.int64)
+    for order in (np.arange(u), rng.permutation(u)):
+        many = np.empty((7, n_views))
+        _decide.candidate_likelihoods(table, rows, 7, ids[ug][order], uv[order], uw[order], u, vsum, 0.01, many)
+        for a in range(7):
+            one = np.empty(n_views)
+            _decide.view_likelihoods_table(table[rows[a]], ids[ug][order], uv[order], uw[order], u, vsum, 0.01, one)
+            np.testing.assert_array_equal(many[a], one)
 
 
 @pytest.mark.parametrize("views", [("front", "top"), VIEWS3])
