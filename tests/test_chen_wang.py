@@ -725,3 +725,15 @@ def test_ml_h1b_averages_the_views_picks_into_new_colours():
                                   rng=1).volume
         new = sum(tuple(c) not in colours for c in vol.reshape(-1, 3))
         assert (new == 0) == only_exemplar
+
+
+@pytest.mark.kernels
+def test_division_free_index_helpers_match_python(rng):
+    """The search's quotient without an integer division and its toroidal wrap, against Python's
+    divmod and %."""
+    for b in (1, 2, 3, 7, 61, 64, 1000, 4093):
+        for a in np.concatenate([np.arange(0, 3 * b + 2), rng.integers(0, 2**31, size=500)]):
+            assert _k.split(int(a), b, 1.0 / b) == divmod(int(a), b)
+    for n in (1, 5, 64):
+        for i in range(-2 * n - 1, 2 * n + 2):
+            assert _k.wrap(i, n) == i % n

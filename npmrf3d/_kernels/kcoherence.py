@@ -127,6 +127,29 @@ def mix(x):
 
 
 @jit
+def wrap(i, n):
+    """``i % n`` (toroidal index) with the division only when ``i`` is outside ``0..n - 1``."""
+    if i < 0 or i >= n:
+        i %= n
+    return i
+
+
+@jit
+def split(a, b, inv_b):
+    """``(a // b, a % b)`` of ``0 <= a < 2**50`` and ``b >= 1`` (``inv_b = 1 / b``) by a
+    floating-point quotient corrected to the exact integer one: no integer division."""
+    q = np.int64(np.float64(a) * inv_b)
+    r = a - q * b
+    while r < 0:
+        q -= 1
+        r += b
+    while r >= b:
+        q += 1
+        r -= b
+    return q, r
+
+
+@jit
 def gather(volume, ra, ca, n, u_r, u_c, window, anchor, trust, vec, weights):
     """The neighbourhood of the site at plane position ``(u_r, u_c)`` of slice ``n`` (view axes
     ``ra``, ``ca``; toroidal volume) into ``vec`` (``window**2 * C``, in (row, column, channel)
@@ -137,9 +160,9 @@ def gather(volume, ra, ca, n, u_r, u_c, window, anchor, trust, vec, weights):
     channels = volume.shape[3]
     m = 0
     for wr in range(window):
-        x_r = (u_r - anchor + wr) % nr
+        x_r = wrap(u_r - anchor + wr, nr)
         for wc in range(window):
-            x_c = (u_c - anchor + wc) % nc
+            x_c = wrap(u_c - anchor + wc, nc)
             q0 = n if na == 0 else (x_r if ra == 0 else x_c)
             q1 = n if na == 1 else (x_r if ra == 1 else x_c)
             q2 = n if na == 2 else (x_r if ra == 2 else x_c)
@@ -217,10 +240,13 @@ def random_centres(salt, site, n_random, exemplar, out, start):
     (``salt < 2**31``)."""
     nr = exemplar.hi_r - exemplar.lo_r + 1
     nc = exemplar.hi_c - exemplar.lo_c + 1
+    inv_cells = 1.0 / (nr * nc)
+    inv_nc = 1.0 / nc
     for t in range(n_random):
         h = mix(salt + site * n_random + t)
-        cell = h % (nr * nc)
-        out[start + t] = (exemplar.lo_r + cell // nc) * exemplar.width + exemplar.lo_c + cell % nc
+        cell = split(h, nr * nc, inv_cells)[1]  # h % (nr * nc)
+        row, col = split(cell, nc, inv_nc)
+        out[start + t] = (exemplar.lo_r + row) * exemplar.width + exemplar.lo_c + col
     return start + n_random
 
 
@@ -239,26 +265,27 @@ def candidates(src_v, ra, ca, pos0, pos1, pos2, exemplar, out):
     ewidth = exemplar.width
     lo_r, hi_r, lo_c, hi_c = exemplar.lo_r, exemplar.hi_r, exemplar.lo_c, exemplar.hi_c
     k = kcoh.shape[1]
+    inv_width = 1.0 / ewidth
     for dr in range(-1, 2):
         for dc in range(-1, 2):
             q0 = pos0
             q1 = pos1
             q2 = pos2
             if ra == 0:
-                q0 = (pos0 + dr) % n0
+                q0 = wrap(pos0 + dr, n0)
             elif ra == 1:
-                q1 = (pos1 + dr) % n1
+                q1 = wrap(pos1 + dr, n1)
             else:
-                q2 = (pos2 + dr) % n2
+                q2 = wrap(pos2 + dr, n2)
             if ca == 0:
-                q0 = (pos0 + dc) % n0
+                q0 = wrap(pos0 + dc, n0)
             elif ca == 1:
-                q1 = (pos1 + dc) % n1
+                q1 = wrap(pos1 + dc, n1)
             else:
-                q2 = (pos2 + dc) % n2
-            s = src_v[q0, q1, q2]
-            sr = s // ewidth - dr
-            sc = s % ewidth - dc
+                q2 = wrap(pos2 + dc, n2)
+            s_r, s_c = split(np.int64(src_v[q0, q1, q2]), ewidth, inv_width)
+            sr = s_r - dr
+            sc = s_c - dc
             sr = min(max(sr, lo_r), hi_r)
             sc = min(max(sc, lo_c), hi_c)
             centre = sr * ewidth + sc
