@@ -275,6 +275,24 @@ def nearest_vote(v, g, ug, uv, u, ex_flat):
 
 
 @jit
+def nearest_in(lo, hi, g, ug, ex_flat):
+    """:func:`nearest_vote` over the merged votes ``lo .. hi - 1`` (one view's stretch when the
+    votes are sorted by view): the one whose texel is nearest in colour to texel ``g`` (first
+    on ties), -1 for an empty stretch."""
+    near = -1
+    near_d = np.inf
+    for q in range(lo, hi):
+        dd = 0.0
+        for ch in range(ex_flat.shape[1]):
+            diff = ex_flat[ug[q], ch] - ex_flat[g, ch]
+            dd += diff * diff
+        if dd < near_d:
+            near_d = dd
+            near = q
+    return near
+
+
+@jit
 def write_colour(volume, p0, p1, p2, colour, hist_args, old_bins_t, new_bins_t):
     """Give voxel ``(p0, p1, p2)`` the colour ``colour`` (C,) float32 (ML_H1b's mean, no texel);
     when it changes, its old and new value bins go to ``old_bins_t`` and ``new_bins_t`` (C,) for

@@ -131,13 +131,14 @@ NO_TRUST = VoteTrust(np.zeros((0, 0, 0), dtype=np.float32), np.zeros((0, 0, 0, 0
 
 
 @jit
-def _texel_factors(views, hist, n_views, div, mul, vdiv):
+def _texel_factors(views, hist, n_views, div, mul, vdiv, priors):
     """Per packed position-histogram entry, the factors :func:`_votes` weighs a vote for that
     texel by while the histograms are frozen (one batch): ``div`` the position divisor
     ``1 + position_weight * excess`` (1.0 when not over-used), ``mul`` the boost
     ``1 - position_boost * excess`` (1.0 when over-used or without boost); per packed texel
     ``vdiv`` the value-histogram divisor ``1 + val_weight * over`` (1.0 without). A factor of
-    1.0 leaves a weight exactly as it is, so the weights keep their bits."""
+    1.0 leaves a weight exactly as it is, so the weights keep their bits. With ``value_prior >
+    0``, ``priors`` gets every packed texel's histogram prior (:func:`value_prior`)."""
     pos_hist, hist_off, theta = hist.positions, hist.position_offsets, hist.theta
     position_weight, position_boost = hist.position_weight, hist.position_boost
     ex_bins, val_hist, val_target, val_weight = hist.texel_bins, hist.values, hist.value_target, hist.value_weight
@@ -161,6 +162,9 @@ def _texel_factors(views, hist, n_views, div, mul, vdiv):
                 if gap > 0.0:
                     over += gap
             vdiv[g] = 1.0 + val_weight * over
+    if hist.value_prior > 0.0:
+        for g in range(priors.shape[0]):
+            priors[g] = value_prior(ex_bins[g], val_hist, val_target, hist.value_unit, hist.value_prior)
 
 
 @jit
@@ -389,6 +393,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
     div = np.empty(pos_hist.shape[0], dtype=np.float64)
     mul = np.empty(pos_hist.shape[0], dtype=np.float64)
     vdiv = np.empty(ex_flat.shape[0], dtype=np.float64)
+    priors = np.zeros(ex_flat.shape[0], dtype=np.float64)
     for b in range(batch_bounds.shape[0] - 1):
         start = batch_bounds[b]
         m = batch_bounds[b + 1] - start
@@ -397,20 +402,22 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
         old_bins = np.zeros((m, channels), dtype=np.int64)
         new_bins = np.zeros((m, channels), dtype=np.int64)
         n_chunks = (m + chunk - 1) // chunk
-        _texel_factors(views, hist, n_views, div, mul, vdiv)
+        _texel_factors(views, hist, n_views, div, mul, vdiv, priors)
         for c in prange(n_chunks):
             vg = np.empty(cap, dtype=np.int64)
             vv = np.empty(cap, dtype=np.int64)
             vw = np.empty(cap, dtype=np.float64)
             mean = np.empty(channels, dtype=np.float64)
             vsum = np.empty(n_views, dtype=np.float64)
-            slot = np.full(ex_flat.shape[0] * n_views, -1, dtype=np.int64)
+            slot = np.full(ex_flat.shape[0] * n_views, -1, dtype=np.int32)
             ug = np.empty(cap, dtype=np.int64)
             uv = np.empty(cap, dtype=np.int64)
             uw = np.empty(cap, dtype=np.float64)
             umax = np.empty(cap, dtype=np.float64)
             uarg = np.empty(cap, dtype=np.int64)
             uid = np.empty(cap, dtype=np.int64)
+            vlo = np.empty(n_views, dtype=np.int64)
+            vhi = np.empty(n_views, dtype=np.int64)
             rows = np.empty(max(medoid, 1), dtype=np.int64)
             liks = np.empty((max(medoid, 1), n_views), dtype=np.float64)
             tops = np.empty(max(medoid, 1), dtype=np.int64)
@@ -468,7 +475,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                                 _decide.view_likelihoods(ex_flat[ga], ex_flat, ug, uv, uw, u, vsum, h2c, outlier, lik)
                             prior = 0.0
                             if val_prior > 0.0:
-                                prior = value_prior(ex_bins[ga], val_hist, val_target, val_unit, val_prior)
+                                prior = priors[ga]
                             if likelihood >= ML_H1A:
                                 # per-view rules: each view's estimate, times the prior's factor
                                 for v in range(n_views):
@@ -488,7 +495,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                                 dd += diff * diff
                             e_sum += uw[q2] * np.sqrt(dd)
                         if val_prior > 0.0:
-                            e_sum *= np.exp(-value_prior(ex_bins[ga], val_hist, val_target, val_unit, val_prior))
+                            e_sum *= np.exp(-priors[ga])
                         if e_sum < best_e:
                             best_e = e_sum
                             best = uarg[tops[a]]
@@ -549,6 +556,17 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                             best_d = dd
                             best = uarg[q]
                 g = vg[best]
+                # each view's stretch of the merged votes (they come sorted by view)
+                by_view = True
+                for v in range(n_views):
+                    vlo[v] = u
+                    vhi[v] = 0
+                for q in range(u):
+                    if q > 0 and uv[q] < uv[q - 1]:
+                        by_view = False
+                    if q < vlo[uv[q]]:
+                        vlo[uv[q]] = q
+                    vhi[uv[q]] = q + 1
                 for ch in range(channels):
                     if volume[p0, p1, p2, ch] != ex_flat[g, ch]:
                         flags[t] = 1
@@ -563,7 +581,8 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                     if v == vv[best]:
                         new_src[t, v] = g - ex_off[v]
                         continue
-                    near = _decide.nearest_vote(v, g, ug, uv, u, ex_flat)
+                    near = _decide.nearest_vote(v, g, ug, uv, u, ex_flat) if not by_view else \
+                        _decide.nearest_in(vlo[v], vhi[v], g, ug, ex_flat)
                     if near >= 0:
                         new_src[t, v] = ug[near] - ex_off[v]
         # sequential, fixed order: histograms follow the new sources
