@@ -556,6 +556,22 @@ def naive_view_estimates(colour, votes, totals, n_views, h2c, outlier):
             for v in range(n_views)]
 
 
+def naive_kernel_table(texels, h2c):
+    """The Parzen kernel between every two distinct colours of ``texels`` (G, C) float32, as
+    :func:`naive_view_estimates` computes it, and every texel's index among the distinct colours
+    (sorted as ``numpy.unique`` sorts rows)."""
+    colours, ids = np.unique(texels, axis=0, return_inverse=True)
+    table = np.empty((len(colours), len(colours)))
+    for a, ca in enumerate(colours):
+        for b, cb in enumerate(colours):
+            dd = 0.0
+            for ch in range(len(ca)):
+                diff = np.float32(ca[ch]) - np.float32(cb[ch])
+                dd += float(diff * diff)
+            table[a, b] = np.exp(-dd / h2c)
+    return ids.reshape(-1), table
+
+
 def naive_prior(colour, values):
     """The histogram prior of a colour: ``prior * sum_c log((target + e) / (max(hist, 0) + e))``
     at its bins (0 without ``values`` or with a zero strength)."""

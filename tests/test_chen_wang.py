@@ -16,6 +16,7 @@ import textwrap
 import numpy as np
 import pytest
 
+from npmrf3d._kernels import candidate_decision as _decide
 from npmrf3d._kernels import kcoherence as _k
 from npmrf3d._kernels.candidate_decision import HEAT_BATH, METROPOLIS, ML_H1A, ML_H1B, ML_H2A, ML_H2B
 from npmrf3d._kernels import kcoherence_solver as _s
@@ -25,9 +26,11 @@ from npmrf3d.methods import chen_wang as CW
 from npmrf3d.methods.chen_wang import ChenWangConfig, chen_wang_synthesize
 from npmrf3d.methods.npmrf_coherent import _chen_wang_config, coherent_synthesize, make_coherent_config
 from npmrf3d.model import kcoherence as coh
-from npmrf3d.model.kcoherence_engine import CandidateDecision, KCoherenceLevels, ValueHistogram, pack_exemplars
+from npmrf3d.model.kcoherence_engine import (CandidateDecision, KCoherenceLevels, ValueHistogram, kernel_table,
+                                              pack_exemplars)
 from npmrf3d.model.neighbourhood import VIEW_AXES
 from tests.naive import (
+    naive_kernel_table,
     naive_candidates,
     naive_exemplar_patch,
     naive_k_coherence,
@@ -381,8 +384,52 @@ def test_solve_candidate_heuristics_and_metropolis_match_twin(rng, views, likeli
                               sampler)
 
 
+@pytest.mark.kernels
+@pytest.mark.parametrize("channels,levels", [(1, 9), (3, 4)])
+def test_kernel_table_matches_twin(rng, channels, levels):
+    """The NP-MRF kernel between the distinct colours, and each texel's colour, against the twin."""
+    texels = (rng.integers(0, levels, size=(60, channels)) / (levels - 1)).astype(np.float32)
+    ids, table = kernel_table(texels, 0.05)
+    want_ids, want_table = naive_kernel_table(texels, 0.05)
+    np.testing.assert_array_equal(ids, want_ids)
+    np.testing.assert_allclose(table, want_table, rtol=1e-13, atol=0)  # numpy's exp differs in the last bit
+    assert kernel_table(texels, 0.05, most=2)[1].shape == (0, 0)  # too many colours: none
+    # the look-up gives the very bits the solver's direct estimate gives
+    u, n_views = 40, 3
+    ug = rng.integers(0, len(texels), size=u).astype(np.int64)
+    uv = np.sort(rng.integers(0, n_views, size=u)).astype(np.int64)
+    uw = rng.random(u)
+    vsum = np.array([uw[uv == v].sum() for v in range(n_views)])
+    for ga in range(len(texels)):
+        want, got = np.empty(n_views), np.empty(n_views)
+        _decide.view_likelihoods(texels[ga], texels, ug, uv, uw, u, vsum, 0.05, 0.01, want)
+        _decide.view_likelihoods_table(table[ids[ga]], ids[ug], uv, uw, u, vsum, 0.01, got)
+        np.testing.assert_array_equal(got, want)
+    # every candidate at once (votes sorted by view, and not), the same bits again
+    rows = ids[rng.permutation(len(texels))[:7]].astype(np.int64)
+    for order in (np.arange(u), rng.permutation(u)):
+        many = np.empty((7, n_views))
+        _decide.candidate_likelihoods(table, rows, 7, ids[ug][order], uv[order], uw[order], u, vsum, 0.01, many)
+        for a in range(7):
+            one = np.empty(n_views)
+            _decide.view_likelihoods_table(table[rows[a]], ids[ug][order], uv[order], uw[order], u, vsum, 0.01, one)
+            np.testing.assert_array_equal(many[a], one)
+
+
+@pytest.mark.parametrize("views", [("front", "top"), VIEWS3])
+@pytest.mark.parametrize("likelihood,temperature,sampler", [
+    (ML_H2B, 0.0, HEAT_BATH), (ML_H2A, 0.0, HEAT_BATH), (ML_H1A, 0.0, HEAT_BATH), (ML_H1B, 0.0, HEAT_BATH),
+    (ML_H2B, 0.7, HEAT_BATH), (ML_H2B, 0.7, METROPOLIS)])
+@pytest.mark.kernels
+@pytest.mark.parametrize("grid,channels", [(1, 1), (2, 3)])
+def test_solve_with_kernel_table_matches_twin(rng, views, likelihood, temperature, sampler, grid, channels):
+    """The NP-MRF rules with the kernel looked up (:func:`kernel_table`), against the twin."""
+    _check_solve_against_twin(rng, views, 6, False, 2.0, likelihood, 4.0, temperature, grid, channels, sampler,
+                              tabled=True)
+
+
 def _check_solve_against_twin(rng, views, medoid, balance, boost, likelihood, value_weight, temperature, grid,
-                              channels, sampler=HEAT_BATH):
+                              channels, sampler=HEAT_BATH, tabled=False):
     window = 4
     exemplars, models, assign, omega, src, volume = _solve_case(rng, views, window, channels, grid,
                                                                 shared=len(views) != 2)
@@ -407,7 +454,10 @@ def _check_solve_against_twin(rng, views, medoid, balance, boost, likelihood, va
                        _packed([VIEW_AXES[v] for v in views], packed, ex_off, [10] * len(views), window,
                                coh.anchor(window), grid),
                        _histograms(got_hist, hist_off, theta, 3.0, boost, packed, vh, value_weight, values["prior"]),
-                       _s.NO_TRUST, _s.SolverRule(medoid, balance, likelihood, 0.05, 0.01, temperature, 12345, sampler),
+                       _s.NO_TRUST, _s.SolverRule(medoid, balance, likelihood, 0.05, 0.01, temperature, 12345, sampler,
+                                                  np.zeros(3, dtype=np.int64), np.zeros(3, dtype=np.int64),
+                                                  *(kernel_table(packed, 0.05) if tabled else
+                                                    (np.zeros(0, dtype=np.int64), np.zeros((0, 0))))),
                        order, bounds, 7)
     np.testing.assert_array_equal(got_vol, want_vol)
     np.testing.assert_allclose(vh.hist, np.array(values["hist"]), atol=1e-12)
@@ -675,3 +725,15 @@ def test_ml_h1b_averages_the_views_picks_into_new_colours():
                                   rng=1).volume
         new = sum(tuple(c) not in colours for c in vol.reshape(-1, 3))
         assert (new == 0) == only_exemplar
+
+
+@pytest.mark.kernels
+def test_division_free_index_helpers_match_python(rng):
+    """The search's quotient without an integer division and its toroidal wrap, against Python's
+    divmod and %."""
+    for b in (1, 2, 3, 7, 61, 64, 1000, 4093):
+        for a in np.concatenate([np.arange(0, 3 * b + 2), rng.integers(0, 2**31, size=500)]):
+            assert _k.split(int(a), b, 1.0 / b) == divmod(int(a), b)
+    for n in (1, 5, 64):
+        for i in range(-2 * n - 1, 2 * n + 2):
+            assert _k.wrap(i, n) == i % n

@@ -63,6 +63,85 @@ def view_likelihoods(colour, ex_flat, ug, uv, uw, u, vsum, h2c, outlier, lik):
 
 
 @jit
+def kernel_table(ex_flat, reps, h2c, out):
+    """The Parzen kernel of :func:`view_likelihoods` between every two of the distinct colours
+    ``ex_flat[reps]`` into ``out`` (n, n): ``out[a, b] = exp(-||e_a - e_b||^2 / h2c)``, computed
+    as :func:`view_likelihoods` computes it (float32 differences, squares summed over the
+    channels in float64), so a look-up gives the same bits as the exponential."""
+    for a in range(reps.shape[0]):
+        colour = ex_flat[reps[a]]
+        for b in range(reps.shape[0]):
+            dd = 0.0
+            for ch in range(ex_flat.shape[1]):
+                diff = colour[ch] - ex_flat[reps[b], ch]
+                dd += diff * diff
+            out[a, b] = np.exp(-dd / h2c)
+
+
+@jit
+def view_likelihoods_table(row, uid, uv, uw, u, vsum, outlier, lik):
+    """:func:`view_likelihoods` with the kernels looked up: ``row`` the candidate colour's row of
+    :func:`kernel_table`, ``uid[q]`` the colour index of merged vote ``q``. Same sums in the same
+    order, so the same bits."""
+    n_views = lik.shape[0]
+    for v in range(n_views):
+        lik[v] = 0.0
+    for q in range(u):
+        lik[uv[q]] += uw[q] * row[uid[q]]
+    for v in range(n_views):
+        lik[v] = (1.0 - outlier) * lik[v] / vsum[v] + outlier if vsum[v] > 0.0 else outlier
+
+
+@jit
+def candidate_likelihoods(kernel, rows, n_try, uid, uv, uw, u, vsum, outlier, out):
+    """:func:`view_likelihoods_table` of ``n_try`` candidates at once: candidate ``a``'s estimates
+    (its kernel row ``kernel[rows[a]]``) into ``out[a]`` (n_try, V). The merged votes come
+    sorted by view (the votes are enumerated view by view and merged in order of first
+    appearance), so each view's sum runs over one stretch of them; four candidates go side by
+    side, each with its own sums in the same order, so the same bits. Votes not sorted by view:
+    one candidate at a time."""
+    n_views = out.shape[1]
+    for q in range(1, u):
+        if uv[q] < uv[q - 1]:
+            for a in range(n_try):
+                view_likelihoods_table(kernel[rows[a]], uid, uv, uw, u, vsum, outlier, out[a])
+            return
+    for a in range(0, n_try, 4):
+        k0 = kernel[rows[a]]
+        k1 = kernel[rows[min(a + 1, n_try - 1)]]
+        k2 = kernel[rows[min(a + 2, n_try - 1)]]
+        k3 = kernel[rows[min(a + 3, n_try - 1)]]
+        q = 0
+        for v in range(n_views):
+            s0 = 0.0
+            s1 = 0.0
+            s2 = 0.0
+            s3 = 0.0
+            while q < u and uv[q] == v:
+                w = uw[q]
+                i = uid[q]
+                s0 += w * k0[i]
+                s1 += w * k1[i]
+                s2 += w * k2[i]
+                s3 += w * k3[i]
+                q += 1
+            if vsum[v] > 0.0:
+                s0 = (1.0 - outlier) * s0 / vsum[v] + outlier
+                s1 = (1.0 - outlier) * s1 / vsum[v] + outlier
+                s2 = (1.0 - outlier) * s2 / vsum[v] + outlier
+                s3 = (1.0 - outlier) * s3 / vsum[v] + outlier
+            else:
+                s0 = s1 = s2 = s3 = outlier
+            out[a, v] = s0
+            if a + 1 < n_try:
+                out[a + 1, v] = s1
+            if a + 2 < n_try:
+                out[a + 2, v] = s2
+            if a + 3 < n_try:
+                out[a + 3, v] = s3
+
+
+@jit
 def objective(lik, likelihood, prior):
     """The score of the rules with an objective from the views' estimates ``lik``: ML_H2b's
     ``sum_v log L_v + prior``, or ML_H2a's ``min_v L_v * exp(prior)`` (``prior`` 0: none)."""
@@ -185,6 +264,24 @@ def nearest_vote(v, g, ug, uv, u, ex_flat):
     for q in range(u):
         if uv[q] != v:
             continue
+        dd = 0.0
+        for ch in range(ex_flat.shape[1]):
+            diff = ex_flat[ug[q], ch] - ex_flat[g, ch]
+            dd += diff * diff
+        if dd < near_d:
+            near_d = dd
+            near = q
+    return near
+
+
+@jit
+def nearest_in(lo, hi, g, ug, ex_flat):
+    """:func:`nearest_vote` over the merged votes ``lo .. hi - 1`` (one view's stretch when the
+    votes are sorted by view): the one whose texel is nearest in colour to texel ``g`` (first
+    on ties), -1 for an empty stretch."""
+    near = -1
+    near_d = np.inf
+    for q in range(lo, hi):
         dd = 0.0
         for ch in range(ex_flat.shape[1]):
             diff = ex_flat[ug[q], ch] - ex_flat[g, ch]

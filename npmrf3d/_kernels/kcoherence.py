@@ -127,6 +127,29 @@ def mix(x):
 
 
 @jit
+def wrap(i, n):
+    """``i % n`` (toroidal index) with the division only when ``i`` is outside ``0..n - 1``."""
+    if i < 0 or i >= n:
+        i %= n
+    return i
+
+
+@jit
+def split(a, b, inv_b):
+    """``(a // b, a % b)`` of ``0 <= a < 2**50`` and ``b >= 1`` (``inv_b = 1 / b``) by a
+    floating-point quotient corrected to the exact integer one: no integer division."""
+    q = np.int64(np.float64(a) * inv_b)
+    r = a - q * b
+    while r < 0:
+        q -= 1
+        r += b
+    while r >= b:
+        q += 1
+        r -= b
+    return q, r
+
+
+@jit
 def gather(volume, ra, ca, n, u_r, u_c, window, anchor, trust, vec, weights):
     """The neighbourhood of the site at plane position ``(u_r, u_c)`` of slice ``n`` (view axes
     ``ra``, ``ca``; toroidal volume) into ``vec`` (``window**2 * C``, in (row, column, channel)
@@ -137,9 +160,9 @@ def gather(volume, ra, ca, n, u_r, u_c, window, anchor, trust, vec, weights):
     channels = volume.shape[3]
     m = 0
     for wr in range(window):
-        x_r = (u_r - anchor + wr) % nr
+        x_r = wrap(u_r - anchor + wr, nr)
         for wc in range(window):
-            x_c = (u_c - anchor + wc) % nc
+            x_c = wrap(u_c - anchor + wc, nc)
             q0 = n if na == 0 else (x_r if ra == 0 else x_c)
             q1 = n if na == 1 else (x_r if ra == 1 else x_c)
             q2 = n if na == 2 else (x_r if ra == 2 else x_c)
@@ -217,10 +240,13 @@ def random_centres(salt, site, n_random, exemplar, out, start):
     (``salt < 2**31``)."""
     nr = exemplar.hi_r - exemplar.lo_r + 1
     nc = exemplar.hi_c - exemplar.lo_c + 1
+    inv_cells = 1.0 / (nr * nc)
+    inv_nc = 1.0 / nc
     for t in range(n_random):
         h = mix(salt + site * n_random + t)
-        cell = h % (nr * nc)
-        out[start + t] = (exemplar.lo_r + cell // nc) * exemplar.width + exemplar.lo_c + cell % nc
+        cell = split(h, nr * nc, inv_cells)[1]  # h % (nr * nc)
+        row, col = split(cell, nc, inv_nc)
+        out[start + t] = (exemplar.lo_r + row) * exemplar.width + exemplar.lo_c + col
     return start + n_random
 
 
@@ -239,26 +265,27 @@ def candidates(src_v, ra, ca, pos0, pos1, pos2, exemplar, out):
     ewidth = exemplar.width
     lo_r, hi_r, lo_c, hi_c = exemplar.lo_r, exemplar.hi_r, exemplar.lo_c, exemplar.hi_c
     k = kcoh.shape[1]
+    inv_width = 1.0 / ewidth
     for dr in range(-1, 2):
         for dc in range(-1, 2):
             q0 = pos0
             q1 = pos1
             q2 = pos2
             if ra == 0:
-                q0 = (pos0 + dr) % n0
+                q0 = wrap(pos0 + dr, n0)
             elif ra == 1:
-                q1 = (pos1 + dr) % n1
+                q1 = wrap(pos1 + dr, n1)
             else:
-                q2 = (pos2 + dr) % n2
+                q2 = wrap(pos2 + dr, n2)
             if ca == 0:
-                q0 = (pos0 + dc) % n0
+                q0 = wrap(pos0 + dc, n0)
             elif ca == 1:
-                q1 = (pos1 + dc) % n1
+                q1 = wrap(pos1 + dc, n1)
             else:
-                q2 = (pos2 + dc) % n2
-            s = src_v[q0, q1, q2]
-            sr = s // ewidth - dr
-            sc = s % ewidth - dc
+                q2 = wrap(pos2 + dc, n2)
+            s_r, s_c = split(np.int64(src_v[q0, q1, q2]), ewidth, inv_width)
+            sr = s_r - dr
+            sc = s_c - dc
             sr = min(max(sr, lo_r), hi_r)
             sc = min(max(sc, lo_c), hi_c)
             centre = sr * ewidth + sc
@@ -295,6 +322,74 @@ def trusted_distance(vec, weights, exemplar, e):
     return d2
 
 
+@jit
+def distinct_blocks(cand, count, kk, keep):
+    """The candidates ``cand[:count]`` of :func:`candidates` (and :func:`random_centres`) into
+    ``keep`` without the neighbours' blocks that repeat an earlier block: a block is a coherent
+    shift and its k-coherence set (``kk`` entries), so one whose shift equals an earlier block's
+    repeats it entirely. A repeated candidate has the cost of its first occurrence, so an
+    argmin that keeps the first minimum is the same over ``keep``. Returns the number kept."""
+    blocks = min(9, count // kk)
+    n = 0
+    for bi in range(blocks):
+        centre = cand[bi * kk]
+        repeat = False
+        for bj in range(bi):
+            if cand[bj * kk] == centre:
+                repeat = True
+                break
+        if repeat:
+            continue
+        for t in range(bi * kk, (bi + 1) * kk):
+            keep[n] = cand[t]
+            n += 1
+    for t in range(blocks * kk, count):
+        keep[n] = cand[t]
+        n += 1
+    return n
+
+
+@jit
+def pca_distances(y, proj, keep, count, out):
+    """Squared distances ``sum_j (y[j] - proj[e, j])**2`` (summed in ``j`` order) of ``y`` to the
+    projections of the centres ``keep[:count]`` into ``out``; four centres at a time, each its
+    own sum, so the same bits as one at a time with four times the independent work."""
+    dims = y.shape[0]
+    i = 0
+    while i + 4 <= count:
+        e0 = keep[i]
+        e1 = keep[i + 1]
+        e2 = keep[i + 2]
+        e3 = keep[i + 3]
+        s0 = 0.0
+        s1 = 0.0
+        s2 = 0.0
+        s3 = 0.0
+        for j in range(dims):
+            yj = y[j]
+            d0 = yj - proj[e0, j]
+            d1 = yj - proj[e1, j]
+            d2 = yj - proj[e2, j]
+            d3 = yj - proj[e3, j]
+            s0 += d0 * d0
+            s1 += d1 * d1
+            s2 += d2 * d2
+            s3 += d3 * d3
+        out[i] = s0
+        out[i + 1] = s1
+        out[i + 2] = s2
+        out[i + 3] = s3
+        i += 4
+    while i < count:
+        e = keep[i]
+        d2 = 0.0
+        for j in range(dims):
+            diff = y[j] - proj[e, j]
+            d2 += diff * diff
+        out[i] = d2
+        i += 1
+
+
 @jit_parallel
 def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fresh_v, omega_v, energy, trust):
     """Search phase of one view (paper section 4.3 with eq. 5-6).
@@ -329,7 +424,8 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
     channels = shape[3]
     d = window * window * channels
     dims = basis.shape[1]
-    cap = 9 * (1 + exemplar.kcoh.shape[1]) + n_random
+    kk = 1 + exemplar.kcoh.shape[1]
+    cap = 9 * kk + n_random
     gr = nr // grid
     gc = nc // grid
     for b in range(batches):
@@ -339,6 +435,8 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
             vec = np.empty(d, dtype=np.float64)
             y = np.empty(dims, dtype=np.float64)
             cand = np.empty(cap, dtype=np.int64)
+            keep = np.empty(cap, dtype=np.int64)
+            dists = np.empty(cap, dtype=np.float64)
             weights = np.empty(window * window, dtype=np.float32)
             acc = 0.0
             for ar in range(gr):
@@ -356,18 +454,18 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
                     if n_random > 0:
                         count = random_centres(salt, global_flat(p0, p1, p2, shape, rule.origin, rule.extent),
                                                n_random, exemplar, cand, count)
+                    count = distinct_blocks(cand, count, kk, keep)
+                    if weighted:
+                        for t2 in range(count):
+                            dists[t2] = trusted_distance(vec, weights, exemplar, keep[t2])
+                    else:
+                        pca_distances(y, proj, keep, count, dists)
                     best = -1
                     best_cost = np.inf
                     best_d2 = 0.0
                     for t2 in range(count):
-                        e = cand[t2]
-                        d2 = 0.0
-                        if weighted:
-                            d2 = trusted_distance(vec, weights, exemplar, e)
-                        else:
-                            for j in range(dims):
-                                diff = y[j] - proj[e, j]
-                                d2 += diff * diff
+                        e = keep[t2]
+                        d2 = dists[t2]
                         excess = index_hist[e] / phi - 1.0
                         cost = d2 * (1.0 + index_weight * excess) if excess > 0.0 else d2
                         if cost < best_cost:

@@ -95,6 +95,10 @@ class SolverRule(NamedTuple):
     sampler : int, the annealed draw's rule, ``HEAT_BATH`` or ``METROPOLIS``
     origin, extent : (3,) int64 each, where the volume lies in the level's whole grid (the
         draws hash :func:`npmrf3d._kernels.kcoherence.global_flat`; ``extent`` 0: the whole grid)
+    colour_ids, kernel : (G,) int64 and (n, n) float64, optional: every packed texel's index
+        among the distinct colours and the NP-MRF rule's kernel between them
+        (:func:`npmrf3d._kernels.candidate_decision.kernel_table` with ``h2c``), looked up instead
+        of computed (same bits); empty: computed
     """
 
     medoid: int
@@ -107,6 +111,8 @@ class SolverRule(NamedTuple):
     sampler: int = HEAT_BATH
     origin: np.ndarray = np.zeros(3, dtype=np.int64)
     extent: np.ndarray = np.zeros(3, dtype=np.int64)
+    colour_ids: np.ndarray = np.zeros(0, dtype=np.int64)
+    kernel: np.ndarray = np.zeros((0, 0), dtype=np.float64)
 
 
 class VoteTrust(NamedTuple):
@@ -125,7 +131,44 @@ NO_TRUST = VoteTrust(np.zeros((0, 0, 0), dtype=np.float32), np.zeros((0, 0, 0, 0
 
 
 @jit
-def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w):
+def _texel_factors(views, hist, n_views, div, mul, vdiv, priors):
+    """Per packed position-histogram entry, the factors :func:`_votes` weighs a vote for that
+    texel by while the histograms are frozen (one batch): ``div`` the position divisor
+    ``1 + position_weight * excess`` (1.0 when not over-used), ``mul`` the boost
+    ``1 - position_boost * excess`` (1.0 when over-used or without boost); per packed texel
+    ``vdiv`` the value-histogram divisor ``1 + val_weight * over`` (1.0 without). A factor of
+    1.0 leaves a weight exactly as it is, so the weights keep their bits. With ``value_prior >
+    0``, ``priors`` gets every packed texel's histogram prior (:func:`value_prior`)."""
+    pos_hist, hist_off, theta = hist.positions, hist.position_offsets, hist.theta
+    position_weight, position_boost = hist.position_weight, hist.position_boost
+    ex_bins, val_hist, val_target, val_weight = hist.texel_bins, hist.values, hist.value_target, hist.value_weight
+    for v in range(n_views):
+        lo = hist_off[v]
+        hi = hist_off[v + 1] if v + 1 < n_views else pos_hist.shape[0]
+        for i in range(lo, hi):
+            excess = pos_hist[i] / theta[v] - 1.0
+            div[i] = 1.0
+            mul[i] = 1.0
+            if excess > 0.0:
+                div[i] = 1.0 + position_weight * excess
+            elif position_boost > 0.0:
+                mul[i] = 1.0 - position_boost * excess
+    if val_weight > 0.0:
+        for g in range(vdiv.shape[0]):
+            over = 0.0
+            for ch in range(ex_bins.shape[1]):
+                b = ex_bins[g, ch]
+                gap = val_hist[ch, b] - val_target[ch, b]
+                if gap > 0.0:
+                    over += gap
+            vdiv[g] = 1.0 + val_weight * over
+    if hist.value_prior > 0.0:
+        for g in range(priors.shape[0]):
+            priors[g] = value_prior(ex_bins[g], val_hist, val_target, hist.value_unit, hist.value_prior)
+
+
+@jit
+def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w, div, mul, vdiv):
     """Texels voted for voxel ``(p0, p1, p2)`` by every overlapping neighbourhood of every view.
 
     A neighbourhood at site ``u`` matched with centre ``e`` votes for the texel ``e + (x - u)``
@@ -149,12 +192,12 @@ def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w):
     (:class:`SolverHistograms`) ``pos_hist`` (``positions``), ``hist_off``
     (``position_offsets``), ``theta``, the strengths, ``ex_bins`` (``texel_bins``), ``val_hist``
     (``values``) and ``val_target`` (``value_target``).
+
+    ``div``, ``mul`` and ``vdiv`` are the histograms' factors of every texel (:func:`_texel_factors`).
     """
     view_axes, ex_off, ewidth = views.axes, views.offsets, views.widths
     window, anchor, grid = views.window, views.anchor, views.grid
-    pos_hist, hist_off, theta = hist.positions, hist.position_offsets, hist.theta
-    position_weight, position_boost = hist.position_weight, hist.position_boost
-    ex_bins, val_hist, val_target, val_weight = hist.texel_bins, hist.values, hist.value_target, hist.value_weight
+    hist_off, val_weight = hist.position_offsets, hist.value_weight
     shape = assign.shape
     weighted = trust.voxels.shape[0] > 0
     own = np.float64(trust.voxels[p0, p1, p2]) if weighted else 0.0
@@ -169,11 +212,13 @@ def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w):
         w = ewidth[v]
         for orow in range(-anchor, window - anchor):
             u_r = (xr - orow) % nr
-            if u_r % grid:
+            if grid > 1 and u_r % grid:
                 continue
             for ocol in range(-anchor, window - anchor):
-                u_c = (xc - ocol) % nc
-                if u_c % grid:
+                u_c = xc - ocol
+                if u_c < 0 or u_c >= nc:  # the division only where the window wraps
+                    u_c %= nc
+                if grid > 1 and u_c % grid:
                     continue
                 q0 = p0
                 q1 = p1
@@ -198,21 +243,12 @@ def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w):
                     share = (np.float64(trust.windows[v, q0, q1, q2]) - own) / (window * window - 1)
                     if share <= 0.0:
                         continue
-                local = (e // w + orow) * w + (e % w + ocol)
-                excess = pos_hist[hist_off[v] + local] / theta[v] - 1.0
-                weight = omega[v, q0, q1, q2]
-                if excess > 0.0:
-                    weight = weight / (1.0 + position_weight * excess)
-                elif position_boost > 0.0:
-                    weight = weight * (1.0 - position_boost * excess)
+                local = e + orow * w + ocol  # (e // w + orow) * w + (e % w + ocol)
+                i = hist_off[v] + local
+                # omega / (1 + position_weight * excess) or omega * (1 - position_boost * excess)
+                weight = np.float64(omega[v, q0, q1, q2]) / div[i] * mul[i]
                 if val_weight > 0.0:
-                    over = 0.0
-                    for ch in range(ex_bins.shape[1]):
-                        b = ex_bins[ex_off[v] + local, ch]
-                        gap = val_hist[ch, b] - val_target[ch, b]
-                        if gap > 0.0:
-                            over += gap
-                    weight = weight / (1.0 + val_weight * over)
+                    weight = weight / vdiv[ex_off[v] + local]
                 if weighted:
                     weight = weight * share
                 out_g[count] = ex_off[v] + local
@@ -252,6 +288,34 @@ def _group_votes(vg, vv, vw, count, n_views, slot, ug, uv, uw, umax, uarg):
     for i in range(u):
         slot[ug[i] * n_views + uv[i]] = -1
     return u
+
+
+@jit
+def _heaviest(umax, uarg, u, most, tops):
+    """The ``most`` heaviest of the ``u`` merged votes into ``tops``, heaviest first: by
+    ``umax`` descending, ties by ``uarg`` ascending (the earlier vote; ``uarg`` are distinct, so
+    the order is total). One pass keeping the sorted best so far. Returns how many (at most
+    ``u``)."""
+    n = 0
+    for q in range(u):
+        wq = umax[q]
+        aq = uarg[q]
+        if n == most:
+            last = tops[n - 1]
+            if not (wq > umax[last] or (wq == umax[last] and aq < uarg[last])):
+                continue
+            n -= 1
+        i = n
+        while i > 0:
+            prev = tops[i - 1]
+            if wq > umax[prev] or (wq == umax[prev] and aq < uarg[prev]):
+                tops[i] = prev
+                i -= 1
+            else:
+                break
+        tops[i] = q
+        n += 1
+    return n
 
 
 @jit_parallel
@@ -319,11 +383,17 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
     medoid, balance, likelihood, h2c = rule.medoid, rule.balance, rule.likelihood, rule.h2c
     outlier, temperature, salt, sampler = rule.outlier, rule.temperature, rule.salt, rule.sampler
     hist_args = (val_hist, val_target, val_unit, val_prior, val_lo, val_scale)
+    colour_ids, kernel = rule.colour_ids, rule.kernel
+    tabled = kernel.shape[0] > 0
     n_views = assign.shape[0]
     n0, n1, n2, channels = volume.shape
     n_vox = grid_voxels(volume.shape, rule.extent)
     cap = n_views * views.window * views.window
     changed = 0
+    div = np.empty(pos_hist.shape[0], dtype=np.float64)
+    mul = np.empty(pos_hist.shape[0], dtype=np.float64)
+    vdiv = np.empty(ex_flat.shape[0], dtype=np.float64)
+    priors = np.zeros(ex_flat.shape[0], dtype=np.float64)
     for b in range(batch_bounds.shape[0] - 1):
         start = batch_bounds[b]
         m = batch_bounds[b + 1] - start
@@ -332,19 +402,24 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
         old_bins = np.zeros((m, channels), dtype=np.int64)
         new_bins = np.zeros((m, channels), dtype=np.int64)
         n_chunks = (m + chunk - 1) // chunk
+        _texel_factors(views, hist, n_views, div, mul, vdiv, priors)
         for c in prange(n_chunks):
             vg = np.empty(cap, dtype=np.int64)
             vv = np.empty(cap, dtype=np.int64)
             vw = np.empty(cap, dtype=np.float64)
             mean = np.empty(channels, dtype=np.float64)
             vsum = np.empty(n_views, dtype=np.float64)
-            taken = np.zeros(cap, dtype=np.bool_)
-            slot = np.full(ex_flat.shape[0] * n_views, -1, dtype=np.int64)
+            slot = np.full(ex_flat.shape[0] * n_views, -1, dtype=np.int32)
             ug = np.empty(cap, dtype=np.int64)
             uv = np.empty(cap, dtype=np.int64)
             uw = np.empty(cap, dtype=np.float64)
             umax = np.empty(cap, dtype=np.float64)
             uarg = np.empty(cap, dtype=np.int64)
+            uid = np.empty(cap, dtype=np.int64)
+            vlo = np.empty(n_views, dtype=np.int64)
+            vhi = np.empty(n_views, dtype=np.int64)
+            rows = np.empty(max(medoid, 1), dtype=np.int64)
+            liks = np.empty((max(medoid, 1), n_views), dtype=np.float64)
             tops = np.empty(max(medoid, 1), dtype=np.int64)
             lik = np.empty(n_views, dtype=np.float64)
             scores = np.empty(max(medoid, 1), dtype=np.float64)
@@ -357,7 +432,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                 p0 = flat // (n1 * n2)
                 p1 = (flat // n2) % n1
                 p2 = flat % n2
-                count = _votes(p0, p1, p2, assign, omega, views, hist, trust, vg, vv, vw)
+                count = _votes(p0, p1, p2, assign, omega, views, hist, trust, vg, vv, vw, div, mul, vdiv)
                 for v in range(n_views):
                     new_src[t, v] = src[v, p0, p1, p2]
                 if count == 0:
@@ -377,33 +452,30 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                 if medoid:
                     # candidates: the `medoid` heaviest votes with distinct (texel, view), heaviest
                     # first (ties: the earlier vote) -- the groups of the heaviest single votes
-                    n_try = 0
-                    for q in range(u):
-                        taken[q] = False
-                    for a in range(medoid):
-                        top = -1
-                        for q in range(u):
-                            if not taken[q] and (top < 0 or umax[q] > umax[top]
-                                                 or (umax[q] == umax[top] and uarg[q] < uarg[top])):
-                                top = q
-                        if top < 0:
-                            break
-                        taken[top] = True
-                        tops[n_try] = top
-                        n_try += 1
+                    n_try = _heaviest(umax, uarg, u, medoid, tops)
                     best_e = np.inf
                     if likelihood:
                         for v in range(n_views):
                             vsum[v] = 0.0
                         for q in range(count):
                             vsum[vv[q]] += vw[q]
+                        if tabled:
+                            for q in range(u):
+                                uid[q] = colour_ids[ug[q]]
+                            for a in range(n_try):
+                                rows[a] = colour_ids[ug[tops[a]]]
+                            _decide.candidate_likelihoods(kernel, rows, n_try, uid, uv, uw, u, vsum, outlier, liks)
                     for a in range(n_try):
                         ga = ug[tops[a]]
                         if likelihood:
-                            _decide.view_likelihoods(ex_flat[ga], ex_flat, ug, uv, uw, u, vsum, h2c, outlier, lik)
+                            if tabled:
+                                for v in range(n_views):
+                                    lik[v] = liks[a, v]
+                            else:
+                                _decide.view_likelihoods(ex_flat[ga], ex_flat, ug, uv, uw, u, vsum, h2c, outlier, lik)
                             prior = 0.0
                             if val_prior > 0.0:
-                                prior = value_prior(ex_bins[ga], val_hist, val_target, val_unit, val_prior)
+                                prior = priors[ga]
                             if likelihood >= ML_H1A:
                                 # per-view rules: each view's estimate, times the prior's factor
                                 for v in range(n_views):
@@ -423,7 +495,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                                 dd += diff * diff
                             e_sum += uw[q2] * np.sqrt(dd)
                         if val_prior > 0.0:
-                            e_sum *= np.exp(-value_prior(ex_bins[ga], val_hist, val_target, val_unit, val_prior))
+                            e_sum *= np.exp(-priors[ga])
                         if e_sum < best_e:
                             best_e = e_sum
                             best = uarg[tops[a]]
@@ -484,6 +556,17 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                             best_d = dd
                             best = uarg[q]
                 g = vg[best]
+                # each view's stretch of the merged votes (they come sorted by view)
+                by_view = True
+                for v in range(n_views):
+                    vlo[v] = u
+                    vhi[v] = 0
+                for q in range(u):
+                    if q > 0 and uv[q] < uv[q - 1]:
+                        by_view = False
+                    if q < vlo[uv[q]]:
+                        vlo[uv[q]] = q
+                    vhi[uv[q]] = q + 1
                 for ch in range(channels):
                     if volume[p0, p1, p2, ch] != ex_flat[g, ch]:
                         flags[t] = 1
@@ -498,7 +581,8 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                     if v == vv[best]:
                         new_src[t, v] = g - ex_off[v]
                         continue
-                    near = _decide.nearest_vote(v, g, ug, uv, u, ex_flat)
+                    near = _decide.nearest_vote(v, g, ug, uv, u, ex_flat) if not by_view else \
+                        _decide.nearest_in(vlo[v], vhi[v], g, ug, ex_flat)
                     if near >= 0:
                         new_src[t, v] = ug[near] - ex_off[v]
         # sequential, fixed order: histograms follow the new sources

@@ -47,7 +47,7 @@ from .pyramid import ArraySpec, Levels
 
 __all__ = ["block_aprons", "FrozenHistograms", "held_values", "CANDIDATE_HEURISTICS", "CANDIDATE_SAMPLERS", "COHERENT_HEURISTICS", "PER_VIEW_HEURISTICS",
            "CandidateDecision", "CoherentState", "KCoherenceLevels", "ValueHistogram",
-           "initial_colours", "pack_exemplars", "position_histogram", "value_counts", "value_scale"]
+           "initial_colours", "kernel_table", "pack_exemplars", "position_histogram", "value_counts", "value_scale"]
 
 #: The NP-MRF heuristics with an objective, which rank candidates by a score and can be
 #: annealed (docs/model.md, section 3), and the solver kernel's code of each
@@ -63,6 +63,9 @@ CANDIDATE_SAMPLERS = {"heat-bath": _decide.HEAT_BATH, "metropolis": _decide.METR
 MEDOID_CANDIDATES = 8
 #: Voxels per parallel work item of the solver (any value gives the same result).
 SOLVE_CHUNK = 512
+#: The most distinct colours of a level's exemplars for which the NP-MRF rule's kernel is looked
+#: up in a table (n * n float64, 8 MiB at 1024) instead of computed per vote (:func:`kernel_table`).
+KERNEL_TABLE_COLOURS = 1024
 
 
 @dataclass(frozen=True)
@@ -140,6 +143,19 @@ def initial_colours(src: np.ndarray, exemplars) -> np.ndarray:
     dist = ((texels - centre) ** 2).sum(axis=-1)
     pick = np.argmin(dist, axis=0)
     return np.ascontiguousarray(np.take_along_axis(texels, pick[None, ..., None], axis=0)[0], dtype=np.float32)
+
+
+def kernel_table(ex_flat: np.ndarray, h2c: float, most: int = KERNEL_TABLE_COLOURS) -> tuple[np.ndarray, np.ndarray]:
+    """The NP-MRF rule's kernel between the distinct colours of the packed texels ``ex_flat``
+    (:func:`npmrf3d._kernels.candidate_decision.kernel_table`) and every texel's colour index:
+    ``(G,)`` int64 and ``(n, n)`` float64; both empty when there are more than ``most`` colours
+    (the solver then computes the kernel per vote, with the same result)."""
+    _, reps, ids = np.unique(ex_flat, axis=0, return_index=True, return_inverse=True)
+    if len(reps) > most:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 0), dtype=np.float64)
+    table = np.empty((len(reps), len(reps)), dtype=np.float64)
+    _decide.kernel_table(ex_flat, reps.astype(np.int64), float(h2c), table)
+    return np.ascontiguousarray(ids.reshape(-1), dtype=np.int64), table
 
 
 def pack_exemplars(models) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -486,6 +502,8 @@ class KCoherenceLevels(Levels):
         likelihood = _decide.OWN_SOLVER if decision.heuristic is None else COHERENT_HEURISTICS[decision.heuristic]
         medoid = MEDOID_CANDIDATES if config.solver == "medoid" or decision.heuristic is not None else 0
         h2c = 2.0 * (decision.centre_bandwidth * self.sigma) ** 2 or 1.0
+        colour_ids, kernel = (kernel_table(ex_flat, h2c) if likelihood != _decide.OWN_SOLVER
+                              else (np.zeros(0, dtype=np.int64), np.zeros((0, 0), dtype=np.float64)))
         level_history, changed, global_counts = [], [], []
         t_search = t_solve = 0.0
         sites = 0
@@ -539,7 +557,8 @@ class KCoherenceLevels(Levels):
                 # and the votes, so visiting a batch in memory order gives the same volume faster
                 order[bounds[b]:bounds[b + 1]].sort()
             rule = _solver.SolverRule(medoid, config.balance_views, likelihood, h2c, decision.outlier,
-                                      temperature, salt, CANDIDATE_SAMPLERS[decision.sampler], origin, extent)
+                                      temperature, salt, CANDIDATE_SAMPLERS[decision.sampler], origin, extent,
+                                      colour_ids, kernel)
             votes_trust = _solver.NO_TRUST if icm is None else icm.vote_trust()
             changed.append(int(_solver.solve(volume, src, assign, omega, packed,
                                              histograms._replace(value_target=target), votes_trust, rule, order,
