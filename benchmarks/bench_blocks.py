@@ -121,7 +121,8 @@ def part_scaling(image, size: int, block: int, out: Path) -> dict:
 
 def _command(size: int, block: int, out: Path, exemplar_path: str | None) -> list[str]:
     return [sys.executable, "-m", "npmrf3d", "synth", exemplar_path or f"bundled:{data.DEFAULT_EXEMPLAR}",
-            "--size", str(size), "--block", str(block), "--workers", "2", "--seed", "0", "--quiet", "--out", str(out)]
+            "--size", str(size), "--blockwise", "--block", str(block), "--workers", "2", "--seed", "0", "--quiet",
+            "--out", str(out)]
 
 
 def part_resume(size: int, block: int, out: Path, exemplar_path: str | None) -> dict:
