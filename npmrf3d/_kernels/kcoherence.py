@@ -2,7 +2,10 @@
 
 Private: called by :mod:`npmrf3d.model.kcoherence` and :mod:`npmrf3d.model.kcoherence_engine`
 with validated arrays only; nothing here raises a user-facing error. The solver that follows
-each search is :mod:`npmrf3d._kernels.kcoherence_solver`. Kernels:
+each search is :mod:`npmrf3d._kernels.kcoherence_solver`. Why one module of ~500 lines: the
+search kernel and the helpers it inlines (gathering, projection, candidates, their distances,
+the division-free wrap) share one geometry and are read together against their twins in
+``tests/naive.py``. Kernels:
 
 * :func:`candidates` (sequential, one site): the k-coherence candidate set of one site of one
   view, in a fixed enumeration order (duplicates kept; they do not change an argmin that keeps
