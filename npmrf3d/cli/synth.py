@@ -46,7 +46,7 @@ from ._common import (
     say,
     write_result,
 )
-from ._blocks import add_block_options, blockwise_requested, run_zarr, zarr_output
+from ._blocks import add_block_options, blockwise_requested, note_blockwise, run_zarr, zarr_output
 from ._options import given
 from ._progress import run_method
 
@@ -337,6 +337,7 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
         blockwise=blockwise_requested(args), seed=args.seed,
     )
     out, checkpoint, per_view, sources = prepare_run(args, METHOD, config, whole=not zarr_output(args))
+
     _check_segmented_window(args, config, per_view)
     if zarr_output(args):
         window = SEGMENTED.window if segmented(config, per_view) else config.window
@@ -346,6 +347,7 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
         return dry_run(METHOD, config, per_view)
     if not args.quiet and config.palette is None and config.grey_levels is None:
         _note_many_values(per_view)
+    note_blockwise(args, config)
     with claim_output(out, args.overwrite):
         result = run_method(args, METHOD, config, per_view, checkpoint=checkpoint, t_start=t_start)
         window = SEGMENTED.window if result.stats.get("segmented") else config.window

@@ -190,7 +190,8 @@ def write_zarr(method: SynthesisMethod, per_view, config, out, *, block: int, re
     -------
     dict
         ``blocks``, ``skipped`` (already done), ``written``, ``seconds`` (of the blocks made here,
-        summed over workers), ``worker_peak_bytes`` (the largest peak resident memory a worker
+        summed over workers), ``cluster_seconds`` and ``cluster_blocks`` (the wall time of the
+        blocks made on the cluster, its start included, and their number), ``worker_peak_bytes`` (the largest peak resident memory a worker
         reported; 0 when every block was made here), ``plan`` (:meth:`BlockPlan.describe`) and
         the estimate of one block (``block_bytes``, ``block_memory``).
     """
@@ -223,7 +224,10 @@ def write_zarr(method: SynthesisMethod, per_view, config, out, *, block: int, re
         done += 1
         if progress is not None:
             progress(done, len(indices))
+    cluster_seconds = 0.0
+    cluster_blocks = len(todo)
     if todo:
+        t_cluster = time.perf_counter()
         with dask_client(scheduler, workers) as client:
             from distributed import as_completed
 
@@ -236,8 +240,10 @@ def write_zarr(method: SynthesisMethod, per_view, config, out, *, block: int, re
                 done += 1
                 if progress is not None:
                     progress(done, len(indices))
+        cluster_seconds = time.perf_counter() - t_cluster
     return {"blocks": len(indices), "skipped": len(indices) - written, "written": written,
-            "seconds": seconds, "worker_peak_bytes": worker_peak, "plan": plan.describe(),
+            "seconds": seconds, "cluster_seconds": cluster_seconds, "cluster_blocks": cluster_blocks,
+            "worker_peak_bytes": worker_peak, "plan": plan.describe(),
             "block_bytes": plan.memory.bytes,
             "block_memory": format_bytes(plan.memory.bytes)}
 
