@@ -152,6 +152,11 @@ SAMPLER_COMBINATIONS = {
     "npmrf-H2b-metropolis": dict(heuristic="ML_H2b", relaxation="anneal", sampler="metropolis"),
 }
 METHODS.update({name: _npmrf(**options) for name, options in SAMPLER_COMBINATIONS.items()})
+#: The default run made block-local (``synth --blockwise``): the coarsest level as the default,
+#: the finer levels with its position and value histograms frozen, no index histogram, one
+#: solver batch and random numbers hashed from voxel positions.
+BLOCKWISE = {"npmrf-blockwise": dict(blockwise=True)}
+METHODS.update({name: _npmrf(**options) for name, options in BLOCKWISE.items()})
 #: The default run without its global histograms: the index and position histograms of the
 #: candidate search and the value-histogram prior switched off (value_weight is 0 already).
 HISTOGRAM_ABLATIONS = {
@@ -164,7 +169,8 @@ HISTOGRAM_ABLATIONS = {
 METHODS.update({name: _npmrf_coherent_with(**options)
                 for name, options in HISTOGRAM_ABLATIONS.items()})
 #: Methods that take ``palette`` (the others never see it, and their cache key has none).
-PALETTE_METHODS = {"npmrf-default", "npmrf-sharp", "npmrf-anneal", *SAMPLER_COMBINATIONS}
+PALETTE_METHODS = {"npmrf-default", "npmrf-sharp", "npmrf-anneal", *SAMPLER_COMBINATIONS,
+                   *BLOCKWISE}
 
 
 # --------------------------------------------------------------------------- exemplars
