@@ -97,6 +97,25 @@ def _npmrf(**fixed):
     return run
 
 
+def _npmrf_coherent_with(**replaced):
+    """``npmrf3d synth``'s default run (support ``coherent``) with fields of its coherent
+    sampler's options replaced: the options :func:`npmrf3d.methods.npmrf._coherent_options`
+    builds for the default configuration, ``replaced`` by :func:`dataclasses.replace`, run by
+    :func:`npmrf3d.methods.npmrf_coherent.coherent_synthesize` (no palette)."""
+    def run(ex, size, levels, seed, **_):
+        from npmrf3d.methods import npmrf, npmrf_coherent
+        config = npmrf.make_config(size=size, levels=levels)
+        phases = npmrf.segmented(config, {view: ex for view in config.views})
+        if phases:
+            raise ValueError("segmented exemplar: the default runs several pyramids; not covered")
+        options = dataclasses.replace(npmrf._coherent_options(config, phases, levels), **replaced)
+        fields = {k: v for k, v in options.to_dict().items() if k not in ("size", "seed")}
+        return npmrf_coherent.coherent_synthesize(ex, size=size, rng=seed, **fields).volume
+    run.__doc__ = (f"the default coherent run with "
+                   f"{', '.join(f'{k}={v!r}' for k, v in replaced.items())}")
+    return run
+
+
 def _npk(ex, size, levels, seed, **_):
     from npmrf3d.methods.kopf import kopf_synthesize
     return kopf_synthesize(ex, size=size, levels=levels, rng=seed).volume
@@ -133,8 +152,25 @@ SAMPLER_COMBINATIONS = {
     "npmrf-H2b-metropolis": dict(heuristic="ML_H2b", relaxation="anneal", sampler="metropolis"),
 }
 METHODS.update({name: _npmrf(**options) for name, options in SAMPLER_COMBINATIONS.items()})
+#: The default run made block-local (``synth --blockwise``): the coarsest level as the default,
+#: the finer levels with its position and value histograms frozen, no index histogram, one
+#: solver batch and random numbers hashed from voxel positions.
+BLOCKWISE = {"npmrf-blockwise": dict(blockwise=True)}
+METHODS.update({name: _npmrf(**options) for name, options in BLOCKWISE.items()})
+#: The default run without its global histograms: the index and position histograms of the
+#: candidate search and the value-histogram prior switched off (value_weight is 0 already).
+HISTOGRAM_ABLATIONS = {
+    "npmrf-no-histograms": dict(index_weight=0.0, position_weight=0.0, position_boost=0.0,
+                                value_weight=0.0, value_prior=0.0),
+    "npmrf-value-prior-only": dict(index_weight=0.0, position_weight=0.0, position_boost=0.0,
+                                   value_weight=0.0),
+    "npmrf-position-only": dict(index_weight=0.0, value_weight=0.0, value_prior=0.0),
+}
+METHODS.update({name: _npmrf_coherent_with(**options)
+                for name, options in HISTOGRAM_ABLATIONS.items()})
 #: Methods that take ``palette`` (the others never see it, and their cache key has none).
-PALETTE_METHODS = {"npmrf-default", "npmrf-sharp", "npmrf-anneal", *SAMPLER_COMBINATIONS}
+PALETTE_METHODS = {"npmrf-default", "npmrf-sharp", "npmrf-anneal", *SAMPLER_COMBINATIONS,
+                   *BLOCKWISE}
 
 
 # --------------------------------------------------------------------------- exemplars
