@@ -51,8 +51,9 @@ def add_run_options(parser: argparse.ArgumentParser, *, out: str, zarr: bool = F
                      help="random seed, a non-negative integer; the result depends on it only")
     run.add_argument("--out", default=out, metavar="DIR",
                      help="output folder for the run files; created if missing" + (
-                         "; a name ending in .zarr: the volume made in blocks into that Zarr array "
-                         "(any size that fits on disk; see --block, --workers, --scheduler)" if zarr else ""))
+                         "; a name ending in .zarr: a chunked Zarr array instead of a run folder, "
+                         "made at once, or with --blockwise in blocks (any size that fits on disk)"
+                         if zarr else ""))
     run.add_argument("--overwrite", action="store_true",
                      help="replace the files of a previous run in --out instead of refusing")
     run.add_argument("--quiet", action="store_true",
