@@ -53,7 +53,7 @@ def view_likelihoods(colour, ex_flat, ug, uv, uw, u, vsum, h2c, outlier, lik):
     for v in range(n_views):
         lik[v] = 0.0
     for q in range(u):
-        dd = 0.0
+        dd = np.float64(0.0)  # float64 also without the compiler (float32 terms)
         for ch in range(ex_flat.shape[1]):
             diff = colour[ch] - ex_flat[ug[q], ch]
             dd += diff * diff
@@ -71,7 +71,7 @@ def kernel_table(ex_flat, reps, h2c, out):
     for a in range(reps.shape[0]):
         colour = ex_flat[reps[a]]
         for b in range(reps.shape[0]):
-            dd = 0.0
+            dd = np.float64(0.0)
             for ch in range(ex_flat.shape[1]):
                 diff = colour[ch] - ex_flat[reps[b], ch]
                 dd += diff * diff
