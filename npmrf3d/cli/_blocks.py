@@ -12,10 +12,8 @@ the exemplar, the three centre slices and the cube's faces of a corner.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import pathlib
-import secrets
 import sys
 
 import numpy as np
@@ -27,7 +25,7 @@ from ..errors import ParameterError
 from ..io.runs import run_record
 from ..io.zarr_blocks import block_box, block_indices, open_blocks, write_block
 from ..methods import check_resources
-from ..methods.blocks import block_plan, write_zarr
+from ..methods.blocks import block_plan, run_identity, write_zarr
 from ..plotting import preview_figure, save_figure
 from ._common import PROG, dry_run, positive_int, say
 from ._options import given
@@ -88,13 +86,6 @@ def note_blockwise(args: argparse.Namespace, config) -> None:
             f"(histogram KL about 1 against 0.005 on held-out photographs: docs/blocks.md)", error=True)
 
 
-def _seeded(config):
-    """The configuration with a seed: every block must draw the same random numbers."""
-    if config.seed is not None:
-        return config
-    return dataclasses.replace(config, seed=secrets.randbelow(2**31))
-
-
 def run_zarr(args: argparse.Namespace, argv: list[str], command: str, method, config, per_view: dict,
              sources: dict, title: str) -> int:
     """Make ``config``'s volume into the Zarr array ``--out``: at once when it is not
@@ -111,15 +102,13 @@ def run_zarr(args: argparse.Namespace, argv: list[str], command: str, method, co
     if scheduler is not None:
         probe_scheduler(scheduler)
     out = pathlib.Path(args.out)
-    config = _seeded(config)
     plan = block_plan(method, per_view, config, block=args.block)
     if args.dry_run:
         say(f"{method.name} {'x'.join(map(str, config.size))} into {out}: {plan.describe()}")
         return 0
     note_blockwise(args, config)
-    record = run_record(command, None, exemplars=sources, method=method.name, argv=[PROG, *argv],
-                        block=args.block, workers=None if scheduler else args.workers, scheduler=scheduler)
-    record["config"], record["seed"] = json.loads(json.dumps(config.to_dict(), default=str)), config.seed
+    record = _record(command, argv, method, config, sources, block=args.block,
+                     workers=None if scheduler else args.workers, scheduler=scheduler)
     bar = None
     if not args.quiet:
         say(f"{method.name}: {plan.describe()}")
@@ -151,6 +140,13 @@ def run_zarr(args: argparse.Namespace, argv: list[str], command: str, method, co
     return 0
 
 
+def _record(command: str, argv, method, config, sources: dict, **extra) -> dict:
+    """The run record a Zarr volume keeps in its attributes (as ``run.json`` holds it)."""
+    record = run_record(command, None, exemplars=sources, method=method.name, argv=[PROG, *argv], **extra)
+    record["config"], record["seed"] = json.loads(json.dumps(config.to_dict(), default=str)), config.seed
+    return record
+
+
 def _zarr_at_once(args, argv, command, method, config, per_view, sources, title) -> int:
     """The volume made at once (as a run folder would hold it) and written into the Zarr array
     ``--out`` in chunks of ``DEFAULT_BLOCK``, with the run record in its attributes."""
@@ -160,11 +156,9 @@ def _zarr_at_once(args, argv, command, method, config, per_view, sources, title)
         return dry_run(method, config, per_view)
     out = pathlib.Path(args.out)
     block = min(DEFAULT_BLOCK, max(config.size))
-    record = run_record(command, None, exemplars=sources, method=method.name, argv=[PROG, *argv])
-    record["config"], record["seed"] = json.loads(json.dumps(config.to_dict(), default=str)), config.seed
-    identity = json.dumps({"method": method.name, "config": record["config"]}, sort_keys=True)
     open_blocks(out, size=config.size, channels=next(iter(per_view.values())).shape[-1], block=block,
-                attrs={"npmrf3d_run": identity}, record=record, overwrite=args.overwrite)
+                attrs={"npmrf3d_run": run_identity(method, config, per_view)},
+                record=_record(command, argv, method, config, sources), overwrite=args.overwrite)
     checkpoint = pathlib.Path(args.checkpoint) if getattr(args, "checkpoint", None) else None
     result = run_method(args, method, config, per_view, checkpoint=checkpoint)
     for index in block_indices(config.size, block):

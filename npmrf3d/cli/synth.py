@@ -14,14 +14,7 @@ import time
 import numpy as np
 
 from .. import data
-from ..config import (
-    DEFAULT_SIZE,
-    PRESETS,
-    SEGMENTED_MODES,
-    SUPPORTS,
-    VARIANTS,
-    SynthesisConfig,
-)
+from ..config import DEFAULT_SIZE, PRESETS, SEGMENTED_MODES, SUPPORTS, VARIANTS, SynthesisConfig
 from ..errors import ParameterError
 from ..io.runs import RUN_FILES
 from ..methods.npmrf import METHOD, segmented

@@ -18,7 +18,6 @@ The cost of a block is its cone: the block grown at every level by that level's 
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import os
 import pathlib
@@ -39,11 +38,13 @@ from ..io.zarr_blocks import (
     open_blocks,
     write_block,
 )
+from ..io.checkpoints import exemplar_digest
+from ..model.pyramid import level_shape
 from ..model.regions import RegionPlan, plan_region
 from ..resources import Estimate, available_memory, check_memory, format_bytes
 from . import METHODS
 
-__all__ = ["BlockPlan", "block_plan", "blockwise_method", "make_block", "shared_exemplars", "synthesize_blocks",
+__all__ = ["BlockPlan", "block_plan", "blockwise_method", "make_block", "run_identity", "shared_exemplars", "synthesize_blocks",
            "write_zarr"]
 
 
@@ -57,10 +58,6 @@ def blockwise_method(method: SynthesisMethod, config, per_view) -> tuple[int, ..
     return tuple(None if a is None else int(a) for a in aprons)
 
 
-def _levels(config) -> int:
-    return int(config.levels)
-
-
 def make_block(method: SynthesisMethod, per_view: Mapping[str, np.ndarray], config, origin, shape,
                start) -> np.ndarray:
     """Block ``origin .. origin + shape - 1`` of the volume ``config`` makes (its ``size`` and
@@ -70,9 +67,16 @@ def make_block(method: SynthesisMethod, per_view: Mapping[str, np.ndarray], conf
     if config.seed is None:
         raise ValueError("a block needs the run's seed")
     per_view = shared_exemplars(per_view)
-    plan = plan_region(config.size, _levels(config), blockwise_method(method, config, per_view), origin, shape,
+    plan = plan_region(config.size, config.levels, blockwise_method(method, config, per_view), origin, shape,
                        start=start)
     return method.run(per_view, config, np.random.default_rng(config.seed), region=plan).volume
+
+
+def run_identity(method: SynthesisMethod, config, per_view) -> str:
+    """What makes a Zarr volume this run's and no other's (JSON): the method, its configuration
+    (seed included) and each view's exemplar digest."""
+    return json.dumps({"method": method.name, "config": config.to_dict(),
+                       "exemplars": {v: exemplar_digest(a) for v, a in per_view.items()}}, sort_keys=True, default=str)
 
 
 def shared_exemplars(per_view: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -80,7 +84,7 @@ def shared_exemplars(per_view: Mapping[str, np.ndarray]) -> dict[str, np.ndarray
     exemplar shared by views once (random numbers are drawn per distinct exemplar), and a task
     sent to a worker arrives with a copy per view."""
     seen: dict[str, np.ndarray] = {}
-    return {v: seen.setdefault(_digest(a), a) for v, a in per_view.items()}
+    return {v: seen.setdefault(exemplar_digest(a), a) for v, a in per_view.items()}
 
 
 def synthesize_blocks(method: SynthesisMethod, per_view, config, *, block: int, start) -> np.ndarray:
@@ -123,10 +127,10 @@ def block_plan(method: SynthesisMethod, per_view, config, *, block: int) -> Bloc
     region, and the voxels of all cones against the pyramid's."""
     size = tuple(config.size)
     aprons = blockwise_method(method, config, per_view)
-    levels = _levels(config)
+    levels = config.levels
     indices = block_indices(size, block)
     biggest = None
-    whole = sum(int(np.prod([n // 2 ** level for n in size])) for level, a in enumerate(aprons) if a is None)
+    whole = sum(int(np.prod(level_shape(size, level))) for level, a in enumerate(aprons) if a is None)
     cone_voxels = whole
     for index in indices:
         plan = plan_region(size, levels, aprons, *block_box(index, block, size))
@@ -134,11 +138,10 @@ def block_plan(method: SynthesisMethod, per_view, config, *, block: int) -> Bloc
         cone_voxels += voxels
         if biggest is None or voxels > biggest[0]:
             biggest = (voxels, plan)
-    pyramid = sum(int(np.prod([n // 2 ** level for n in size])) for level in range(levels))
+    pyramid = sum(int(np.prod(level_shape(size, level))) for level in range(levels))
     cone = biggest[1]
     # the larger of the finest region and the finest whole level, each as a one-level run
-    sizes = [cone.frames[0].shape] + [tuple(n // 2 ** level for n in size)
-                                      for level, f in enumerate(cone.frames) if f is None][:1]
+    sizes = [cone.frames[0].shape] + [level_shape(size, level) for level, f in enumerate(cone.frames) if f is None][:1]
     memory = max((method.resources(dataclasses.replace(config, size=shape, levels=1), per_view) for shape in sizes),
                  key=lambda e: e.bytes)
     return BlockPlan(len(indices), cone, memory, cone_voxels / pyramid)
@@ -202,8 +205,7 @@ def write_zarr(method: SynthesisMethod, per_view, config, out, *, block: int, re
     check_memory(plan.memory, available=memory_per_worker,
                  hint="use a smaller --block (each worker holds one block's cone), or fewer --workers")
     out = pathlib.Path(out)
-    identity = json.dumps({"method": method.name, "config": config.to_dict(),
-                           "exemplars": {v: _digest(a) for v, a in per_view.items()}}, sort_keys=True, default=str)
+    identity = run_identity(method, config, per_view)
     open_blocks(out, size=config.size, channels=next(iter(per_view.values())).shape[-1], block=block,
                 attrs={"npmrf3d_run": identity}, record=json.loads(json.dumps(record, default=str)),
                 overwrite=overwrite)
@@ -246,8 +248,3 @@ def write_zarr(method: SynthesisMethod, per_view, config, out, *, block: int, re
             "worker_peak_bytes": worker_peak, "plan": plan.describe(),
             "block_bytes": plan.memory.bytes,
             "block_memory": format_bytes(plan.memory.bytes)}
-
-
-def _digest(array: np.ndarray) -> str:
-    a = np.ascontiguousarray(array)
-    return hashlib.sha256(a.tobytes() + str((a.shape, a.dtype.str)).encode()).hexdigest()

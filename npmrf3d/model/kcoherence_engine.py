@@ -355,7 +355,8 @@ class KCoherenceLevels(Levels):
                                      unit=grid_voxels / config.value_bins)
         else:
             pos_hist = np.concatenate([position_histogram(src[vi], m.pixels) for vi, m in enumerate(vmodels)])
-        frozen_positions, frozen_values = pos_hist.copy(), values.hist.copy()
+        if local:  # each pass starts from these again
+            frozen_positions, frozen_values = pos_hist.copy(), values.hist.copy()
         theta = np.array([grid_voxels / m.pixels for m in vmodels])
         histograms = _solver.SolverHistograms(
             pos_hist, hist_off, theta, config.position_weight, config.position_boost, values.ex_bins,

@@ -186,18 +186,15 @@ class Levels(ABC):
     def aprons(self) -> tuple[int | None, ...] | None:
         """Per level (0 the finest), how far a level's result reaches over its iterations (a
         region grown by it gives its core exactly: :mod:`npmrf3d.model.regions`), None for a
-        level that runs whole; None when the method cannot run on a region at all."""
+        level that runs whole; None when the method cannot run on a region at all. A method
+        with aprons also defines ``crop(state, index)``: the part of a level's state at the
+        per-axis array indices ``index``."""
         return None
 
     def after_level(self, level: int, state: Any) -> None:
         """Called with each finished level's whole or regional state (also one resumed from a
         checkpoint), before it is cut to a region and up-sampled: a method may keep what its
         finer levels need from it (statistics of a level that runs whole)."""
-
-    def crop(self, state: Any, index: tuple[np.ndarray, np.ndarray, np.ndarray]) -> Any:
-        """The part of a level's ``state`` at the per-axis array indices ``index`` (methods with
-        :meth:`aprons` only)."""
-        raise NotImplementedError(f"{type(self).__name__} does not run on regions")
 
     def prepare(self, level: int, shape: tuple[int, int, int]) -> None:
         """Per-level set-up that draws no random numbers (models, exemplar pyramids)."""
