@@ -48,6 +48,23 @@ def test_radial_two_point_matches_a_brute_force_average(rng):
     assert materials.radial_two_point(ind, max_distance=0)[0] == pytest.approx(ind.mean())
 
 
+def test_non_periodic_radial_two_point_averages_the_pairs_inside(rng):
+    ind = rng.random((5, 6, 7)) < 0.4
+    r_max = 2
+    sums, counts = np.zeros(r_max + 1), np.zeros(r_max + 1)
+    for d in itertools.product(*(range(-n + 1, n) for n in ind.shape)):
+        r = int(np.rint(np.sqrt(sum(di * di for di in d))))
+        if r > r_max:
+            continue
+        a = ind[tuple(slice(max(0, -di), n - max(0, di)) for di, n in zip(d, ind.shape))]
+        b = ind[tuple(slice(max(0, di), n - max(0, -di)) for di, n in zip(d, ind.shape))]
+        sums[r] += (a & b).mean()
+        counts[r] += 1
+    got = materials.radial_two_point(ind, max_distance=r_max, periodic=False)
+    np.testing.assert_allclose(got, sums / counts, atol=1e-12)
+    assert not np.allclose(got, materials.radial_two_point(ind, max_distance=r_max))
+
+
 def test_specific_surface_area_of_a_sphere_and_by_stereology(porous):
     z, y, x = np.mgrid[:40, :40, :40].astype(np.float64)
     radius = 11.0

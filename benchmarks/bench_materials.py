@@ -1,0 +1,339 @@
+"""Materials benchmark: synthetic microstructures against the spread of a real scan's own crops.
+
+For every real scan built by ``benchmarks/materials_scans.py`` (``scans/<name>.npy``, float32 in
+[0, 1]), the exemplar is the scan's most typical ``S^3`` crop (``S = --size``, the crop whose grey
+mean and standard deviation lie nearest the crops' medians). The 2D methods (``npmrf``, the
+default; ``chen-wang``; ``kopf``) see its middle slice across axis 0 -- an anisotropic scan gives
+each view its own middle slice -- and ``volume-lh`` sees the crop itself. Each output (``S^3``)
+and every ``S^3`` crop of the scan (stride ``S/2``, at most ``--max-crops`` spread evenly) is
+judged on the minority phase at the exemplar's threshold (0.5 for a binary scan, Otsu's for a
+grey one):
+
+* ``fraction`` -- volume fraction;
+* ``surface`` -- specific surface area (marching cubes on the phase indicator, 1/voxel);
+* ``tau0..2`` -- tortuosity factor of the phase along each axis (TauFactor; ``inf`` when the
+  phase does not percolate);
+* ``s2`` -- error of the radial two-point correlation's shape: the L2 distance of
+  ``(S2(r) - phi^2) / (phi - phi^2)``, r = 1..S/2, to the mean of the crops' curves, divided by
+  that of a structureless volume (the exemplar's voxels shuffled): 0 = the scan's shape,
+  1 = no structure; ``s2_axes`` the same for the per-axis curves;
+* ``chord`` / ``chord_other`` -- mean chord length of the phase / of the other phase (voxels,
+  all three axes, chords cut by the faces left out).
+
+A cell is **inside** when it lies within the crops' minimum and maximum (for the errors: at
+most the crops' largest, each crop judged against the mean of the others); otherwise the table
+says how far outside, relative to the nearer bound. Prints a Markdown table, writes
+``materials.json`` and one figure per scan (real slices, synthetic slices, S2 with the crops'
+band) into ``--out``.
+
+Usage::
+
+    python benchmarks/materials_scans.py --sources SRC --out scans
+    python benchmarks/bench_materials.py --scans scans --out figures/materials
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import sys
+import time
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+import npmrf3d
+from npmrf3d.analysis import materials
+from npmrf3d.model.otsu import otsu_threshold
+
+sys.path.insert(0, str(pathlib.Path(__file__).parent))
+from _common import hardware
+from bench_volume_microct import typical_corner
+from materials_scans import SCANS, by_name
+
+METHODS = ("npmrf", "chen-wang", "kopf", "volume-lh")
+SCALARS = ("fraction", "surface", "tau0", "tau1", "tau2", "chord", "chord_other")
+ERRORS = ("s2", "s2_axes")
+
+
+def crop_corners(shape, side: int, max_crops: int) -> list[tuple[int, int, int]]:
+    """Corners of the ``side^3`` crops on the ``side // 2`` lattice, at most ``max_crops`` of them
+    spread evenly."""
+    step = max(side // 2, 1)
+    corners = [(i, j, k) for i in range(0, shape[0] - side + 1, step)
+               for j in range(0, shape[1] - side + 1, step) for k in range(0, shape[2] - side + 1, step)]
+    if len(corners) > max_crops:
+        corners = [corners[i] for i in np.linspace(0, len(corners) - 1, max_crops).round().astype(int)]
+    return corners
+
+
+def shape_curve(s2: np.ndarray, fraction: float) -> np.ndarray:
+    """``(S2 - phi^2) / (phi - phi^2)`` without lag 0 (1 by construction)."""
+    var = fraction - fraction ** 2
+    return (s2[..., 1:] - fraction ** 2) / var if var > 0 else np.zeros_like(s2[..., 1:])
+
+
+def tortuosity(ind: np.ndarray, axis: int) -> float:
+    try:
+        return materials.tortuosity(ind, axis=axis)
+    except npmrf3d.errors.ParameterError:
+        return float("inf")
+
+
+def statistics(ind: np.ndarray, *, tau: bool = True) -> dict:
+    """The benchmark's statistics of one phase indicator (see the module docstring)."""
+    r = min(ind.shape) // 2
+    fraction = float(ind.mean())
+    radial = materials.radial_two_point(ind, max_distance=r, periodic=False)
+    axes = materials.two_point_correlation(ind, True, max_distance=r, periodic=False)
+    chords = np.concatenate([materials.chord_lengths(ind, a) for a in range(3)])
+    others = np.concatenate([materials.chord_lengths(~ind, a) for a in range(3)])
+    out = {"fraction": fraction, "surface": materials.specific_surface_area(ind),
+           "chord": float(chords.mean()) if len(chords) else 0.0,
+           "chord_other": float(others.mean()) if len(others) else 0.0,
+           "radial": shape_curve(radial, fraction), "axes": shape_curve(axes, fraction)}
+    for a in range(3):
+        out[f"tau{a}"] = tortuosity(ind, a) if tau else float("nan")
+    return out
+
+
+def l2(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.sqrt(np.mean((np.asarray(a) - np.asarray(b)) ** 2)))
+
+
+def verdict(value: float, low: float, high: float) -> float:
+    """0 inside ``[low, high]``; else the relative distance to the nearer bound (signed: + above)."""
+    if low - 1e-12 <= value <= high + 1e-12:
+        return 0.0
+    if not np.isfinite(value):
+        return float("inf")
+    bound = high if value > high else low
+    return (value - bound) / max(abs(bound), 1e-12)
+
+
+class Judge:
+    """The crops of one scan: their statistics, spread and mean S2 shape curves."""
+
+    def __init__(self, crops: list[dict], control: dict):
+        self.crops = crops
+        self.radial = np.mean([c["radial"] for c in crops], axis=0)
+        self.axes = np.mean([c["axes"] for c in crops], axis=0)
+        self.control = {"s2": l2(control["radial"], self.radial), "s2_axes": l2(control["axes"], self.axes)}
+        n = len(crops)
+        errors = []
+        for i, c in enumerate(crops):  # each crop against the mean of the others
+            rest_r = (self.radial * n - c["radial"]) / (n - 1)
+            rest_a = (self.axes * n - c["axes"]) / (n - 1)
+            errors.append({"s2": l2(c["radial"], rest_r) / self.control["s2"],
+                           "s2_axes": l2(c["axes"], rest_a) / self.control["s2_axes"]})
+        self.spread = {k: (float(np.min([c[k] for c in crops])), float(np.max([c[k] for c in crops])))
+                       for k in SCALARS}
+        self.spread.update({k: (0.0, float(np.max([e[k] for e in errors]))) for k in ERRORS})
+
+    def judge(self, stats: dict) -> dict:
+        values = {k: stats[k] for k in SCALARS}
+        values["s2"] = l2(stats["radial"], self.radial) / self.control["s2"]
+        values["s2_axes"] = l2(stats["axes"], self.axes) / self.control["s2_axes"]
+        return {k: {"value": float(v), "outside": verdict(float(v), *self.spread[k])} for k, v in values.items()}
+
+
+def exemplars_for(crop: np.ndarray, isotropic: bool):
+    """The 2D exemplar(s) of a crop: its middle slice across axis 0, or each view's middle slice."""
+    n = crop.shape[0] // 2
+    if isotropic:
+        return {"exemplar": crop[n][..., None]}
+    return {"exemplar": crop[n][..., None],
+            "exemplars": {"front": crop[:, :, n][..., None], "right": crop[n][..., None],
+                          "top": crop[:, n][..., None]}}
+
+
+def synthesize(method: str, crop: np.ndarray, isotropic: bool, size: int, seed: int,
+               options: dict) -> tuple[np.ndarray, float]:
+    t0 = time.perf_counter()
+    if method == "volume-lh":
+        result = npmrf3d.synthesize(crop[..., None], method=method, size=size, rng=seed, **options)
+    else:
+        given = exemplars_for(crop, isotropic)
+        exemplar = given.pop("exemplar")
+        result = npmrf3d.synthesize(exemplar, method=method, size=size, rng=seed, **given, **options)
+    return result.volume[..., 0], time.perf_counter() - t0
+
+
+def cell(j: dict) -> str:
+    o = j["outside"]
+    v = j["value"]
+    text = "inf" if not np.isfinite(v) else (f"{v:.3f}" if abs(v) < 10 else f"{v:.3g}")
+    if o == 0:
+        return text
+    return f"{text} ({'out' if not np.isfinite(o) else (f'{o:+.0%}' if abs(o) < 10 else '>10x')})"
+
+
+def method_options(items: list[str]) -> dict:
+    """``METHOD:KEY=VALUE`` items -> {method: {key: value}} (values read as JSON when they parse)."""
+    out: dict = {}
+    for item in items:
+        try:
+            method, rest = item.split(":", 1)
+            key, value = rest.split("=", 1)
+        except ValueError:
+            raise SystemExit(f"bench_materials: error: --option takes METHOD:KEY=VALUE; got {item!r}") from None
+        try:
+            value = json.loads(value)
+        except json.JSONDecodeError:
+            pass
+        out.setdefault(method, {})[key] = value
+    return out
+
+
+def figure(path: pathlib.Path, name: str, crop: np.ndarray, volumes: dict, judge: Judge, runs: dict) -> None:
+    cols = 1 + len(volumes)
+    fig, ax = plt.subplots(4, cols, figsize=(2.1 * cols, 8.6))
+    n = crop.shape[0] // 2
+    for c, (label, vol) in enumerate([("real crop", crop)] + list(volumes.items())):
+        for row, sl in enumerate((vol[n], vol[:, n], vol[:, :, n])):
+            ax[row, c].imshow(sl, cmap="gray", vmin=0, vmax=1)
+            ax[row, c].set_xticks([])
+            ax[row, c].set_yticks([])
+        ax[0, c].set_title(label, fontsize=8)
+    for row, axis_label in enumerate(("slice across axis 0", "axis 1", "axis 2")):
+        ax[row, 0].set_ylabel(axis_label, fontsize=8)
+    gs = ax[3, 0].get_gridspec()
+    for a in ax[3]:
+        a.remove()
+    curve = fig.add_subplot(gs[3, :])
+    r = np.arange(1, len(judge.radial) + 1)
+    band = np.array([c["radial"] for c in judge.crops])
+    curve.fill_between(r, band.min(axis=0), band.max(axis=0), color="0.8", label=f"{len(judge.crops)} real crops")
+    curve.plot(r, judge.radial, "k-", lw=1.5, label="crops' mean")
+    for label in volumes:
+        curve.plot(r, runs[label]["radial"], lw=1, label=f"{label} ({runs[label]['judged']['s2']['value']:.2f})")
+    curve.axhline(0, color="0.5", lw=0.5)
+    curve.set_xlabel("r (voxels)")
+    curve.set_ylabel("(S2 - phi^2) / (phi - phi^2)")
+    curve.legend(fontsize=7, ncol=3)
+    fig.suptitle(f"{name}: middle slices of a real crop and of each method's volume; radial S2 shape",
+                 fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def run_scan(name: str, path: pathlib.Path, args) -> dict:
+    scan = by_name(name)
+    volume = np.load(path).astype(np.float32)
+    side = args.size
+    corners = crop_corners(volume.shape, side, args.max_crops)
+    a, b, c = typical_corner(volume, side // 2, side)
+    crop = volume[a:a + side, b:b + side, c:c + side]
+    threshold = 0.5 if scan.binary else float(otsu_threshold(crop))
+    above = float((crop > threshold).mean())
+    minority = (lambda v: v > threshold) if above <= 0.5 else (lambda v: v <= threshold)
+    t0 = time.perf_counter()
+    crops = [statistics(minority(volume[i:i + side, j:j + side, k:k + side]), tau=not args.no_tau)
+             for i, j, k in corners]
+    shuffled = np.random.default_rng(0).permutation(crop.ravel()).reshape(crop.shape)
+    judge = Judge(crops, statistics(minority(shuffled), tau=False))
+    print(f"{name}: {volume.shape}, {len(corners)} crops of {side}^3 ({time.perf_counter() - t0:.0f} s), "
+          f"exemplar crop at {(a, b, c)}, threshold {threshold:.3f}, phase "
+          f"{'above' if above <= 0.5 else 'at or below'} it", flush=True)
+    runs, volumes = {}, {}
+    for method in args.methods:
+        for seed in args.seeds:
+            vol, seconds = synthesize(method, crop, scan.isotropic, side, seed, args.options.get(method, {}))
+            stats = statistics(minority(vol), tau=not args.no_tau)
+            label = method if len(args.seeds) == 1 else f"{method} s{seed}"
+            runs[label] = {"method": method, "seed": seed, "seconds": round(seconds, 1),
+                           "judged": judge.judge(stats), "radial": stats["radial"]}
+            volumes[label] = vol
+            j = runs[label]["judged"]
+            print(f"  {label}: {seconds:.1f} s; " + ", ".join(f"{k} {cell(j[k])}" for k in SCALARS + ERRORS),
+                  flush=True)
+    out = pathlib.Path(args.out)
+    figure(out / f"{name}.png", name, crop, volumes, judge, runs)
+    return {"scan": name, "shape": list(volume.shape), "isotropic": scan.isotropic, "held_out": scan.held_out,
+            "binary": scan.binary, "threshold": threshold, "corner": [a, b, c], "crops": len(corners),
+            "spread": judge.spread, "control": judge.control,
+            "runs": {k: {kk: vv for kk, vv in v.items() if kk != "radial"} for k, v in runs.items()}}
+
+
+def table(records: list[dict]) -> str:
+    keys = SCALARS + ERRORS
+    lines = ["| scan | method | " + " | ".join(keys) + " | inside | time (s) |",
+             "|---" * (len(keys) + 4) + "|"]
+    for rec in records:
+        spread = " | ".join(f"{lo:.3g}–{hi:.3g}" if k in SCALARS else f"≤ {hi:.3f}"
+                            for k, (lo, hi) in ((k, rec["spread"][k]) for k in keys))
+        lines.append(f"| **{rec['scan']}**{'' if rec['held_out'] else ' (tuning)'}"
+                     f"{'' if rec['isotropic'] else ', 3 slices'} | crops' spread | {spread} | | |")
+        for label, run in rec["runs"].items():
+            j = run["judged"]
+            n_in = sum(j[k]["outside"] == 0 for k in keys)
+            lines.append(f"| | {label} | " + " | ".join(cell(j[k]) for k in keys)
+                         + f" | {n_in}/{len(keys)} | {run['seconds']:.0f} |")
+    return "\n".join(lines)
+
+
+def summary(records: list[dict]) -> str:
+    """Per method and group: share of cells inside, worst miss, mean S2 ratio."""
+    lines = []
+    for group, keep in (("held-out", True), ("tuning", False)):
+        for iso in (True, False):
+            recs = [r for r in records if r["held_out"] == keep and r["isotropic"] == iso]
+            if not recs:
+                continue
+            methods = sorted({run["method"] for r in recs for run in r["runs"].values()}, key=METHODS.index)
+            for method in methods:
+                cells = [run["judged"] for r in recs for run in r["runs"].values() if run["method"] == method]
+                outs = [c[k]["outside"] for c in cells for k in SCALARS + ERRORS]
+                inside = np.mean([o == 0 for o in outs])
+                worst = max(abs(o) for o in outs)
+                s2 = np.mean([c["s2"]["value"] for c in cells])
+                lines.append(f"{group:8s} {'isotropic' if iso else 'anisotropic':11s} {method:10s}: "
+                             f"{inside:.0%} of cells inside, worst {worst:.0%} outside, S2 ratio {s2:.3f}")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument("--scans", default="scans", help="folder of the scans' .npy files")
+    p.add_argument("--names", nargs="+", default=[s.name for s in SCANS], help="which scans")
+    p.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
+    p.add_argument("--seeds", type=int, nargs="+", default=[7])
+    p.add_argument("--size", type=int, default=64, help="side of the crops and of the volumes made")
+    p.add_argument("--max-crops", type=int, default=27)
+    p.add_argument("--no-tau", action="store_true", help="skip the tortuosity factors (no taufactor)")
+    p.add_argument("--option", action="append", default=[], metavar="METHOD:KEY=VALUE",
+                   help="an option of one method's configuration, e.g. npmrf:levels=4 (repeatable)")
+    p.add_argument("--out", default="figures/materials")
+    args = p.parse_args(argv)
+    args.options = method_options(args.option)
+    folder = pathlib.Path(args.scans)
+    missing = [n for n in args.names if not (folder / f"{n}.npy").is_file()]
+    if len(missing) == len(args.names):
+        print(f"bench_materials: error: no scan in {folder}; build them with benchmarks/materials_scans.py",
+              file=sys.stderr)
+        return 2
+    for n in missing:
+        print(f"bench_materials: {n}: {folder / (n + '.npy')} not found, left out", file=sys.stderr)
+    pathlib.Path(args.out).mkdir(parents=True, exist_ok=True)
+    records = [run_scan(n, folder / f"{n}.npy", args) for n in args.names if n not in missing]
+    print()
+    print(table(records))
+    print()
+    print(summary(records))
+    record = {"hardware": hardware(), "size": args.size, "seeds": args.seeds, "methods": args.methods,
+              "options": args.options,
+              "scans": records}
+    with open(pathlib.Path(args.out) / "materials.json", "w") as fh:
+        json.dump(record, fh, indent=1, default=float)
+    print(f"wrote {args.out}/materials.json and one PNG per scan")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
