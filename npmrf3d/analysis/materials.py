@@ -134,6 +134,9 @@ def specific_surface_area(volume, *, threshold="otsu", spacing: float = 1.0) -> 
     A grey volume's surface is its iso-surface at the threshold (sub-voxel accurate); a bool
     volume's is the 0.5 iso-surface of the indicator (``skimage.measure.marching_cubes``). The
     surface is not closed at the volume's faces; its area is divided by ``N1 N2 N3 spacing^3``.
+    A bool volume's voxel staircase reads about 9 % above the smooth surface it samples (a
+    digital ball: +8.8 %; thresholded smooth noise: +8.6 % against the grey iso-surface); PoreSpy
+    and TauFactor blur the indicator first (docs/materials.md).
 
     Examples
     --------
