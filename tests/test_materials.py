@@ -133,18 +133,21 @@ def test_missing_optional_packages_name_the_extra(monkeypatch):
         materials.specific_surface_area(half)
 
 
-def test_tortuosity_calls_taufactor_along_the_axis(monkeypatch):
+@pytest.mark.parametrize("cuda", [False, True])
+def test_tortuosity_calls_taufactor_along_the_axis_on_the_available_device(monkeypatch, cuda):
     seen = {}
 
     class Solver:
-        def __init__(self, img):
-            seen["shape"] = img.shape
+        def __init__(self, img, device):
+            seen["shape"], seen["device"] = img.shape, device
             self.tau = np.array([1.5])
 
         def solve(self, verbose=""):
             seen["solved"] = True
 
-    fake = type("taufactor", (), {"Solver": Solver})
+    # one stand-in for both imports: taufactor's Solver and torch's CUDA query
+    fake = type("taufactor_and_torch", (), {
+        "Solver": Solver, "cuda": type("cuda", (), {"is_available": staticmethod(lambda: cuda)})})
     monkeypatch.setattr(materials.importlib, "import_module", lambda name, *a: fake)
     assert materials.tortuosity(np.ones((4, 5, 6), dtype=bool), axis=2) == 1.5
-    assert seen == {"shape": (6, 4, 5), "solved": True}
+    assert seen == {"shape": (6, 4, 5), "device": "cuda" if cuda else "cpu", "solved": True}
