@@ -28,7 +28,7 @@ _MONTHS = ("January|February|March|April|May|June|July|August|September|October|
 #: One alternative per kind of process word. ``stop`` is followed by a space or hyphen and a
 #: whole number that is not a decimal (``--stop 0.95`` and the cooling study's ``stop95`` are
 #: the product's own); a date counts only with its day (a data snapshot's "December 2026" is
-#: provenance, "2 December 2026" a change log).
+#: provenance, one with its day a change log).
 PROCESS_WORDS = re.compile("|".join((
     r"\b[Ss]top[- ]\d+(?![.\d])",
     r"\bstop\d+/",
@@ -77,7 +77,7 @@ def _text_of(path: pathlib.Path) -> str:
     if path.resolve() == THIS_FILE:
         # this module's own patterns and planted examples are not product text
         text = text.split("# -- planted examples --", 1)[0]
-        text = re.sub(r"PROCESS_WORDS = re\.compile\(.*?\)\)\)", "", text, flags=re.S)
+        text = re.sub(r"PROCESS_WORDS = re\.compile\(.*?\)\)\)", "", text, flags=re.DOTALL)
     return text
 
 
