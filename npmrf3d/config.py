@@ -64,9 +64,9 @@ class DecisionRule:
 SUPPORTS = ("coherent", "full")
 
 #: The full-Parzen support's decision rules by name: ``paper`` is Urs et al. 2014 word for word
-#: (the ablation baseline; it collapses to flat volumes on photographs, docs/quality.md),
+#: (the ablation baseline; it collapses to flat volumes on photographs, docs/full_parzen.md),
 #: ``tuned`` the sharpened bandwidths, sampled decision, histogram penalty and outlier share
-#: chosen by measurement (docs/quality.md, "The levers, measured").
+#: chosen by measurement (docs/full_parzen.md, "The levers").
 PRESETS: dict[str, DecisionRule] = {
     "paper": DecisionRule(),
     "tuned": DecisionRule(

@@ -12,7 +12,7 @@ Two parts, each writing a PNG and the JSON of the numbers behind it into ``--out
   the dominant in-plane orientation of every slice ``volume[i]`` (structure tensor) follows the
   field's angle (``twist.json``, ``twist.png``: slices and the orientation against i).
 
-Run: ``python studies/volume3d.py`` (the issue's scale: 64^3 crop -> 128^3) or ``--quick``.
+Run: ``python studies/volume3d.py`` (64^3 crop -> 128^3) or ``--quick``.
 """
 
 from __future__ import annotations

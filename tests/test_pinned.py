@@ -1,8 +1,7 @@
 """Pinned volumes: small runs of every method must stay bit-identical across refactoring.
 
 These hashes are *not* expected results in the scientific sense (nothing here says the volumes
-are good); they were computed once from the code as it stood before the architecture refactor
-(commit 501c217) and pin its behaviour, so that moving the level loop, the
+are good); they were computed from the code of a reviewed state and pin its behaviour, so that moving the level loop, the
 relaxations, the up-sampling and the method registry around cannot silently change any volume
 for a given seed and configuration. A deliberate change of an algorithm's output updates the
 hash in the same commit and says why in the message.

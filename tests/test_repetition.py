@@ -27,7 +27,7 @@ def test_copy_repetition_matches_every_shift_counted(shape, values, min_shift, t
 def test_the_searched_shifts_find_a_jittered_copy_and_count_a_collapse_once():
     """The default (peaks of the exact-copy histogram) finds the exact maximum of a copied
     volume: blocks of an exemplar at a far shift, moved by the jitter, beside a flat region
-    that copies one voxel (which the stop-31 box sum counted up to 125 times)."""
+    that copies one voxel (which a box sum over shifts would count up to 125 times)."""
     rng = np.random.default_rng(5)
     coords = rng.integers(0, 40, size=(20, 20, 20, 3))
     coords[10:18, :8, :8] = coords[0:8, :8, :8] + rng.integers(-1, 2, size=(8, 8, 8, 3))  # a copy at t = 10

@@ -6,7 +6,7 @@ compare log-densities across labels and a reordered reduction would change argma
 The one exception is :data:`jit_contract` for the neighbour-distance loop: it only allows
 fused multiply-add (``contract``), which rounds once instead of twice; the compiled code is
 the same for every thread count, so results stay bit-identical across threads (measured
-speed-up in docs/quality.md).
+speed-up in docs/performance.md).
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ update it takes. The arguments come in bundles (:class:`ViewModels`, :class:`Lev
 
 Heuristic codes (docs/model.md, section 3): 0 = ML_H1a, 1 = ML_H1b, 2 = ML_H2a, 3 = ML_H2b.
 Decision codes: 0 = argmax (the paper's ICM), 1 = draw from ``exp(score / tau)`` with a
-pre-drawn uniform (this project's stochastic decision, see docs/quality.md).
+pre-drawn uniform (this project's stochastic decision, see docs/full_parzen.md, "The levers").
 """
 
 from __future__ import annotations

@@ -11,9 +11,9 @@ of all voxels. A volume tiled by the exemplar scores near 1 at ``t`` = its perio
 by the jitter by a voxel or two still counts); a volume that recombines the exemplar's parts
 scores near 0, since two far voxels copy nearby exemplar voxels by chance, each at its own shift.
 Every voxel counts at most once per shift, so a flat region that copies one exemplar voxel many
-times (a collapse) scores its true share and not a multiple of it (docs/volume.md, "A flat
-region is not a repetition": a box sum over shifts counted it up to 125 times and reported 0.20
-for Berea, whose share is 0.02).
+times (a collapse) scores its true share and not a multiple of it (docs/volume.md, "The
+repetition statistic": a box sum over shifts would count it up to 125 times, 0.20 on a Berea
+volume whose share is 0.02).
 """
 
 from __future__ import annotations

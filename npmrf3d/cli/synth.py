@@ -202,7 +202,7 @@ def register(commands, formatter_class) -> None:
              "with one level fewer, and the volume kept is the one whose two-point correlation "
              "is nearer the exemplar's (about twice the time; with --checkpoint FILE.npz the "
              "second run resumes from FILE.levelsL.npz) (measured on micro-CT slices, "
-             "docs/volume.md); auto = when the exemplars hold at most "
+             "docs/segmented.md); auto = when the exemplars hold at most "
              f"{SEGMENTED_MAX_VALUES} distinct grey values, no = --window and --levels as given; "
              "run.json's stats say which ran (segmented, level_trials, levels_kept)",
     )

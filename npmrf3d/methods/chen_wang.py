@@ -284,7 +284,7 @@ def chen_wang_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress
     value_bins : int
         Bins per channel of those histograms.
     phase_weight : float >= 0
-        A phase control through the histogram prior (this project's addition, docs/volume.md): each
+        A phase control through the histogram prior (this project's addition, docs/segmented.md, "Phase control (`phase_weight`)"): each
         channel's value bins split at the Otsu threshold of the exemplars' histogram into two
         phases, and after every iteration a :class:`npmrf3d.model.phases.PhaseControl` per
         channel prices the phase the volume over-uses; a candidate's prior loses

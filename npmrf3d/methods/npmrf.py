@@ -104,7 +104,7 @@ def npmrf_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress: Pr
         one fewer, of which :func:`npmrf3d.methods.npmrf_coherent.best_of_pyramids` keeps the one nearer the
         exemplars' two-point correlation; about twice the time). "auto": when the exemplars hold
         at most :data:`npmrf3d.methods.npmrf_coherent.SEGMENTED_MAX_VALUES` grey values together; "no":
-        ``window`` and ``levels`` as given. The result's ``stats`` say what ran (docs/volume.md).
+        ``window`` and ``levels`` as given. The result's ``stats`` say what ran (docs/segmented.md).
     bandwidth, adaptive, decision, tau, histogram_weight : optional
         Support ``full``: override single fields of the preset (:class:`npmrf3d.config.DecisionRule`).
     centre_bandwidth, outlier : optional

@@ -13,9 +13,9 @@ voxel's own source -- and the voxel copies the candidate whose centre value maxi
 (ties: the first). Multi-scale through the same coordinate pyramid (Gaussian stack, jitter at the
 coarser levels), so one voxel's state is its exemplar coordinate.
 
-Choices (docs/volume.md): the bandwidth is adaptive, ``2h^2 = adaptive * min_p D_p`` (the
+Choices (docs/volume.md, "`volume-npmrf`: the NP-MRF with one 3D view"): the bandwidth is adaptive, ``2h^2 = adaptive * min_p D_p`` (the
 literal ``h_opt`` of docs/model.md, section 2, is far too wide for ``d = 124 C``, as
-docs/quality.md, "The literal method collapses", measured in 2D); ``adaptive = 0.1`` by measurement: at 1.0 the decision is mode-seeking and the porous test
+docs/full_parzen.md, "The literal rule collapses (reproduced)", measured in 2D); ``adaptive = 0.1`` by measurement: at 1.0 the decision is mode-seeking and the porous test
 volume's minority phase shrank from 50 % to 26 % in large blobs, at 0.1 it kept 45 %; the centre kernel's ``h_c`` is ``centre_bandwidth`` times the exemplar's standard deviation;
 neighbourhood values at level ``l`` are read from the exemplar smoothed for that level, every
 ``2**l`` voxels. No vector field (``vector_field`` stays ``none``).

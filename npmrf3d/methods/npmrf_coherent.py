@@ -80,8 +80,8 @@ SEGMENTED_MAX_VALUES = 16
 
 @dataclass(frozen=True)
 class SegmentedPreset:
-    """What ``synth``'s coherent default changes for a segmented exemplar (docs/volume.md,
-    "The 2D default on segmented slices"): chosen on a micro-CT slice (Berea), where the
+    """What ``synth``'s coherent default changes for a segmented exemplar (docs/segmented.md,
+    "The segmented preset"): chosen on a micro-CT slice (Berea), where the
     photographs' default lost a third to a half of the pores, and checked on five held-out
     slices of four scans (the phase fraction and the 3D correlation shape improve on all).
 
@@ -92,7 +92,7 @@ class SegmentedPreset:
     volume kept is the one whose two-point correlation shape is nearer the exemplars'
     (:func:`npmrf3d.analysis.metrics.two_point_shape_error`): the coarsest level builds the large pores
     of one slice and smears the small throats of another, and only the exemplar can tell which
-    (docs/volume.md, "Two pyramids, the better kept").
+    (docs/segmented.md, "Two pyramids, the better kept").
     """
 
     window: int = 5
@@ -149,7 +149,7 @@ class CoherentConfig:
     random_candidates: int = _CW.random_candidates
     global_share: float = _CW.global_share
     coherence_bias: float = _CW.coherence_bias
-    # measured (docs/quality.md): the histogram prior alone keeps hubble's spots and leaves
+    # measured (docs/quality.md, "Value histograms"): the histogram prior alone keeps hubble's spots and leaves
     # gravel as it was; the vote weighting (Chen–Wang's default) cost gravel's grain here
     value_weight: float = 0.0
     value_prior: float = 5.0

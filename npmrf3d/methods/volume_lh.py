@@ -27,7 +27,7 @@ voxel of the 3D exemplar: the synthesised volume is a field of exemplar coordina
    and compared with the exemplar's at ``u + h D``, so exemplar direction ``D`` is laid along
    ``R D``: the structure turns with the field.
 
-Choices where the paper is silent (also in ``docs/volume.md``): a coarsest level of
+Choices where the paper is silent (also in ``docs/volume.md``, "The method and its settings"): a coarsest level of
 ``size / 2**(levels-1)`` voxels holding the exemplar tiled at its spacing (what one voxel
 up-sampled would give) with a random offset per tile and jitter; the valid box keeps
 coordinates ``window // 2`` voxels from the exemplar's faces (the paper discards 2 voxels per
@@ -104,7 +104,7 @@ class VolumeConfig:
     fine_jitter: float = 0.0
     usage: float = 1.0
     balance: float = 4.0
-    # docs/volume.md: the tiled start repeats 8-22 % of a 128^3 volume at the
+    # docs/volume.md, "The coarsest level's start": the tiled start repeats 8-22 % of a 128^3 volume at the
     # exemplar's period; blocks keeps the statistics of 6 scans x 3 seeds but one surface area
     start: str = "blocks"
     vector_field: str = "none"

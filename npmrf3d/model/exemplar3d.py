@@ -5,7 +5,7 @@ scaled as 2D exemplars are (``uint8 / 255``, ``uint16 / 65535``, ``bool`` to 0/1
 their units). A 2D method refuses one, a 3D method refuses an image, each with a message that
 says how to state which is meant (``exemplar_kind``, on the command line ``--exemplar-kind``).
 
-How an array is recognised (:func:`interpret`; ``docs/volume.md``)
+How an array is recognised (:func:`interpret`; ``docs/scan_input.md``)
 ------------------------------------------------------------------
 * A TIFF says it: tifffile's axes of the first series decide. ``Z`` (an ImageJ/Fiji stack,
   ``slices`` in its metadata) or ``Q``/``I`` (a plain multi-page TIFF, one page per slice) is the

@@ -12,7 +12,7 @@ flips sign between sub-passes (``docs/volume.md``, "The phase histogram's gain")
 The same control drives the 2D methods' value histogram (:func:`bin_phases`,
 :func:`bin_phase_error`, :func:`phase_prior_target`): the two sides of each channel's Otsu split
 of the exemplars' value histogram, priced through the histogram prior (``phase_weight``,
-``docs/volume.md``, "A phase control in the 2D default").
+``docs/segmented.md``, "Phase control (`phase_weight`)").
 """
 
 from __future__ import annotations

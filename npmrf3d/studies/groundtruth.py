@@ -14,7 +14,7 @@ synthesises volumes with several methods and compares each with the real volume:
   curves to the real volume's, per axis and averaged. For a phase volume S2 is dominated by
   the phase fraction, so a structureless volume with the right fraction scores well (measured
   on real micro-CT slices: it ranked the shuffled control above structured volumes,
-  ``docs/volume.md``); ``two_point_shape_l2`` is the same distance of the normalised
+  ``docs/segmented.md``, "How the slices are scored"); ``two_point_shape_l2`` is the same distance of the normalised
   autocovariances (``two_point(..., normalised=True)``), which leaves the fraction to
   ``fraction_l1``. (For grey volumes the two are equal.)
 * **phase / grey-level fractions** (:func:`fractions`): share of voxels per phase (each voxel
