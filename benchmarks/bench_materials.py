@@ -11,8 +11,10 @@ grey one):
 
 * ``fraction`` -- volume fraction;
 * ``surface`` -- specific surface area (marching cubes on the phase indicator, 1/voxel);
-* ``tau0..2`` -- tortuosity factor of the phase along each axis (TauFactor; ``inf`` when the
-  phase does not percolate);
+* ``diff0..2`` -- relative diffusivity of the phase along each axis, ``fraction / tau`` with
+  ``tau`` TauFactor's tortuosity factor (0 when the phase does not percolate). The table gives
+  it rather than ``tau`` because ``tau`` is unbounded: crops of a scan whose phase barely
+  percolates read 10^6 beside 3 (``materials.json`` keeps ``tau`` too);
 * ``s2`` -- error of the radial two-point correlation's shape: the L2 distance of
   ``(S2(r) - phi^2) / (phi - phi^2)``, r = 1..S/2, to the mean of the crops' curves, divided by
   that of a structureless volume (the exemplar's voxels shuffled): 0 = the scan's shape,
@@ -56,8 +58,9 @@ from bench_volume_microct import typical_corner
 from materials_scans import SCANS, by_name
 
 METHODS = ("npmrf", "chen-wang", "kopf", "volume-lh")
-SCALARS = ("fraction", "surface", "tau0", "tau1", "tau2", "chord", "chord_other")
+SCALARS = ("fraction", "surface", "diff0", "diff1", "diff2", "chord", "chord_other")
 ERRORS = ("s2", "s2_axes")
+TAUS = ("tau0", "tau1", "tau2")
 
 
 def crop_corners(shape, side: int, max_crops: int) -> list[tuple[int, int, int]]:
@@ -78,6 +81,7 @@ def shape_curve(s2: np.ndarray, fraction: float) -> np.ndarray:
 
 
 def tortuosity(ind: np.ndarray, axis: int) -> float:
+    """TauFactor's tortuosity factor, ``inf`` when the phase does not percolate along ``axis``."""
     try:
         return materials.tortuosity(ind, axis=axis)
     except npmrf3d.errors.ParameterError:
@@ -98,6 +102,7 @@ def statistics(ind: np.ndarray, *, tau: bool = True) -> dict:
            "radial": shape_curve(radial, fraction), "axes": shape_curve(axes, fraction)}
     for a in range(3):
         out[f"tau{a}"] = tortuosity(ind, a) if tau else float("nan")
+        out[f"diff{a}"] = fraction / out[f"tau{a}"]
     return out
 
 
@@ -106,7 +111,10 @@ def l2(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def verdict(value: float, low: float, high: float) -> float:
-    """0 inside ``[low, high]``; else the relative distance to the nearer bound (signed: + above)."""
+    """0 inside ``[low, high]``; else the relative distance to the nearer bound (signed: + above);
+    NaN for a statistic not measured."""
+    if np.isnan(value) or np.isnan(low):
+        return float("nan")
     if low - 1e-12 <= value <= high + 1e-12:
         return 0.0
     if not np.isfinite(value):
@@ -131,11 +139,11 @@ class Judge:
             errors.append({"s2": l2(c["radial"], rest_r) / self.control["s2"],
                            "s2_axes": l2(c["axes"], rest_a) / self.control["s2_axes"]})
         self.spread = {k: (float(np.min([c[k] for c in crops])), float(np.max([c[k] for c in crops])))
-                       for k in SCALARS}
+                       for k in SCALARS + TAUS}
         self.spread.update({k: (0.0, float(np.max([e[k] for e in errors]))) for k in ERRORS})
 
     def judge(self, stats: dict) -> dict:
-        values = {k: stats[k] for k in SCALARS}
+        values = {k: stats[k] for k in SCALARS + TAUS}
         values["s2"] = l2(stats["radial"], self.radial) / self.control["s2"]
         values["s2_axes"] = l2(stats["axes"], self.axes) / self.control["s2_axes"]
         return {k: {"value": float(v), "outside": verdict(float(v), *self.spread[k])} for k, v in values.items()}
@@ -166,6 +174,8 @@ def synthesize(method: str, crop: np.ndarray, isotropic: bool, size: int, seed: 
 def cell(j: dict) -> str:
     o = j["outside"]
     v = j["value"]
+    if np.isnan(v):
+        return "–"
     text = "inf" if not np.isfinite(v) else (f"{v:.3f}" if abs(v) < 10 else f"{v:.3g}")
     if o == 0:
         return text
@@ -233,8 +243,16 @@ def run_scan(name: str, path: pathlib.Path, args) -> dict:
     above = float((crop > threshold).mean())
     minority = (lambda v: v > threshold) if above <= 0.5 else (lambda v: v <= threshold)
     t0 = time.perf_counter()
-    crops = [statistics(minority(volume[i:i + side, j:j + side, k:k + side]), tau=not args.no_tau)
-             for i, j, k in corners]
+    cache = pathlib.Path(args.out) / "crops" / f"{name}-{side}-{len(corners)}-{'no-tau' if args.no_tau else 'tau'}.npz"
+    if cache.is_file():  # the crops' statistics depend only on the scan, the size and the corners
+        with np.load(cache, allow_pickle=False) as saved:
+            crops = [{k: (saved[k][n] if saved[k].ndim > 1 else float(saved[k][n])) for k in saved.files}
+                     for n in range(len(corners))]
+    else:
+        crops = [statistics(minority(volume[i:i + side, j:j + side, k:k + side]), tau=not args.no_tau)
+                 for i, j, k in corners]
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(cache, **{k: np.array([c[k] for c in crops]) for k in crops[0]})
     shuffled = np.random.default_rng(0).permutation(crop.ravel()).reshape(crop.shape)
     judge = Judge(crops, statistics(minority(shuffled), tau=False))
     print(f"{name}: {volume.shape}, {len(corners)} crops of {side}^3 ({time.perf_counter() - t0:.0f} s), "
@@ -271,9 +289,10 @@ def table(records: list[dict]) -> str:
                      f"{'' if rec['isotropic'] else ', 3 slices'} | crops' spread | {spread} | | |")
         for label, run in rec["runs"].items():
             j = run["judged"]
-            n_in = sum(j[k]["outside"] == 0 for k in keys)
+            judged = [k for k in keys if not np.isnan(j[k]["outside"])]
+            n_in = sum(j[k]["outside"] == 0 for k in judged)
             lines.append(f"| | {label} | " + " | ".join(cell(j[k]) for k in keys)
-                         + f" | {n_in}/{len(keys)} | {run['seconds']:.0f} |")
+                         + f" | {n_in}/{len(judged)} | {run['seconds']:.0f} |")
     return "\n".join(lines)
 
 
@@ -288,7 +307,7 @@ def summary(records: list[dict]) -> str:
             methods = sorted({run["method"] for r in recs for run in r["runs"].values()}, key=METHODS.index)
             for method in methods:
                 cells = [run["judged"] for r in recs for run in r["runs"].values() if run["method"] == method]
-                outs = [c[k]["outside"] for c in cells for k in SCALARS + ERRORS]
+                outs = [c[k]["outside"] for c in cells for k in SCALARS + ERRORS if not np.isnan(c[k]["outside"])]
                 inside = np.mean([o == 0 for o in outs])
                 worst = max(abs(o) for o in outs)
                 s2 = np.mean([c["s2"]["value"] for c in cells])
