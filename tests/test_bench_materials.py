@@ -1,0 +1,88 @@
+"""The measuring pieces of the materials benchmark (benchmarks/bench_materials.py)."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import pathlib
+import sys
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+_BENCH = pathlib.Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+@pytest.fixture(scope="module")
+def bm():
+    sys.path.insert(0, str(_BENCH))
+    try:
+        spec = importlib.util.spec_from_file_location("bench_materials", _BENCH / "bench_materials.py")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules["bench_materials"] = module
+        spec.loader.exec_module(module)
+    finally:
+        sys.path.remove(str(_BENCH))
+    return module
+
+
+def blobs(shape, seed: int, sigma: float = 2.0) -> np.ndarray:
+    """A stationary two-phase-like grey volume in [0, 1]."""
+    x = ndimage.gaussian_filter(np.random.default_rng(seed).standard_normal(shape), sigma, mode="wrap")
+    return ((x - x.min()) / (x.max() - x.min())).astype(np.float32)
+
+
+def phase(volume: np.ndarray, share: float = 0.4) -> np.ndarray:
+    """The ``share`` of the voxels with the highest values."""
+    return volume > np.quantile(volume, 1.0 - share)
+
+
+def test_verdict_is_zero_inside_and_relative_outside(bm):
+    assert bm.verdict(0.5, 0.4, 0.6) == 0.0
+    assert bm.verdict(0.66, 0.4, 0.6) == pytest.approx(0.1)
+    assert bm.verdict(0.3, 0.4, 0.6) == pytest.approx(-0.25)
+    assert np.isnan(bm.verdict(float("nan"), 0.4, 0.6))
+
+
+def test_crop_corners_are_spread_and_capped(bm):
+    corners = bm.crop_corners((64, 64, 96), 32, 100)
+    assert len(corners) == 3 * 3 * 5 and corners[0] == (0, 0, 0) and corners[-1] == (32, 32, 64)
+    capped = bm.crop_corners((64, 64, 96), 32, 7)
+    assert len(capped) == 7 and capped[0] == (0, 0, 0) and capped[-1] == (32, 32, 64)
+
+
+def test_structure_scores_near_the_crops_and_shuffling_near_one(bm):
+    volume = phase(blobs((64, 64, 64), 0))
+    crops = [bm.statistics(volume[i:i + 32, j:j + 32, k:k + 32], tau=False)
+             for i, j, k in bm.crop_corners(volume.shape, 32, 27)]
+    shuffled = np.random.default_rng(1).permutation(volume[:32, :32, :32].ravel()).reshape(32, 32, 32)
+    judge = bm.Judge(crops, bm.statistics(shuffled, tau=False))
+    other = bm.statistics(phase(blobs((64, 64, 64), 5))[:32, :32, :32], tau=False)  # a new draw
+    coarse = bm.statistics(phase(blobs((64, 64, 64), 5, sigma=4.0))[:32, :32, :32], tau=False)  # larger grains
+    near, far = judge.judge(other), judge.judge(coarse)
+    assert near["s2"]["value"] < 0.5 < far["s2"]["value"]
+    assert near["chord"]["outside"] == 0 and far["chord"]["outside"] > 0.2
+    again = bm.statistics(shuffled, tau=False)
+    assert judge.judge(again)["s2"]["value"] == pytest.approx(1.0)
+    assert np.isnan(near["diff0"]["value"])   # not measured without tau
+
+
+def test_a_run_writes_the_table_record_and_figure(bm, tmp_path, capsys):
+    scans = tmp_path / "scans"
+    scans.mkdir()
+    np.save(scans / "ketton.npy", (blobs((48, 48, 48), 2) > 0.55).astype(np.float32))
+    out = tmp_path / "out"
+    assert bm.main(["--scans", str(scans), "--names", "ketton", "--size", "32", "--max-crops", "4",
+                    "--methods", "kopf", "--option", "kopf:levels=1", "--no-tau", "--out", str(out)]) == 0
+    record = json.loads((out / "materials.json").read_text())
+    run = record["scans"][0]["runs"]["kopf"]
+    assert set(run["judged"]) == set(bm.SCALARS + bm.TAUS + bm.ERRORS)
+    assert record["options"] == {"kopf": {"levels": 1}}
+    assert (out / "ketton.png").stat().st_size > 10_000
+    assert "| **ketton** |" in capsys.readouterr().out
+
+
+def test_no_scan_is_refused_in_one_line(bm, tmp_path, capsys):
+    assert bm.main(["--scans", str(tmp_path), "--names", "ketton"]) == 2
+    assert "materials_scans.py" in capsys.readouterr().err
