@@ -128,6 +128,7 @@ class SynthesisConfig:
     toroidal_exemplar: bool = False
     temperatures: bool = False
     blockwise: bool = False
+    phase_weight: float = 0.0
     seed: int | None = None
 
     def to_dict(self) -> dict:

@@ -88,3 +88,23 @@ def test_chen_wang_records_the_controls_state():
                                phase_weight=4.0)
     level = res.stats["levels"]["level_0"]
     assert len(level["phase_error"]) == 1 and len(level["phase_error"][0]) == 2 and 0 < level["phase_gain"][0] <= 1
+
+
+def test_the_default_sampler_passes_its_phase_weight_to_the_coherent_run():
+    """``synth --phase-weight`` reaches the coherent sampler's control: the default's run with
+    it equals the coherent sampler given the default's options and the same weight."""
+    import dataclasses
+
+    import npmrf3d
+    from npmrf3d.methods import npmrf
+
+    ex = _thin_bright_lines()
+    config = npmrf.make_config(size=16, window=5, levels=2, phase_weight=16.0)
+    options = npmrf._coherent_options(config, False, 2)
+    assert options.phase_weight == 16.0
+    on = npmrf3d.synthesize(ex, size=16, window=5, levels=2, phase_weight=16.0, segmented="no", rng=1)
+    fields = {k: v for k, v in dataclasses.asdict(options).items() if k not in ("size", "seed")}
+    twin = coherent_synthesize(ex, size=16, rng=1, **fields)
+    assert np.array_equal(on.volume, twin.volume)
+    off = npmrf3d.synthesize(ex, size=16, window=5, levels=2, segmented="no", rng=1)
+    assert "phase_error" in on.stats["levels"]["level_0"] and "phase_error" not in off.stats["levels"]["level_0"]

@@ -207,6 +207,13 @@ def register(commands, formatter_class) -> None:
              "run.json's stats say which ran (segmented, level_trials, levels_kept)",
     )
     method.add_argument(
+        "--phase-weight", type=float, default=_d("phase_weight"), metavar="W",
+        help="support coherent: a phase control through the histogram prior -- the value bins "
+             "split at the exemplars' Otsu threshold, and a candidate of the phase the volume "
+             "over-uses loses W times that phase's price; keeps a minority phase's share of a "
+             "scan slice (docs/materials.md), >= 0 (0 = off)",
+    )
+    method.add_argument(
         "--bandwidth", type=float, default=None, metavar="B",
         help=_rule_help("neighbour bandwidth as a factor of h_opt, a positive number", "bandwidth"),
     )
@@ -327,7 +334,7 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
         tau=args.tau, histogram_weight=args.histogram_weight, outlier=args.outlier,
         grey_levels=args.grey_levels,
         palette=args.palette, toroidal_exemplar=args.toroidal_exemplar, temperatures=args.temperatures,
-        blockwise=blockwise_requested(args), seed=args.seed,
+        blockwise=blockwise_requested(args), phase_weight=args.phase_weight, seed=args.seed,
     )
     out, checkpoint, per_view, sources = prepare_run(args, METHOD, config, whole=not zarr_output(args))
 

@@ -289,7 +289,8 @@ def _coherent_options(config: SynthesisConfig, phases: bool, levels: int) -> npm
     return npmrf_coherent.make_coherent_config(
         size=config.size, window=(window,) * levels, levels=levels,
         views=config.views, heuristic=config.heuristic, centre_bandwidth=config.rule.centre_bandwidth,
-        outlier=config.rule.outlier, value_weight=value_weight, t0=config.t0 if anneal else 0.0,
+        outlier=config.rule.outlier, value_weight=value_weight, phase_weight=config.phase_weight,
+        t0=config.t0 if anneal else 0.0,
         t_end=config.t_end, schedule=config.schedule, sampler=config.sampler, blockwise=config.blockwise,
         seed=config.seed,
         **({"iterations": (config.proposals,) * levels} if anneal else {}),

@@ -69,6 +69,7 @@ APPLIES: dict[str, tuple[tuple[str, str], ...]] = {
     "histogram_weight": (("full", "icm"), ("full", "anneal")),
     "toroidal_exemplar": (("full", "icm"), ("full", "anneal")),
     "segmented": (("coherent", "icm"), ("coherent", "anneal")),
+    "phase_weight": (("coherent", "icm"), ("coherent", "anneal")),
 }
 #: The options that support ``coherent`` with ICM uses only with per-voxel temperatures (without
 #: them every voxel is re-decided in each of a level's iterations and children copy 8/8).
@@ -140,7 +141,7 @@ def make_config(
     schedule=_C.schedule, t0=_C.t0, t_end=_C.t_end, proposals=_C.proposals, proposal=_C.proposal,
     variant=None, segmented=_C.segmented, bandwidth=None, centre_bandwidth=None, adaptive=None,
     decision=None, tau=None, histogram_weight=None, outlier=None, grey_levels=None, palette=None,
-    toroidal_exemplar=False, temperatures=None, blockwise=False, seed=None,
+    toroidal_exemplar=False, temperatures=None, blockwise=False, phase_weight=_C.phase_weight, seed=None,
 ) -> SynthesisConfig:
     """Validate plain keyword arguments into a frozen :class:`SynthesisConfig`.
 
@@ -156,7 +157,10 @@ def make_config(
     ``blockwise`` (support ``coherent`` without per-voxel temperatures): the block-local sampler
     (the coarsest level whole, the finer ones with its histograms frozen, random numbers hashed
     from voxel positions), whose volume can be made in blocks (:mod:`npmrf3d.methods.blocks`); a
-    segmented exemplar then runs the segmented preset's deeper pyramid only.
+    segmented exemplar then runs the segmented preset's deeper pyramid only. ``phase_weight``
+    (support ``coherent``): the phase control of the histogram prior
+    (:class:`npmrf3d.methods.npmrf_coherent.CoherentConfig`), which holds the share of the voxels
+    above the exemplars' Otsu threshold to the exemplars' (0: off).
     """
     levels = check.integer("levels", levels, low=1, high=8)
     window = check.window(window)
@@ -170,7 +174,8 @@ def make_config(
              "proposal": proposal, "preset": preset if variant is None else None, "bandwidth": bandwidth,
              "adaptive": adaptive, "decision": decision, "tau": tau, "histogram_weight": histogram_weight,
              "toroidal_exemplar": bool(toroidal_exemplar) or None, "temperatures": temperatures,
-             "segmented": segmented if segmented == "yes" else None}
+             "segmented": segmented if segmented == "yes" else None,
+             "phase_weight": None if phase_weight == _C.phase_weight else phase_weight}
     if relaxation == "anneal" and not get_heuristic(heuristic).objective:
         check.fail(f"heuristic {heuristic} cannot drive annealing: annealing compares objective "
                    f"values, and {heuristic} is defined by per-view argmax searches with no "
@@ -229,6 +234,7 @@ def make_config(
         palette = check.integer("palette", palette, low=2, high=65536)
     if seed is not None:
         seed = check.integer("seed", seed, low=0)
+    phase_weight = check.real("phase_weight", phase_weight, low=0.0)
     blockwise = check.boolean("blockwise", blockwise)
     if blockwise and support != "coherent":
         check.fail("blockwise runs need support 'coherent' (the full-Parzen sampler's estimates "
@@ -242,5 +248,5 @@ def make_config(
         sampler=sampler, schedule=schedule, t0=t0, t_end=t_end, proposals=proposals,
         proposal=proposal, support=support, preset=preset_name, segmented=segmented, rule=rule,
         grey_levels=grey_levels, palette=palette, toroidal_exemplar=bool(toroidal_exemplar),
-        temperatures=temperatures, blockwise=blockwise, seed=seed,
+        temperatures=temperatures, blockwise=blockwise, phase_weight=phase_weight, seed=seed,
     )
