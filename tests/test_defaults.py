@@ -93,7 +93,8 @@ def test_config_make_config_and_cli_agree_on_every_default(name):
     cli = _cli_defaults(*path)
     made = _signature_defaults(builder)
     # options whose default is decided elsewhere on purpose
-    special = ({"upsample", "support", "preset", "temperatures", "xi", "sampler", "blockwise"} if name == "npmrf"
+    special = ({"upsample", "support", "preset", "temperatures", "xi", "sampler", "blockwise",
+                "phase_weight"} if name == "npmrf"
                else {"iterations"} if name == "kopf" else set())
     checked = 0
     for field, value in fields.items():
@@ -125,6 +126,11 @@ def test_special_defaults_agree_too():
     assert make_config().support == SynthesisConfig.support == "coherent"
     assert make_config(relaxation="anneal").support == "coherent"
     assert make_config(support="full").preset == SynthesisConfig.preset == "tuned"
+    # NP-MRF phase control: None everywhere means the configuration's weight (0 where it cannot run)
+    assert _signature_defaults(make_config)["phase_weight"] is None
+    assert _cli_defaults("synth")["phase_weight"] is None
+    assert make_config().phase_weight == SynthesisConfig.phase_weight > 0
+    assert make_config(blockwise=True).phase_weight == make_config(support="full").phase_weight == 0.0
     # NP_K iterations: one number for every level
     one = _signature_defaults(make_kopf_config)["iterations"]
     assert _cli_defaults("baseline", "kopf")["iterations"] == str(one)

@@ -274,7 +274,7 @@ NON_DEFAULT = {"xi": -5.0, "stop": 0.5, "max_sweeps": 3, "inherit": "fixed",
                "sampler": "metropolis", "schedule": "linear", "t0": 2.0, "t_end": 0.1, "proposals": 3,
                "proposal": "labels", "preset": "paper", "bandwidth": 0.5, "adaptive": 0.1,
                "decision": "argmax", "tau": 0.5, "histogram_weight": 1.0, "toroidal_exemplar": True,
-               "segmented": "yes", "temperatures": True, "phase_weight": 16.0}
+               "segmented": "yes", "temperatures": True, "phase_weight": 4.0}
 
 
 @pytest.mark.parametrize("name", sorted(APPLIES))

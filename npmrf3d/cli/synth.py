@@ -207,11 +207,12 @@ def register(commands, formatter_class) -> None:
              "run.json's stats say which ran (segmented, level_trials, levels_kept)",
     )
     method.add_argument(
-        "--phase-weight", type=float, default=_d("phase_weight"), metavar="W",
+        "--phase-weight", type=float, default=None, metavar="W",
         help="support coherent: a phase control through the histogram prior -- the value bins "
              "split at the exemplars' Otsu threshold, and a candidate of the phase the volume "
              "over-uses loses W times that phase's price; keeps a minority phase's share of a "
-             "scan slice (docs/materials.md), >= 0 (0 = off)",
+             "scan slice (docs/materials.md), >= 0 (0 = off) "
+             f"(default: {_d('phase_weight'):g}; 0 with --blockwise)",
     )
     method.add_argument(
         "--bandwidth", type=float, default=None, metavar="B",

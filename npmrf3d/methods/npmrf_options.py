@@ -141,7 +141,7 @@ def make_config(
     schedule=_C.schedule, t0=_C.t0, t_end=_C.t_end, proposals=_C.proposals, proposal=_C.proposal,
     variant=None, segmented=_C.segmented, bandwidth=None, centre_bandwidth=None, adaptive=None,
     decision=None, tau=None, histogram_weight=None, outlier=None, grey_levels=None, palette=None,
-    toroidal_exemplar=False, temperatures=None, blockwise=False, phase_weight=_C.phase_weight, seed=None,
+    toroidal_exemplar=False, temperatures=None, blockwise=False, phase_weight=None, seed=None,
 ) -> SynthesisConfig:
     """Validate plain keyword arguments into a frozen :class:`SynthesisConfig`.
 
@@ -158,7 +158,8 @@ def make_config(
     (the coarsest level whole, the finer ones with its histograms frozen, random numbers hashed
     from voxel positions), whose volume can be made in blocks (:mod:`npmrf3d.methods.blocks`); a
     segmented exemplar then runs the segmented preset's deeper pyramid only. ``phase_weight``
-    (support ``coherent``): the phase control of the histogram prior
+    (support ``coherent``; None: :attr:`SynthesisConfig.phase_weight`, 0 for ``blockwise`` runs,
+    whose finer levels have no live histograms): the phase control of the histogram prior
     (:class:`npmrf3d.methods.npmrf_coherent.CoherentConfig`), which holds the share of the voxels
     above the exemplars' Otsu threshold to the exemplars' (0: off).
     """
@@ -175,7 +176,7 @@ def make_config(
              "adaptive": adaptive, "decision": decision, "tau": tau, "histogram_weight": histogram_weight,
              "toroidal_exemplar": bool(toroidal_exemplar) or None, "temperatures": temperatures,
              "segmented": segmented if segmented == "yes" else None,
-             "phase_weight": None if phase_weight == _C.phase_weight else phase_weight}
+             "phase_weight": phase_weight}
     if relaxation == "anneal" and not get_heuristic(heuristic).objective:
         check.fail(f"heuristic {heuristic} cannot drive annealing: annealing compares objective "
                    f"values, and {heuristic} is defined by per-view argmax searches with no "
@@ -234,8 +235,13 @@ def make_config(
         palette = check.integer("palette", palette, low=2, high=65536)
     if seed is not None:
         seed = check.integer("seed", seed, low=0)
-    phase_weight = check.real("phase_weight", phase_weight, low=0.0)
     blockwise = check.boolean("blockwise", blockwise)
+    if phase_weight is None or support != "coherent":  # the full support has no phase control
+        phase_weight = _C.phase_weight if support == "coherent" and not blockwise else 0.0
+    phase_weight = check.real("phase_weight", phase_weight, low=0.0)
+    if blockwise and phase_weight > 0.0:
+        check.fail("blockwise runs have no phase control (their finer levels keep the coarsest "
+                   "level's histograms frozen); drop phase_weight (--phase-weight)")
     if blockwise and support != "coherent":
         check.fail("blockwise runs need support 'coherent' (the full-Parzen sampler's estimates "
                    "read the whole exemplar and its ICM stop rule the whole volume)")
