@@ -353,7 +353,11 @@ def main(argv=None) -> int:
               "scans": records}
     with open(pathlib.Path(args.out) / "materials.json", "w") as fh:
         json.dump(record, fh, indent=1, default=float)
-    print(f"wrote {args.out}/materials.json and one PNG per scan")
+    command = "python benchmarks/bench_materials.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    (pathlib.Path(args.out) / "table.md").write_text(
+        f"Made by `{command}` on {record['hardware']}.\n\n{table(records)}\n\n```\n{summary(records)}\n```\n",
+        encoding="utf-8")
+    print(f"wrote {args.out}/materials.json, table.md and one PNG per scan")
     return 0
 
 

@@ -80,6 +80,7 @@ def test_a_run_writes_the_table_record_and_figure(bm, tmp_path, capsys):
     assert set(run["judged"]) == set(bm.SCALARS + bm.TAUS + bm.ERRORS)
     assert record["options"] == {"kopf": {"levels": 1}}
     assert (out / "ketton.png").stat().st_size > 10_000
+    assert "| | kopf |" in (out / "table.md").read_text()
     assert "| **ketton** |" in capsys.readouterr().out
 
 
