@@ -6,8 +6,28 @@ so moving a module's own fixture here kept every test's random draws as they wer
 
 from __future__ import annotations
 
+import importlib.util
+import pathlib
+import sys
+
 import numpy as np
 import pytest
+
+BENCHMARKS = pathlib.Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+def benchmark_module(name: str):
+    """Import ``benchmarks/<name>.py`` (which imports its sibling modules by plain name) and
+    register it in ``sys.modules`` (dataclasses look their module up there)."""
+    sys.path.insert(0, str(BENCHMARKS))
+    try:
+        spec = importlib.util.spec_from_file_location(name, BENCHMARKS / f"{name}.py")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)
+    finally:
+        sys.path.remove(str(BENCHMARKS))
+    return module
 
 
 def checkerboard(side: int = 24, block: int = 2) -> np.ndarray:

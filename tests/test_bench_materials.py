@@ -2,29 +2,17 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import pathlib
-import sys
 
 import numpy as np
 import pytest
 from scipy import ndimage
 
-_BENCH = pathlib.Path(__file__).resolve().parents[1] / "benchmarks"
-
+from tests.conftest import benchmark_module
 
 @pytest.fixture(scope="module")
 def bm():
-    sys.path.insert(0, str(_BENCH))
-    try:
-        spec = importlib.util.spec_from_file_location("bench_materials", _BENCH / "bench_materials.py")
-        module = importlib.util.module_from_spec(spec)
-        sys.modules["bench_materials"] = module
-        spec.loader.exec_module(module)
-    finally:
-        sys.path.remove(str(_BENCH))
-    return module
+    return benchmark_module("bench_materials")
 
 
 def blobs(shape, seed: int, sigma: float = 2.0) -> np.ndarray:

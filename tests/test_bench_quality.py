@@ -2,30 +2,17 @@
 
 from __future__ import annotations
 
-import importlib.util
-import pathlib
-import sys
 
 import numpy as np
 import pytest
 from scipy import ndimage
 
 from npmrf3d.analysis import metrics
-
-_BENCH = pathlib.Path(__file__).resolve().parents[1] / "benchmarks"
-
+from tests.conftest import benchmark_module
 
 @pytest.fixture(scope="module")
 def q():
-    sys.path.insert(0, str(_BENCH))
-    try:
-        spec = importlib.util.spec_from_file_location("_quality", _BENCH / "_quality.py")
-        module = importlib.util.module_from_spec(spec)
-        sys.modules["_quality"] = module    # dataclasses look their module up
-        spec.loader.exec_module(module)
-    finally:
-        sys.path.remove(str(_BENCH))
-    return module
+    return benchmark_module("_quality")
 
 
 @pytest.fixture(scope="module")
