@@ -25,7 +25,7 @@ import npmrf3d
 from npmrf3d.model.exemplar import named_exemplar
 from npmrf3d.plotting import plot_cube, to_display
 
-EXEMPLARS = ("wood", "gravel64", "ihc64", "brick")
+EXEMPLARS = ("gravel64", "ihc64", "brick")
 
 
 def main(argv=None) -> int:
@@ -59,8 +59,7 @@ def main(argv=None) -> int:
                 ax.set_ylabel(name, fontsize=9)
         cube = fig.add_subplot(rows, 5, row * 5 + 5)
         plot_cube(volume, ax=cube, vmin=lo, vmax=hi)
-        if row == 0:
-            cube.set_title("volume", fontsize=9)
+        cube.set_title("volume" if row == 0 else "", fontsize=9)
     fig.tight_layout()
     out = pathlib.Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
