@@ -119,13 +119,22 @@ def test_info_and_every_help_text_read_as_a_product():
 
 # -- planted examples --
 
-@pytest.mark.parametrize("line", [
-    "as measured at stop 30, the gain", "the stop-26 rule", "figures/volume3d/stop33/x.png",
-    "fixed in issue 12", "(issue #7)", "the issue's bar", "alias seed002 of gravel",
-    "seed 003 was used", "redrawn this session", "an earlier round chose it", "in round 2",
-    "new this stop", "since this stop", "between stops", "figures/volume3d/heldout29/",
-    "measured on 2 December 2026", "the defaults of HEAD (6aa05c6)",
-])
+#: Process words the matcher must find, each written with a ``|`` inside a word so that this file
+#: itself holds none; :func:`_planted` removes it.
+PLANTED = (
+    "as measured at st|op 30, the gain", "the st|op-26 rule", "figures/volume3d/st|op33/x.png",
+    "fixed in iss|ue 12", "(iss|ue #7)", "the iss|ue's bar", "alias se|ed002 of gravel",
+    "se|ed 003 was used", "redrawn this sess|ion", "an earl|ier round chose it", "in rou|nd 2",
+    "new this st|op", "since this st|op", "between st|ops", "figures/volume3d/held|out29/",
+    "measured on 2 Dece|mber 2026", "the defaults of HE|AD (6aa05c6)",
+)
+
+
+def _planted(line: str) -> str:
+    return line.replace("|", "")
+
+
+@pytest.mark.parametrize("line", [_planted(p) for p in PLANTED])
 def test_the_matcher_finds_a_planted_process_word(line):
     assert offending_lines(f"ok\n{line}\n", "planted.md") == [f"planted.md:2: {line}"]
 
