@@ -21,11 +21,45 @@ import io
 import pathlib
 import sys
 import zipfile
+from collections.abc import Callable
 
 import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
 from bench_volume_scan import block_mean
+
+
+def _tif(blobs: list[bytes]) -> np.ndarray:
+    """One multi-page TIFF, or a stack of one 2-D TIFF per slice."""
+    import tifffile
+    images = [tifffile.imread(io.BytesIO(b)) for b in blobs]
+    return (images[0] if len(images) == 1 else np.stack(images)).astype(np.float32)
+
+
+def _zip_tif(blobs: list[bytes]) -> np.ndarray:
+    """The one TIFF inside a zip archive."""
+    with zipfile.ZipFile(io.BytesIO(blobs[0])) as archive:
+        return _tif([archive.read(archive.namelist()[0])])
+
+
+def _raw128(blobs: list[bytes]) -> np.ndarray:
+    """A raw 128^3 uint8 volume."""
+    return np.frombuffer(blobs[0], dtype=np.uint8).reshape(128, 128, 128).astype(np.float32)
+
+
+def _nmc_phase(raw: np.ndarray) -> np.ndarray:
+    """Labels 0 pore, 1 NMC, 2 generated carbon-binder: the binder joins the pore phase."""
+    return (raw == 1).astype(np.float32)
+
+
+def _central_170(raw: np.ndarray) -> np.ndarray:
+    """The central 170 x 170 square of a cylinder's slices."""
+    c = (raw.shape[1] - 170) // 2
+    return raw[:, c:c + 170, c:c + 170]
+
+
+def _slices_last(raw: np.ndarray) -> np.ndarray:
+    return raw.transpose(1, 2, 0)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -41,44 +75,17 @@ class Scan:
     isotropic: bool                 # one slice says enough; an anisotropic scan gives three
     held_out: bool                  # never used for a choice of the project's defaults
     downsample: int = 1             # mean over this many voxels per side
+    reader: Callable[[list[bytes]], np.ndarray] = _tif   # the files' bytes -> the raw volume
+    transform: Callable[[np.ndarray], np.ndarray] | None = None  # applied to the raw volume first
 
-
-def _stack(files: list[pathlib.Path]) -> np.ndarray:
-    import tifffile
-    return np.stack([tifffile.imread(f) for f in files]).astype(np.float32)
-
-
-def _zip_tif(files: list[pathlib.Path]) -> np.ndarray:
-    import tifffile
-    with zipfile.ZipFile(files[0]) as archive:
-        name = archive.namelist()[0]
-        return tifffile.imread(io.BytesIO(archive.read(name))).astype(np.float32)
-
-
-def _tif(files: list[pathlib.Path]) -> np.ndarray:
-    import tifffile
-    return tifffile.imread(files[0]).astype(np.float32)
-
-
-def _raw128(files: list[pathlib.Path]) -> np.ndarray:
-    return np.fromfile(files[0], dtype=np.uint8).reshape(128, 128, 128).astype(np.float32)
-
-
-def _prepare(scan: Scan, raw: np.ndarray) -> np.ndarray:
-    if scan.name == "nmc":
-        # labels 0 pore, 1 NMC, 2 generated carbon-binder: the binder joins the pore phase
-        raw = (raw == 1).astype(np.float32)
-    elif scan.name == "bone2923":
-        # the central 170 x 170 square of the 257 x 257 cylinder's slices
-        c = (raw.shape[1] - 170) // 2
-        raw = raw[:, c:c + 170, c:c + 170]
-    elif scan.name == "soil":
-        raw = raw.transpose(1, 2, 0)
-    elif scan.name == "weave_tag":
-        raw = raw / 2.0
-    if raw.max() > 1.0:
-        raw = raw / 255.0
-    return np.ascontiguousarray(block_mean(raw, scan.downsample), dtype=np.float32)
+    def volume(self, blobs: list[bytes]) -> np.ndarray:
+        """The files' bytes as the benchmark's volume: float32 in [0, 1], averaged by ``downsample``."""
+        raw = self.reader(blobs)
+        if self.transform is not None:
+            raw = self.transform(raw)
+        if raw.max() > 1.0:
+            raw = raw / 255.0
+        return np.ascontiguousarray(block_mean(raw, self.downsample), dtype=np.float32)
 
 
 _LHDL = "test_data/LHDL/"
@@ -86,17 +93,17 @@ SCANS: tuple[Scan, ...] = (
     Scan("berea", "LukasMosser/PorousMediaGan", ("data/berea/original/raw/berea.zip",),
          "5728a6e8f2aee9bba5b3e732eec8c08f32642f841b3cf08da69d8972d0d334c9",
          "Berea sandstone, segmented micro-CT (Imperial College), 400^3 at half resolution",
-         binary=True, isotropic=True, held_out=False, downsample=2),
+         binary=True, isotropic=True, held_out=False, downsample=2, reader=_zip_tif),
     Scan("ketton", "LukasMosser/PorousMediaGan", ("data/ketton/original/raw/ketton.zip",),
          "c7d024693d4028a0909736a81e8bea8bef21dab00be1717a118e3246a8e9e203",
          "Ketton limestone, segmented micro-CT (Imperial College), 256^3 at half resolution",
-         binary=True, isotropic=True, held_out=True, downsample=2),
+         binary=True, isotropic=True, held_out=True, downsample=2, reader=_zip_tif),
     Scan("nmc", "NREL/MATBOX_Microstructure_analysis_toolbox",
          (("Data_example/From computed tomography with additives numerically generated/"
           "nmc-1-cal_generatedCBD_bridge.tif"),),
          "0197a8da2b6def10265e8fa2f3ce6a4c9b9a4f11af6c40c13d9dcbb7861eaf08",
          "calendered NMC cathode, X-ray CT (NREL), NMC against pore + binder",
-         binary=True, isotropic=True, held_out=True),
+         binary=True, isotropic=True, held_out=True, transform=_nmc_phase),
     Scan("bone3155", "ciclope-microFE/ciclope", tuple(f"{_LHDL}3155_D_4_bc/cropped/3155_D_4_bc_{i:04d}.tif"
                                                       for i in range(200)),
          "eedf8c5feb7cd10ef7c41ca9f7a42884cf6ace75f347aa71741ce6cd71d32cc0",
@@ -106,16 +113,16 @@ SCANS: tuple[Scan, ...] = (
                                                       for i in range(495)),
          "7f4f11f78d1d8c7340a229a18fe5edca6ebf296ff5810d9904d7db174dc31a98",
          "human trabecular bone core, micro-CT 19.5 um (LHDL), grey, central square",
-         binary=False, isotropic=True, held_out=True),
+         binary=False, isotropic=True, held_out=True, transform=_central_170),
     Scan("soil", "EMSL-Computing/Pore2Chip", tuple(f"examples/bean_bucket_100/Bean Bucket 8bit image{i:04d}.tif"
                                                    for i in range(100)),
          "803ed2a9d5528a5bc5f4449e84ca085bf50ce95e2e657bfa1f3c0618d6f47ed4",
          "soil core, XCT, 38 grey levels",
-         binary=False, isotropic=True, held_out=True),
+         binary=False, isotropic=True, held_out=True, transform=_slices_last),
     Scan("polymer", "rshkarin/quanfima", ("data/polymer3d_8bit_128x128x128.raw",),
          "3806417b3e876e909f6f08d5b0b33248cd5e8ddb81596abc86b212ec186470c9",
          "short fibres in a polymer matrix, micro-CT, grey",
-         binary=False, isotropic=False, held_out=True),
+         binary=False, isotropic=False, held_out=True, reader=_raw128),
     Scan("fiberform", "nasa/puma", ("python/pumapy/data/100_fiberform.tif",),
          "1386f825c71272f2cac7a7dbf8c82a25387b70c379655c02a843f6150edbe861",
          "FiberForm carbon-fibre preform, micro-CT 1.3 um, grey",
@@ -126,21 +133,11 @@ SCANS: tuple[Scan, ...] = (
          binary=False, isotropic=False, held_out=False),
 )
 
-_READERS = {"berea": _zip_tif, "ketton": _zip_tif, "polymer": _raw128}
-
-
 def by_name(name: str) -> Scan:
     for scan in SCANS:
         if scan.name == name:
             return scan
     raise KeyError(f"no scan named {name!r}; known: {', '.join(s.name for s in SCANS)}")
-
-
-def _digest(files: list[pathlib.Path]) -> str:
-    h = hashlib.sha256()
-    for f in files:
-        h.update(f.read_bytes())
-    return h.hexdigest()
 
 
 def build(scan: Scan, sources: pathlib.Path) -> tuple[np.ndarray, str]:
@@ -150,9 +147,11 @@ def build(scan: Scan, sources: pathlib.Path) -> tuple[np.ndarray, str]:
     missing = [f for f in files if not f.is_file()]
     if missing:
         raise FileNotFoundError(f"{len(missing)} of {len(files)} files missing, first {missing[0]}")
-    digest = _digest(files)
-    reader = _READERS.get(scan.name, _tif if len(files) == 1 else _stack)
-    return _prepare(scan, reader(files)), digest
+    blobs = [f.read_bytes() for f in files]
+    digest = hashlib.sha256()
+    for blob in blobs:
+        digest.update(blob)
+    return scan.volume(blobs), digest.hexdigest()
 
 
 def main(argv=None) -> int:
