@@ -168,9 +168,10 @@ HISTOGRAM_ABLATIONS = {
 }
 METHODS.update({name: _npmrf_coherent_with(**options)
                 for name, options in HISTOGRAM_ABLATIONS.items()})
-#: The default run with the phase control of its histogram prior (``synth --phase-weight W``),
-#: the guard of a phase control chosen on scans: it must not make photographs worse.
-PHASE_CONTROL = {f"npmrf-phase-{w}": {"phase_weight": float(w)} for w in (8, 16, 32)}
+#: The default run with another weight of its histogram prior's phase control (``synth
+#: --phase-weight W``; the default's is 16): the guard that a weight chosen on scans leaves
+#: photographs as they were.
+PHASE_CONTROL = {f"npmrf-phase-{w}": {"phase_weight": float(w)} for w in (0, 8, 16, 32)}
 METHODS.update({name: _npmrf(**options) for name, options in PHASE_CONTROL.items()})
 #: Methods that take ``palette`` (the others never see it, and their cache key has none).
 PALETTE_METHODS = {"npmrf-default", "npmrf-sharp", "npmrf-anneal", *SAMPLER_COMBINATIONS,

@@ -151,25 +151,23 @@ class Judge:
         return {k: {"value": float(v), "outside": verdict(float(v), *self.spread[k])} for k, v in values.items()}
 
 
-def exemplars_for(crop: np.ndarray, isotropic: bool):
-    """The 2D exemplar(s) of a crop: its middle slice across axis 0, or each view's middle slice."""
+def exemplars_for(crop: np.ndarray, isotropic: bool) -> tuple[np.ndarray, dict]:
+    """The 2D exemplar of a crop, its middle slice across axis 0, and the options that give an
+    anisotropic scan's views each their own middle slice."""
     n = crop.shape[0] // 2
-    if isotropic:
-        return {"exemplar": crop[n][..., None]}
-    return {"exemplar": crop[n][..., None],
-            "exemplars": {"front": crop[:, :, n][..., None], "right": crop[n][..., None],
-                          "top": crop[:, n][..., None]}}
+    views = {} if isotropic else {"exemplars": {"front": crop[:, :, n][..., None], "right": crop[n][..., None],
+                                                "top": crop[:, n][..., None]}}
+    return crop[n][..., None], views
 
 
 def synthesize(method: str, crop: np.ndarray, isotropic: bool, size: int, seed: int,
                options: dict) -> tuple[np.ndarray, float]:
     t0 = time.perf_counter()
     if method == "volume-lh":
-        result = npmrf3d.synthesize(crop[..., None], method=method, size=size, rng=seed, **options)
+        exemplar, views = crop[..., None], {}
     else:
-        given = exemplars_for(crop, isotropic)
-        exemplar = given.pop("exemplar")
-        result = npmrf3d.synthesize(exemplar, method=method, size=size, rng=seed, **given, **options)
+        exemplar, views = exemplars_for(crop, isotropic)
+    result = npmrf3d.synthesize(exemplar, method=method, size=size, rng=seed, **views, **options)
     return result.volume[..., 0], time.perf_counter() - t0
 
 

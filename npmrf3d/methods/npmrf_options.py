@@ -236,8 +236,10 @@ def make_config(
     if seed is not None:
         seed = check.integer("seed", seed, low=0)
     blockwise = check.boolean("blockwise", blockwise)
-    if phase_weight is None or support != "coherent":  # the full support has no phase control
-        phase_weight = _C.phase_weight if support == "coherent" and not blockwise else 0.0
+    if support != "coherent" or (phase_weight is None and blockwise):  # no phase control there
+        phase_weight = 0.0
+    elif phase_weight is None:
+        phase_weight = _C.phase_weight
     phase_weight = check.real("phase_weight", phase_weight, low=0.0)
     if blockwise and phase_weight > 0.0:
         check.fail("blockwise runs have no phase control (their finer levels keep the coarsest "
