@@ -477,3 +477,34 @@ def test_only_dropped_interrupts_are_kept_quiet():
         _interrupt.restore(previous)
     assert [u.exc_type for u in seen] == [ValueError]
     assert not _interrupt.pending()
+
+
+def test_after_an_interrupt_only_the_compilers_failing_finalizers_are_kept_quiet():
+    """An interrupt inside the compiler can leave an llvmlite object half-built; its finalizer
+    fails when the process exits, and that must not print a traceback after the one line."""
+    import sys
+    from types import SimpleNamespace
+
+    import llvmlite.binding.ffi as ffi
+
+    from npmrf3d.cli import _interrupt
+    seen = []
+    kept = sys.unraisablehook
+    sys.unraisablehook = seen.append
+    try:
+        previous = _interrupt.install()
+        try:
+            _interrupt.interrupt()
+        except KeyboardInterrupt:
+            pass
+        _interrupt.restore(previous)
+        compiler = SimpleNamespace(exc_type=AttributeError, object=ffi.ObjectRef.__del__)
+        other = SimpleNamespace(exc_type=AttributeError, object=test_only_dropped_interrupts_are_kept_quiet)
+        sys.unraisablehook(compiler)
+        sys.unraisablehook(other)
+        assert seen == [other]
+        before = sys.unraisablehook      # a run that is not interrupted puts the hook back as it was
+        _interrupt.restore(_interrupt.install())
+        assert sys.unraisablehook is before
+    finally:
+        sys.unraisablehook = kept

@@ -10,7 +10,10 @@ which raises ``KeyboardInterrupt`` again while the latch is set, so a swallowed 
 ends the run at its next step with exit 130 and nothing written. Python reports such a dropped
 exception through :func:`sys.unraisablehook` ("Exception ignored in ..." and a traceback on
 stderr); while the latch is set, :func:`install`'s hook keeps those quiet, since the interrupt
-is not lost (the one line of the interruption follows).
+is not lost (the one line of the interruption follows). An interrupt that lands inside the
+compiler can also leave one of llvmlite's objects half-built, whose finalizer then fails when
+the process exits ("Exception ignored in: ObjectRef.__del__ ... AttributeError"); once a run
+was interrupted, :func:`restore` leaves a hook that keeps those quiet too, and only those.
 """
 
 from __future__ import annotations
@@ -25,6 +28,8 @@ __all__ = ["check", "install", "interrupt", "pending", "restore"]
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 _latched = threading.Event()
+#: Packages whose objects' finalizers may fail after an interrupt cut their construction short.
+COMPILER_PACKAGES = ("llvmlite", "numba")
 
 
 def interrupt(signum=None, frame=None):
@@ -52,6 +57,20 @@ def _quiet_dropped_interrupts(unraisable, *, fallback=None):
     (fallback or sys.__unraisablehook__)(unraisable)
 
 
+def _from_compiler(unraisable) -> bool:
+    """Whether an unraisable exception comes from a function or object of the compiler."""
+    module = getattr(unraisable.object, "__module__", None) or type(unraisable.object).__module__
+    return isinstance(module, str) and module.split(".", 1)[0] in COMPILER_PACKAGES
+
+
+def _quiet_compiler_finalizers(unraisable, *, fallback=None):
+    """``sys.unraisablehook`` after an interrupted run: say nothing of the compiler's failing
+    finalizers; pass everything else to ``fallback``."""
+    if _from_compiler(unraisable):
+        return
+    (fallback or sys.__unraisablehook__)(unraisable)
+
+
 def install() -> dict | None:
     """Clear the latch, handle :data:`SIGNALS` with :func:`interrupt` and keep dropped
     interrupts quiet; return what was replaced, for :func:`restore` (None off the main thread,
@@ -67,10 +86,14 @@ def install() -> dict | None:
 
 
 def restore(previous: dict | None) -> None:
-    """Put back what :func:`install` replaced and clear the latch."""
+    """Put back what :func:`install` replaced and clear the latch; after an interrupt, the hook
+    put back keeps the compiler's failing finalizers quiet (:func:`_quiet_compiler_finalizers`)."""
+    interrupted = _latched.is_set()
     _latched.clear()
     previous = dict(previous or {})
     if "unraisablehook" in previous:
-        sys.unraisablehook = previous.pop("unraisablehook")
+        hook = previous.pop("unraisablehook")
+        sys.unraisablehook = (hook if not interrupted else
+                              lambda unraisable: _quiet_compiler_finalizers(unraisable, fallback=hook))
     for s, handler in previous.items():
         signal.signal(s, handler)
