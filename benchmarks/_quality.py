@@ -153,10 +153,16 @@ SAMPLER_COMBINATIONS = {
 }
 METHODS.update({name: _npmrf(**options) for name, options in SAMPLER_COMBINATIONS.items()})
 #: The default run made block-local (``synth --blockwise``): the coarsest level as the default,
-#: the finer levels with its position and value histograms frozen, no index histogram, one
-#: solver batch and random numbers hashed from voxel positions.
+#: the finer levels reading the histograms of a pilot block, no index histogram, batches and
+#: random numbers hashed from voxel positions.
 BLOCKWISE = {"npmrf-blockwise": dict(blockwise=True)}
 METHODS.update({name: _npmrf(**options) for name, options in BLOCKWISE.items()})
+#: The same through the coherent sampler's options, with the pilot smaller than the volume (at
+#: 64^3 a pilot of 64 is the whole volume: its histograms are the run's own): how far blocks that
+#: read another region's histograms stay from the default.
+BLOCK_PILOTS = {f"npmrf-blockwise-pilot-{p}": dict(blockwise=True, pilot=p) for p in (16, 32, 64)}
+METHODS.update({name: _npmrf_coherent_with(**options) for name, options in BLOCK_PILOTS.items()})
+METHODS["npmrf-coherent-default"] = _npmrf_coherent_with()
 #: The default run without its global histograms: the index and position histograms of the
 #: candidate search and the value-histogram prior switched off (value_weight is 0 already).
 HISTOGRAM_ABLATIONS = {

@@ -1007,3 +1007,11 @@ def naive_global_flat(p, shape, origin, extent):
         return (p[0] * shape[1] + p[1]) * shape[2] + p[2]
     g = [(o + q) % e for o, q, e in zip(origin, p, extent)]
     return (g[0] * extent[1] + g[1]) * extent[2] + g[2]
+
+
+def naive_voxel_batches(shape, origin, extent, salt, batches):
+    """Every voxel's batch of a block-local pass: a hash of its grid position and the salt."""
+    out = np.empty(shape, dtype=np.int8)
+    for p in np.ndindex(*shape):
+        out[p] = naive_mix(naive_mix(naive_global_flat(p, shape, origin, extent)) + salt) % batches
+    return out

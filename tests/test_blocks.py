@@ -20,11 +20,13 @@ from npmrf3d.resources import ResourceError
 from npmrf3d.studies.catalog import load_exemplar
 
 from .cli_checks import refused_naming
-from .naive import naive_global_flat
+from .naive import naive_global_flat, naive_voxel_batches
 
 #: A cone that is a true part of its level at the two finer levels: window 3 (reach 2), one
-#: iteration per level, blocks of 16 in a 48 x 32 x 32 volume.
-SMALL = dict(size=(48, 32, 32), window=3, levels=3, iterations=1, blockwise=True, seed=11)
+#: iteration per level, blocks of 16 in a 48 x 32 x 32 volume; a pilot smaller than the volume
+#: (its cone is a true part of the finer levels too) and the phase control on.
+SMALL = dict(size=(48, 32, 32), window=3, levels=3, iterations=1, blockwise=True, pilot=16, phase_weight=16.0,
+             seed=11)
 
 
 def _exemplar(name: str) -> np.ndarray:
@@ -104,6 +106,41 @@ def test_global_flat_matches_its_twin():
             got = _k.global_flat(p[0], p[1], p[2], tuple(int(n) for n in shape), origin.astype(np.int64),
                                  e.astype(np.int64))
             assert got == naive_global_flat(p, shape, origin, e)
+
+
+def test_voxel_batches_match_their_twin():
+    rng = np.random.default_rng(3)
+    for _ in range(4):
+        shape = tuple(int(n) for n in rng.integers(1, 7, 3))
+        extent = np.array([n + int(rng.integers(0, 4)) for n in shape], dtype=np.int64)
+        origin = rng.integers(0, extent).astype(np.int64)
+        salt, batches = int(rng.integers(0, 2**31)), int(rng.integers(1, 9))
+        for o, e in ((origin, extent), (np.zeros(3, np.int64), np.zeros(3, np.int64))):
+            got = np.empty(shape, dtype=np.int8)
+            _k.voxel_batches(np.array(shape, dtype=np.int64), o, e, salt, batches, got)
+            np.testing.assert_array_equal(got, naive_voxel_batches(shape, o, e, salt, batches))
+
+
+def test_a_region_draws_the_batches_of_the_whole_grid():
+    """The batches of a region (toroidal, across the grid's edge) are the whole grid's there,
+    and every batch holds about its share."""
+    extent = np.array([12, 10, 8], dtype=np.int64)
+    whole = np.empty(tuple(extent), dtype=np.int8)
+    _k.voxel_batches(extent, np.zeros(3, np.int64), extent, 77, 8, whole)
+    origin, shape = np.array([9, 3, 5], dtype=np.int64), (6, 4, 7)
+    part = np.empty(shape, dtype=np.int8)
+    _k.voxel_batches(np.array(shape, dtype=np.int64), origin, extent, 77, 8, part)
+    index = np.ix_(*[(o + np.arange(n)) % e for o, n, e in zip(origin, shape, extent)])
+    np.testing.assert_array_equal(part, whole[index])
+    assert np.all(np.abs(np.bincount(whole.ravel(), minlength=8) - whole.size / 8) < 0.3 * whole.size / 8)
+
+
+def test_blocks_read_the_pilot(tmp_path):
+    """A pilot of another size gives another volume: the blocks follow its histograms."""
+    method = METHODS["coherent"]
+    per_view = _views(_exemplar("gravel64"))
+    volumes = [_whole(method, per_view, method.make_config(**{**SMALL, "pilot": p}), 2) for p in (16, 32)]
+    assert not np.array_equal(*volumes)
 
 
 def test_methods_that_cannot_run_in_blocks_say_so():

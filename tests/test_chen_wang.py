@@ -613,14 +613,14 @@ def test_periodic_exemplar_pattern_appears_in_the_constrained_slices():
         assert 0.3 < v.mean() < 0.7
 
 
-@pytest.mark.parametrize("phase_weight", [0.0, 8.0])
-def test_progress_and_checkpoint_resume(tmp_path, phase_weight):
-    """With the phase control the checkpoint carries its state: the resumed run is the
-    uninterrupted one."""
+@pytest.mark.parametrize("phase_weight,blockwise", [(0.0, {}), (8.0, {}), (8.0, {"blockwise": True, "pilot": 8})])
+def test_progress_and_checkpoint_resume(tmp_path, phase_weight, blockwise):
+    """With the phase control the checkpoint carries its state, and a block-local run's its
+    pilot's histograms: the resumed run is the uninterrupted one."""
     ex = np.random.default_rng(0).random((24, 24)).astype(np.float32)
     calls = []
     path = tmp_path / "cw.npz"
-    kw = dict(size=16, window=(4, 4), levels=2, iterations=(2, 1), rng=5, phase_weight=phase_weight)
+    kw = dict(size=16, window=(4, 4), levels=2, iterations=(2, 1), rng=5, phase_weight=phase_weight, **blockwise)
     res = chen_wang_synthesize(ex, progress=lambda *a: calls.append(a), checkpoint=path, **kw)
     assert [(c[0], c[1], c[2]) for c in calls] == [(1, 0, 2), (1, 1, 2), (1, 2, 2), (0, 0, 1), (0, 1, 1)]
     assert path.exists()

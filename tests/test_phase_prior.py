@@ -102,10 +102,8 @@ def test_the_default_sampler_passes_its_phase_weight_to_the_coherent_run():
     config = npmrf.make_config(size=16, window=5, levels=2, phase_weight=16.0)
     options = npmrf._coherent_options(config, False, 2)
     assert options.phase_weight == 16.0 == npmrf.make_config(size=16).phase_weight
-    assert npmrf.make_config(size=16, blockwise=True).phase_weight == 0.0
+    assert npmrf.make_config(size=16, blockwise=True).phase_weight == 16.0
     assert npmrf.make_config(size=16, support="full").phase_weight == 0.0
-    with pytest.raises(ParameterError, match="blockwise runs have no phase control"):
-        npmrf.make_config(size=16, blockwise=True, phase_weight=16.0)
     on = npmrf3d.synthesize(ex, size=16, window=5, levels=2, phase_weight=16.0, segmented="no", rng=1)
     fields = {k: v for k, v in dataclasses.asdict(options).items() if k not in ("size", "seed")}
     twin = coherent_synthesize(ex, size=16, rng=1, **fields)

@@ -16,7 +16,8 @@ the division-free wrap) share one geometry and are read together against their t
   within a batch and updated (sequentially) between batches. Its arguments come in two bundles,
   the view's exemplar model (:class:`SearchExemplar`) and the settings (:class:`SearchRule`).
 * :func:`project_sites` (parallel over sites): PCA projections of listed sites (the global
-  search of the worst-matched sites); :func:`value_bins`: histogram bins of values.
+  search of the worst-matched sites); :func:`value_bins`: histogram bins of values;
+  :func:`voxel_batches`: the solver's batches of a block-local run, hashed from grid positions.
 
 Geometry (shared with :mod:`npmrf3d.model.kcoherence`): a window of side ``w`` "at" a site ``u`` covers
 plane positions ``u - a .. u - a + w - 1`` along both plane axes (toroidal volume), with
@@ -234,6 +235,18 @@ def value_bins(values, lo, scale, bins, out):
     for i in range(values.shape[0]):
         for ch in range(values.shape[1]):
             out[i, ch] = value_bin(values[i, ch], lo[ch], scale[ch], bins)
+
+
+@jit_parallel
+def voxel_batches(shape, origin, extent, salt, batches, out):
+    """The batch ``mix(mix(g) + salt) % batches`` of every voxel of a region (``origin``,
+    ``extent``: :func:`global_flat`; ``g`` its flat index in the level's whole grid) into ``out``
+    (``shape``, int8): a voxel's batch depends on its grid position and ``salt < 2**31`` only, so a
+    region made alone cuts its voxels as the whole grid does."""
+    for p0 in prange(shape[0]):
+        for p1 in range(shape[1]):
+            for p2 in range(shape[2]):
+                out[p0, p1, p2] = mix(mix(global_flat(p0, p1, p2, shape, origin, extent)) + salt) % batches
 
 
 @jit

@@ -31,7 +31,7 @@ from ._common import PROG, dry_run, positive_int, say
 from ._options import given
 from ._progress import run_method
 
-__all__ = ["DEFAULT_BLOCK", "add_block_options", "blockwise_requested", "note_blockwise", "run_zarr", "zarr_output"]
+__all__ = ["DEFAULT_BLOCK", "add_block_options", "blockwise_requested", "run_zarr", "zarr_output"]
 
 #: Side of the blocks (and Zarr chunks) when none is asked for: large against the default's
 #: aprons (18 to 24 voxels a side per level), so the cones repeat little work, and about
@@ -45,10 +45,10 @@ def add_block_options(group: argparse._ArgumentGroup) -> None:
     """``--blockwise``, ``--block``, ``--workers`` and ``--scheduler`` into ``group``."""
     group.add_argument(
         "--blockwise", action="store_true", default=False,
-        help="the block-local sampler (the coarsest level whole, the finer levels with its "
-             "histograms frozen, random numbers hashed from voxel positions), which makes a volume "
-             "of any size in blocks with --out VOL.zarr, bit for bit the volume it makes at once; "
-             "it loses colour fidelity against the default (docs/blocks.md)")
+        help="the block-local sampler (the coarsest level whole, the finer levels reading the "
+             "histograms of a pilot block, random numbers hashed from voxel positions), which makes a volume "
+             "of any size in blocks with --out VOL.zarr, bit for bit the volume it makes at once "
+             "(docs/blocks.md)")
     group.add_argument(
         "--block", type=positive_int, default=DEFAULT_BLOCK, metavar="N",
         help="--out VOL.zarr --blockwise: side of the blocks and of the Zarr chunks; each worker "
@@ -79,13 +79,6 @@ def blockwise_requested(args: argparse.Namespace) -> bool:
     return bool(args.blockwise)
 
 
-def note_blockwise(args: argparse.Namespace, config) -> None:
-    """Say on stderr (not with ``--quiet``) what the block-local sampler costs, before it runs."""
-    if getattr(config, "blockwise", False) and not args.quiet:
-        say(f"{PROG}: note: the block-local sampler (--blockwise) loses contrast against the default "
-            f"(histogram KL about 1 against 0.005 on held-out photographs: docs/blocks.md)", error=True)
-
-
 def run_zarr(args: argparse.Namespace, argv: list[str], command: str, method, config, per_view: dict,
              sources: dict, title: str) -> int:
     """Make ``config``'s volume into the Zarr array ``--out``: at once when it is not
@@ -106,7 +99,6 @@ def run_zarr(args: argparse.Namespace, argv: list[str], command: str, method, co
     if args.dry_run:
         say(f"{method.name} {'x'.join(map(str, config.size))} into {out}: {plan.describe()}")
         return 0
-    note_blockwise(args, config)
     record = _record(command, argv, method, config, sources, block=args.block,
                      workers=None if scheduler else args.workers, scheduler=scheduler)
     bar = None

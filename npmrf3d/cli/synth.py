@@ -39,7 +39,7 @@ from ._common import (
     say,
     write_result,
 )
-from ._blocks import add_block_options, blockwise_requested, note_blockwise, run_zarr, zarr_output
+from ._blocks import add_block_options, blockwise_requested, run_zarr, zarr_output
 from ._options import given
 from ._progress import run_method
 
@@ -212,7 +212,7 @@ def register(commands, formatter_class) -> None:
              "split at the exemplars' Otsu threshold, and a candidate of the phase the volume "
              "over-uses loses W times that phase's price; keeps a minority phase's share of a "
              "scan slice (docs/materials.md), >= 0 (0 = off) "
-             f"(default: {_d('phase_weight'):g}; 0 with --blockwise)",
+             f"(default: {_d('phase_weight'):g}; 0 with --support full)",
     )
     method.add_argument(
         "--bandwidth", type=float, default=None, metavar="B",
@@ -348,7 +348,6 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
         return dry_run(METHOD, config, per_view)
     if not args.quiet and config.palette is None and config.grey_levels is None:
         _note_many_values(per_view)
-    note_blockwise(args, config)
     with claim_output(out, args.overwrite):
         result = run_method(args, METHOD, config, per_view, checkpoint=checkpoint, t_start=t_start)
         window = SEGMENTED.window if result.stats.get("segmented") else config.window

@@ -113,9 +113,12 @@ class ChenWangConfig:
     batches: int = 8
     solver: str = "medoid"
     balance_views: bool = False
-    # block-local runs: the coarsest level whole, the finer ones with its histograms frozen and
-    # random numbers hashed from grid positions, so any block can be made alone (model.regions)
+    # block-local runs: the coarsest level whole, the finer ones reading the histograms of a
+    # pilot region and random numbers hashed from grid positions, so any block can be made alone
+    # (model.regions, model.kcoherence_histograms.PilotHistograms)
     blockwise: bool = False
+    # the pilot's block side at the finest level (its cone at the coarser ones)
+    pilot: int = 64
     seed: int | None = None
 
     def to_dict(self) -> dict:
@@ -135,17 +138,17 @@ def make_chen_wang_config(
     global_share=DEFAULTS.global_share, coherence_bias=DEFAULTS.coherence_bias,
     value_weight=DEFAULTS.value_weight, value_prior=DEFAULTS.value_prior, value_bins=DEFAULTS.value_bins,
     phase_weight=DEFAULTS.phase_weight, batches=DEFAULTS.batches, solver=DEFAULTS.solver, balance_views=DEFAULTS.balance_views,
-    blockwise=DEFAULTS.blockwise, seed=None,
+    blockwise=DEFAULTS.blockwise, pilot=DEFAULTS.pilot, seed=None,
 ) -> ChenWangConfig:
     """Validate plain keyword arguments into a frozen :class:`ChenWangConfig`.
 
     ``window`` and ``iterations`` take one integer or one per level (coarsest first); when the
     default per-level tuples meet another level count, the last ``levels`` entries are used.
-    ``blockwise``: the coarsest level runs whole with every histogram, the finer ones in blocks
-    with the coarsest level's position and value histograms frozen and no index histogram
-    (:class:`npmrf3d.model.kcoherence_engine.FrozenHistograms`); the global search and the
-    phase control, which read the whole volume, are off (``global_share`` and
-    ``phase_weight`` recorded as 0).
+    ``blockwise``: the coarsest level runs whole with every histogram; the finer ones in blocks
+    that read, batch by batch, the position and value histograms of a pilot block of side
+    ``pilot`` made once with its histograms live, and no index histogram
+    (:class:`npmrf3d.model.kcoherence_histograms.PilotHistograms`); the global search, which
+    reads the whole volume, is off (``global_share`` recorded as 0).
     """
     levels = check.integer("levels", levels, low=1, high=8)
     if window is DEFAULTS.window and levels != len(DEFAULTS.window):
@@ -187,8 +190,9 @@ def make_chen_wang_config(
     if seed is not None:
         seed = check.integer("seed", seed, low=0)
     blockwise = check.boolean("blockwise", blockwise)
+    pilot = check.integer("pilot", pilot, low=8)
     if blockwise:
-        phase_weight = global_share = 0.0
+        global_share = 0.0
     return ChenWangConfig(size=dims, window=window, levels=levels, views=views,
                           iterations=iterations, k=k, pca_dims=pca_dims, r=r, grid=grid,
                           index_weight=index_weight, position_weight=position_weight,
@@ -197,7 +201,7 @@ def make_chen_wang_config(
                           coherence_bias=coherence_bias, value_weight=value_weight,
                           value_prior=value_prior, value_bins=value_bins, phase_weight=phase_weight,
                           batches=batches, solver=solver, balance_views=bool(balance_views), blockwise=blockwise,
-                          seed=seed)
+                          pilot=pilot, seed=seed)
 
 
 def _check_exemplar_levels(config: ChenWangConfig, per_view: Mapping[str, np.ndarray]) -> None:

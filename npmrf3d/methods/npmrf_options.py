@@ -155,11 +155,11 @@ def make_config(
     support ``coherent`` then weights its searches and votes by trust and re-decides warm voxels
     only (``xi``, ``stop``, ``max_sweeps``, ``inherit`` and ``upsample`` 1/8 need it there).
     ``blockwise`` (support ``coherent`` without per-voxel temperatures): the block-local sampler
-    (the coarsest level whole, the finer ones with its histograms frozen, random numbers hashed
-    from voxel positions), whose volume can be made in blocks (:mod:`npmrf3d.methods.blocks`); a
-    segmented exemplar then runs the segmented preset's deeper pyramid only. ``phase_weight``
-    (support ``coherent``; None: :attr:`SynthesisConfig.phase_weight`, 0 for ``blockwise`` runs,
-    whose finer levels have no live histograms): the phase control of the histogram prior
+    (the coarsest level whole, the finer ones reading a pilot block's histograms, random numbers
+    hashed from voxel positions), whose volume can be made in blocks
+    (:mod:`npmrf3d.methods.blocks`); a segmented exemplar then runs the segmented preset's deeper
+    pyramid only. ``phase_weight`` (support ``coherent``; None:
+    :attr:`SynthesisConfig.phase_weight`, 0 for the full support): the phase control of the histogram prior
     (:class:`npmrf3d.methods.npmrf_coherent.CoherentConfig`), which holds the share of the voxels
     above the exemplars' Otsu threshold to the exemplars' (0: off).
     """
@@ -236,14 +236,11 @@ def make_config(
     if seed is not None:
         seed = check.integer("seed", seed, low=0)
     blockwise = check.boolean("blockwise", blockwise)
-    if support != "coherent" or (phase_weight is None and blockwise):  # no phase control there
+    if support != "coherent":  # no phase control there
         phase_weight = 0.0
     elif phase_weight is None:
         phase_weight = _C.phase_weight
     phase_weight = check.real("phase_weight", phase_weight, low=0.0)
-    if blockwise and phase_weight > 0.0:
-        check.fail("blockwise runs have no phase control (their finer levels keep the coarsest "
-                   "level's histograms frozen); drop phase_weight (--phase-weight)")
     if blockwise and support != "coherent":
         check.fail("blockwise runs need support 'coherent' (the full-Parzen sampler's estimates "
                    "read the whole exemplar and its ICM stop rule the whole volume)")

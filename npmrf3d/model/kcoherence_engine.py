@@ -27,6 +27,7 @@ to the kernels belong with it; the histograms live in
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import time
@@ -43,19 +44,22 @@ from ..io.checkpoints import run_key
 from . import kcoherence as coh
 from .exemplar import pack_rows
 from .kcoherence_histograms import (
-    FrozenHistograms,
+    PilotHistograms,
     ValueHistogram,
-    held_values,
+    pack_pilot,
+    pilot_length,
     position_histogram,
+    unpack_pilot,
     value_counts,
     value_scale,
 )
 from .kcoherence_icm import IcmLevel, IcmSchedule, inherited_mask
 from .neighbourhood import VIEW_AXES
 from .phases import PhaseControl, bin_phase_error, bin_phases, phase_prior_target
-from .pyramid import ArraySpec, Levels
+from .pyramid import ArraySpec, Levels, run_pyramid
+from .regions import plan_region
 
-__all__ = ["block_aprons", "FrozenHistograms", "held_values", "CANDIDATE_HEURISTICS", "CANDIDATE_SAMPLERS", "COHERENT_HEURISTICS", "PER_VIEW_HEURISTICS",
+__all__ = ["block_aprons", "PilotHistograms", "CANDIDATE_HEURISTICS", "CANDIDATE_SAMPLERS", "COHERENT_HEURISTICS", "PER_VIEW_HEURISTICS",
            "CandidateDecision", "CoherentState", "KCoherenceLevels", "ValueHistogram",
            "initial_colours", "kernel_table", "pack_exemplars", "position_histogram", "value_counts", "value_scale"]
 
@@ -253,8 +257,10 @@ class KCoherenceLevels(Levels):
             self.control = [PhaseControl.start(2) for _ in range(channels)]
         self.level_ex = self.vmodels = None
         self.blockwise = bool(getattr(config, "blockwise", False))
-        self.frozen: FrozenHistograms | None = None
-        self.prepared: int | None = None
+        #: blockwise: the pilot's histograms of every finer level (:class:`PilotHistograms`)
+        self.pilot: dict[int, PilotHistograms] | None = None
+        #: while this engine *is* the pilot: the records it is making, by level
+        self.recording: dict[int, PilotHistograms] | None = None
         #: blockwise: the finest level that runs whole, with every histogram (the coarsest)
         self.lowest_whole = config.levels - 1
 
@@ -271,13 +277,33 @@ class KCoherenceLevels(Levels):
         f = 2 ** level
         return self.per_view[view].shape[0] // f, self.per_view[view].shape[1] // f
 
-    def after_level(self, level, state):
-        """``blockwise``: the coarsest level's position counts, which the finer levels keep
-        (:class:`FrozenHistograms`)."""
-        if self.blockwise and level == self.lowest_whole:
-            if self.prepared != level:  # resumed from a checkpoint: the level's models first
-                self.prepare(level, state.volume.shape[:3])
-            self.frozen = FrozenHistograms.of(state, self.vmodels)
+    def after_level(self, level, state, rng):
+        """``blockwise``: after the coarsest level, the pilot (:meth:`run_pilot`), unless a
+        checkpoint already held its records."""
+        if self.blockwise and level == self.lowest_whole and level > 0 and self.recording is None \
+                and self.pilot is None:
+            self.pilot = self.run_pilot(state, rng)
+
+    def run_pilot(self, state, rng) -> dict[int, PilotHistograms]:
+        """The records of the finer levels' pilot: the dependency cone of the block of side
+        ``config.pilot`` at the grid's first corner, made from the finished coarsest ``state``
+        with its histograms live (a copy of this engine, of ``rng`` and of the phase control, so
+        the run itself goes on as if the pilot had not been made)."""
+        pilot = copy.copy(self)
+        pilot.recording, pilot.pilot = {}, None
+        pilot.control = copy.deepcopy(self.control)
+        side = tuple(min(int(self.config.pilot), n) for n in self.size)
+        plan = plan_region(self.size, self.levels, self.aprons(), (0, 0, 0), side)
+        run_pyramid(pilot, copy.deepcopy(rng), region=plan, after=(self.lowest_whole, state))
+        return pilot.recording
+
+    def _pilot_layout(self):
+        """Per finer level of a ``blockwise`` run, the shape of its pilot record: (level,
+        iterations, batches, position bins, channels, value bins)."""
+        config, channels = self.config, self.distinct[0].shape[2]
+        return [(level, config.iterations[config.levels - 1 - level], config.batches,
+                 sum(h * w for h, w in (self._exemplar_shape(v, level) for v in self.views)), channels,
+                 config.value_bins) for level in range(self.lowest_whole - 1, -1, -1)]
 
     def crop(self, state, index):
         ix = np.ix_(*index)
@@ -288,6 +314,18 @@ class KCoherenceLevels(Levels):
     def _grid(self):
         """The current frame's origin and extent as the kernels take them."""
         return np.array(self.frame.origin, dtype=np.int64), np.array(self.frame.extent, dtype=np.int64)
+
+    @staticmethod
+    def _hashed_batches(shape, origin, extent, salt, batches):
+        """A block-local pass's voxel order and batch bounds: the voxels of each batch
+        (:func:`npmrf3d._kernels.kcoherence.voxel_batches`, a hash of their grid positions) in
+        memory order, batch after batch."""
+        ids = np.empty(shape, dtype=np.int8)
+        _search.voxel_batches(np.array(shape, dtype=np.int64), origin, extent, salt, batches, ids)
+        ids = ids.ravel()
+        order = np.argsort(ids, kind="stable").astype(np.int64)
+        bounds = np.concatenate([[0], np.cumsum(np.bincount(ids, minlength=batches))]).astype(np.int64)
+        return order, bounds
 
     def prepare(self, level, shape):
         self.prepared = level
@@ -341,22 +379,18 @@ class KCoherenceLevels(Levels):
                                           bins=config.value_bins, lo=self.value_lo, span=self.value_span)
         packed = _solver.PackedViews(self.view_axes, ex_flat, ex_off, np.array(widths, dtype=np.int64), window,
                                      int(vmodels[0].anchor), config.grid)
-        # blockwise below the coarsest level: every voxel reads only its neighbourhood and the
-        # coarsest level's histograms, frozen (one batch, no index histogram, no reordering)
+        # blockwise below the coarsest level: batches hashed from grid positions, no index
+        # histogram; the pilot keeps its own histograms live, every other run reads the pilot's
         local = self.blockwise and level < self.lowest_whole
-        grid_voxels = float(np.prod(self.frame.extent)) if local else float(np.prod(shape))
-        if local:
-            finer = range(self.lowest_whole - 1, level - 1, -1)
-            pos_hist = np.concatenate([self.frozen.positions_at(vi, [self._exemplar_shape(v, lev) for lev in finer])
-                                       for vi, v in enumerate(views)])
-            values = values._replace(hist=held_values(pos_hist, hist_off, values.ex_bins, ex_off,
-                                                      [m.pixels for m in vmodels], config.value_bins) / (
-                                                          grid_voxels / config.value_bins),
-                                     unit=grid_voxels / config.value_bins)
-        else:
-            pos_hist = np.concatenate([position_histogram(src[vi], m.pixels) for vi, m in enumerate(vmodels)])
-        if local:  # each pass starts from these again
-            frozen_positions, frozen_values = pos_hist.copy(), values.hist.copy()
+        replay = self.pilot[level] if local and self.recording is None else None
+        grid_voxels = float(np.prod(self.frame.extent)) if replay is not None else float(np.prod(shape))
+        if replay is not None:
+            values = values._replace(unit=grid_voxels / config.value_bins)
+        if local and replay is None:
+            record = self.recording[level] = PilotHistograms.empty(
+                config.iterations[li], config.batches, sum(m.pixels for m in vmodels), volume.shape[3],
+                config.value_bins)
+        pos_hist = np.concatenate([position_histogram(src[vi], m.pixels) for vi, m in enumerate(vmodels)])
         theta = np.array([grid_voxels / m.pixels for m in vmodels])
         histograms = _solver.SolverHistograms(
             pos_hist, hist_off, theta, config.position_weight, config.position_boost, values.ex_bins,
@@ -374,7 +408,7 @@ class KCoherenceLevels(Levels):
                                                        window, int(vmodels[0].anchor))
         n_iter = config.iterations[li] if icm is None else self.icm.max_sweeps
         origin, extent = self._grid() if local else (np.zeros(3, dtype=np.int64), np.zeros(3, dtype=np.int64))
-        batches = 1 if local else min(config.batches, n_vox)
+        batches = config.batches if local else min(config.batches, n_vox)
         bounds = np.linspace(0, n_vox, batches + 1).astype(np.int64)
         index_weight = 0.0 if local else config.index_weight
         likelihood = _decide.OWN_SOLVER if decision.heuristic is None else COHERENT_HEURISTICS[decision.heuristic]
@@ -416,19 +450,19 @@ class KCoherenceLevels(Levels):
             global_counts.append(global_count)
             t_search += time.perf_counter() - ts
             ts = time.perf_counter()
-            if local:  # the histograms as the coarsest level left them, in every pass
-                order = np.arange(n_vox, dtype=np.int64)
-                histograms.positions[:] = frozen_positions
-                values.hist[:] = frozen_values
+            if local:
+                order, bounds = self._hashed_batches(shape, origin, extent, int(rng.integers(0, 2**31)), batches)
             else:
                 order = rng.permutation(n_vox).astype(np.int64)
-            if icm is not None:
-                order = icm.visit(order)
-                bounds = np.linspace(0, len(order), min(config.batches, len(order)) + 1).astype(np.int64)
             temperature = decision.temperature(li, it)
-            target = values.target if control is None else phase_prior_target(
-                values.target, phases, np.stack([c.phase_costs(config.phase_weight) for c in control]),
-                config.value_prior)
+            if replay is not None:
+                target = replay.targets[it]
+            else:
+                target = values.target if control is None else phase_prior_target(
+                    values.target, phases, np.stack([c.phase_costs(config.phase_weight) for c in control]),
+                    config.value_prior)
+            if local and replay is None:
+                record.targets[it] = target
             salt = int(rng.integers(0, 2**31)) if temperature > 0.0 else 0
             for b in range(len(bounds) - 1):
                 # within a batch the histograms are frozen and every voxel depends only on them
@@ -438,11 +472,26 @@ class KCoherenceLevels(Levels):
                                       temperature, salt, CANDIDATE_SAMPLERS[decision.sampler], origin, extent,
                                       colour_ids, kernel)
             votes_trust = _solver.NO_TRUST if icm is None else icm.vote_trust()
-            changed.append(int(_solver.solve(volume, src, assign, omega, packed,
-                                             histograms._replace(value_target=target), votes_trust, rule, order,
-                                             bounds, SOLVE_CHUNK)))
+            histograms = histograms._replace(value_target=target)
+            if not local:
+                changed.append(int(_solver.solve(volume, src, assign, omega, packed, histograms, votes_trust, rule,
+                                                 order, bounds, SOLVE_CHUNK)))
+            else:  # one batch at a time: the pilot records its histograms, a block reads them
+                n_changed = 0
+                for b in range(batches):
+                    if replay is None:
+                        record.positions[it, b] = histograms.positions / grid_voxels
+                        record.values[it, b] = histograms.values
+                    else:
+                        histograms.positions[:] = replay.positions[it, b] * grid_voxels
+                        histograms.values[:] = replay.values[it, b]
+                    part = order[bounds[b]:bounds[b + 1]]
+                    n_changed += int(_solver.solve(volume, src, assign, omega, packed, histograms, votes_trust,
+                                                   rule, part, np.array([0, len(part)], dtype=np.int64),
+                                                   SOLVE_CHUNK))
+                changed.append(n_changed)
             t_solve += time.perf_counter() - ts
-            if control is not None:
+            if control is not None and replay is None:
                 for c, e in zip(control, bin_phase_error(values.hist, values.target, phases)):
                     c.step(e)
             level_history.append(energy_sum / max(1, sites))
@@ -452,7 +501,7 @@ class KCoherenceLevels(Levels):
             else:
                 icm.cool()
                 on_step(it, level_history[-1], icm.expected() if icm.warm(it) else it)
-        used = [float((pos_hist[hist_off[vi]:hist_off[vi] + m.pixels] > 0).mean()) for vi, m in enumerate(vmodels)]
+        used = [float((position_histogram(src[vi], m.pixels) > 0).mean()) for vi, m in enumerate(vmodels)]
         stats = {
             "shape": list(shape), "window": window, "iterations": it,
             "candidates_per_site": 9 * (1 + config.k) + config.random_candidates, "sites_per_iteration": sites,
@@ -471,6 +520,8 @@ class KCoherenceLevels(Levels):
 
     def to_arrays(self, state):
         control = {} if self.control is None else {"phase_control": np.stack([c.to_array() for c in self.control])}
+        if self.blockwise:
+            control["pilot"] = pack_pilot(self.pilot, self._pilot_layout())
         return {"volume": state.volume, "sources": state.sources,
                 "widths": np.asarray(state.widths, dtype=np.int64), "temps": state.temps,
                 "inherited": state.inherited, **control}
@@ -479,6 +530,8 @@ class KCoherenceLevels(Levels):
         if self.control is not None and "phase_control" in arrays:
             self.control = [PhaseControl.from_array(a, 2)
                             for a in np.asarray(arrays["phase_control"], dtype=np.float64)]
+        if self.blockwise and "pilot" in arrays:
+            self.pilot = unpack_pilot(np.asarray(arrays["pilot"]), self._pilot_layout())
         volume = np.ascontiguousarray(arrays["volume"], dtype=np.float32)
         temps = arrays["temps"] if "temps" in arrays else np.ones(volume.shape[:3])  # no ICM: all hot
         inherited = arrays["inherited"] if "inherited" in arrays else np.zeros(volume.shape[:3])
@@ -498,4 +551,6 @@ class KCoherenceLevels(Levels):
         if self.control is not None:
             specs["phase_control"] = ArraySpec(np.stack([c.to_array() for c in self.control]).shape,
                                                np.float64)
+        if self.blockwise:  # made after the coarsest level, kept with every level
+            specs["pilot"] = ArraySpec((pilot_length(self._pilot_layout()),), np.float64)
         return specs

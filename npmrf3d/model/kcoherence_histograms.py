@@ -1,6 +1,6 @@
 """The k-coherence engine's histograms: the solver's position and value histograms
 (:func:`position_histogram`, :class:`ValueHistogram`) and what a ``blockwise`` run's finer
-levels keep of the coarsest level's (:class:`FrozenHistograms`, :func:`held_values`).
+levels read in their place (:class:`PilotHistograms`).
 
 Used by :mod:`npmrf3d.model.kcoherence_engine`; bins of values by the compiled
 :func:`npmrf3d._kernels.kcoherence.value_bins`.
@@ -14,8 +14,8 @@ import numpy as np
 
 from .._kernels import kcoherence as _search
 
-__all__ = ["FrozenHistograms", "ValueHistogram", "held_values", "position_histogram", "value_counts",
-           "value_scale"]
+__all__ = ["PilotHistograms", "ValueHistogram", "pack_pilot", "pilot_length", "position_histogram", "unpack_pilot",
+           "value_counts", "value_scale"]
 
 
 def value_scale(span, bins: int) -> np.ndarray:
@@ -83,67 +83,61 @@ def position_histogram(src_v: np.ndarray, pixels: int) -> np.ndarray:
     return np.bincount(np.asarray(src_v).ravel(), minlength=pixels).astype(np.float64)
 
 
-def held_values(positions: np.ndarray, position_offsets, texel_bins: np.ndarray, texel_offsets, pixels,
-                bins: int) -> np.ndarray:
-    """The value histogram ``(C, bins)`` (in voxels) of a volume whose every voxel holds the
-    texel its source names, from each view's position counts (``positions`` packed per view at
-    ``position_offsets``, ``pixels`` each; their texels' bins ``texel_bins`` at
-    ``texel_offsets``), the views averaged.
+class PilotHistograms(NamedTuple):
+    """What one finer level of a ``blockwise`` run reads in place of its own histograms: the
+    live histograms of a *pilot* region of that level, recorded before each batch of each pass.
 
-    >>> held_values(np.array([2.0, 0.0, 1.0]), [0], np.array([[0], [1], [1]]), [0], [3], 2)
-    array([[2., 1.]])
-    """
-    channels = texel_bins.shape[1]
-    out = np.zeros((channels, bins), dtype=np.float64)
-    for start, offset, n in zip(position_offsets, texel_offsets, pixels):
-        counts = positions[start:start + n]
-        for ch in range(channels):
-            out[ch] += np.bincount(texel_bins[offset:offset + n, ch], weights=counts, minlength=bins)
-    return out / len(pixels)
+    A block cannot keep the default's histograms (every batch of a pass reads the counts of the
+    whole level so far). The pilot -- the dependency cone of one fixed block, made once after the
+    coarsest level with its own histograms updated between batches as the default does -- shows
+    how those histograms move through a level; every block then reads the pilot's counts at the
+    same batch, scaled to the level's whole grid, so its decisions feel the pull the whole
+    volume's would, and depend on nothing outside their cone.
 
-
-class FrozenHistograms(NamedTuple):
-    """The histograms a ``blockwise`` run's finer levels keep from its coarsest level, which
-    runs whole: per view the position counts of the coarsest level's sources.
-
-    A finer level's position counts are the coarsest ones up-sampled as the sources are (each
-    coarse pixel's count goes, doubled, to the four pixels ``2 * p + offset``:
-    :meth:`positions_at`), which is what the level's starting sources hold, and its value
-    histogram that of the texels they name (:func:`held_values`): the histograms of that
-    level's exemplar, not of the coarsest level's smoother one. The solver's votes and its
-    histogram prior read them without updates, so that every voxel depends on its
-    neighbourhood alone.
+    Attributes
+    ----------
+    positions : (iterations, batches, P) float64
+        Per pass and batch the position counts (views packed), per voxel of the pilot region.
+    values : (iterations, batches, C, bins) float64
+        The value histograms, in units of an even bin's share.
+    targets : (iterations, C, bins) float64
+        Per pass the value prior's target (the phase control's, when it is on).
     """
 
-    positions: tuple[np.ndarray, ...]
-    shapes: tuple[tuple[int, int], ...]
+    positions: np.ndarray
+    values: np.ndarray
+    targets: np.ndarray
 
     @classmethod
-    def of(cls, state, models) -> "FrozenHistograms":
-        """The position counts of the coarsest level's finished whole ``state`` (a
-        :class:`npmrf3d.model.kcoherence_engine.CoherentState`; its level ``models``)."""
-        positions = tuple(position_histogram(state.sources[vi], m.pixels) for vi, m in enumerate(models))
-        return cls(positions, tuple((int(m.exemplar.shape[0]), int(m.exemplar.shape[1])) for m in models))
+    def empty(cls, iterations: int, batches: int, pixels: int, channels: int, bins: int) -> "PilotHistograms":
+        """A record to fill, zeros."""
+        return cls(np.zeros((iterations, batches, pixels)), np.zeros((iterations, batches, channels, bins)),
+                   np.zeros((iterations, channels, bins)))
 
-    def positions_at(self, view: int, fine_shapes) -> np.ndarray:
-        """View ``view``'s counts up-sampled once per exemplar shape of ``fine_shapes`` (the
-        view's exemplar at each finer level in turn, down to the one wanted).
 
-        >>> frozen = FrozenHistograms((np.array([1.0, 0.0, 0.0, 3.0]),), ((2, 2),))
-        >>> frozen.positions_at(0, [(4, 4)]).reshape(4, 4)
-        array([[2., 2., 0., 0.],
-               [2., 2., 0., 0.],
-               [0., 0., 6., 6.],
-               [0., 0., 6., 6.]])
-        """
-        counts, (h, w) = self.positions[view], self.shapes[view]
-        rows, cols = np.divmod(np.arange(h * w), w)
-        for fh, fw in fine_shapes:
-            fine = np.zeros(fh * fw, dtype=np.float64)
-            for a in (0, 1):
-                for b in (0, 1):
-                    np.add.at(fine, np.minimum(2 * rows + a, fh - 1) * fw + np.minimum(2 * cols + b, fw - 1),
-                              2.0 * counts)
-            counts, h, w = fine, fh, fw
-            rows, cols = np.divmod(np.arange(h * w), w)
-        return counts
+def pack_pilot(records, layout) -> np.ndarray:
+    """The pilot's records of every level in ``layout`` (``(level, iterations, batches, pixels,
+    channels, bins)`` each) as one float64 array (a checkpoint member); empty without records."""
+    if not records:
+        return np.zeros(0, dtype=np.float64)
+    return np.concatenate([a.ravel() for level, *_ in layout for a in records[level]])
+
+
+def unpack_pilot(flat: np.ndarray, layout) -> dict | None:
+    """The records :func:`pack_pilot` packed, by level; None for an empty array."""
+    if flat.size == 0:
+        return None
+    records, at = {}, 0
+    for level, iterations, batches, pixels, channels, bins in layout:
+        parts = []
+        for shape in PilotHistograms.empty(iterations, batches, pixels, channels, bins):
+            n = shape.size
+            parts.append(np.asarray(flat[at:at + n], dtype=np.float64).reshape(shape.shape))
+            at += n
+        records[level] = PilotHistograms(*parts)
+    return records
+
+
+def pilot_length(layout) -> int:
+    """The length of :func:`pack_pilot`'s array for ``layout``."""
+    return sum(i * b * p + i * b * c * n + i * c * n for _, i, b, p, c, n in layout)

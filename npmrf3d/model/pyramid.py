@@ -191,10 +191,11 @@ class Levels(ABC):
         per-axis array indices ``index``."""
         return None
 
-    def after_level(self, level: int, state: Any) -> None:
+    def after_level(self, level: int, state: Any, rng: np.random.Generator) -> None:
         """Called with each finished level's whole or regional state (also one resumed from a
         checkpoint), before it is cut to a region and up-sampled: a method may keep what its
-        finer levels need from it (statistics of a level that runs whole)."""
+        finer levels need from it (statistics of a level that runs whole). ``rng`` is the run's
+        generator at that point: a method may copy it, never draw from it."""
 
     def prepare(self, level: int, shape: tuple[int, int, int]) -> None:
         """Per-level set-up that draws no random numbers (models, exemplar pyramids)."""
@@ -247,7 +248,7 @@ class PyramidRun:
 def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressCallback | None = None,
                 checkpoint: str | Path | None = None, timings: dict | None = None,
                 stats: dict | None = None, t_start: float | None = None,
-                region: RegionPlan | None = None) -> PyramidRun:
+                region: RegionPlan | None = None, after: tuple[int, Any] | None = None) -> PyramidRun:
     """Run ``method`` from its coarsest level to level 0.
 
     Parameters
@@ -274,6 +275,8 @@ def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressC
         whole (the coarsest ones) come from the checkpoint ``region.start``, made by the first
         block that finds none and resumed by every other, so all blocks share them; no
         ``checkpoint`` then. None: the whole grid.
+    after : (level, state), optional
+        Start after the finished whole ``level`` given as ``state`` (instead of a checkpoint).
     """
     t_start = time.perf_counter() if t_start is None else t_start
     timings = {"setup": time.perf_counter() - t_start} if timings is None else dict(timings)
@@ -287,11 +290,14 @@ def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressC
             raise ValueError("a region runs without a checkpoint, for a method with aprons only")
         checkpoint = region.start
     resumed = _load(checkpoint, method, rng)
-    if resumed is not None:
+    if after is not None:
+        done_level, state = after
+        first_level = done_level - 1
+    elif resumed is not None:
         state, done_level, rng_state, history, timings, stats = resumed
         rng.bit_generator.state = rng_state
         first_level = done_level - 1
-        method.after_level(done_level, state)
+        method.after_level(done_level, state, rng)
     for level in range(first_level, -1, -1):
         t0 = time.perf_counter()
         frame = None if region is None else region.frames[level]
@@ -313,7 +319,7 @@ def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressC
         history.append(level_history)
         timings[f"level_{level}"] = time.perf_counter() - t0
         stats["levels"][f"level_{level}"] = level_stats
-        method.after_level(level, state)
+        method.after_level(level, state, rng)
         if checkpoint is not None and frame is None:  # a region's own levels are not kept
             save_run_state(
                 checkpoint, method.key, **method.fingerprint, **method.to_arrays(state),
