@@ -3,7 +3,10 @@ workers, a cut-off Zarr run resumed, and seams.
 
 The default sampler with ``blockwise=True`` (``npmrf3d synth --blockwise``, the sampler of
 ``--out VOL.zarr``) on a 64 x 64 exemplar: a crop of the bundled grey ``gravel`` photograph
-(``--exemplar`` for another image), seed 0. Parts (each ``--parts`` name):
+(``--exemplar`` for another image), seed 0. Its levels of at most 256^3 voxels run whole, so
+below 512^3 every level does; ``--whole-voxels N`` runs the coherent sampler with the default's
+options and that threshold instead, so that small volumes make their finer levels in blocks.
+Parts (each ``--parts`` name):
 
 * ``equal``: ``--size`` (default 128) at once and as blocks of ``--block`` (default 64), the
   blocks made one after the other in this process at 1 and at 2 numba threads: equal or not,
@@ -17,6 +20,9 @@ The default sampler with ``blockwise=True`` (``npmrf3d synth --blockwise``, the 
 * ``big``: ``--big`` (default 256) into Zarr with 2 workers: wall time, block rate, worker
   peak memory, and the time 512^3 and 1024^3 would take at that rate (their cones counted by
   the block plan).
+* ``estimate``: ``--estimate`` (default 512) in blocks of ``--big-block``: the first block (the
+  levels that run whole, the pilot, the block) and the next, made here with 2 threads, and the
+  volume's time on these 2 cores estimated from them.
 * ``seams``: slices of the ``equal`` volume that cross block borders (the planes through the
   block corners) against slices inside blocks: the slice metrics of
   :func:`npmrf3d.analysis.metrics` (histogram KL, autocorrelation error, sliced Wasserstein
@@ -26,12 +32,13 @@ The default sampler with ``blockwise=True`` (``npmrf3d synth --blockwise``, the 
 Prints a table and writes ``figures/blocks/blocks.json``.
 
 Usage: ``python benchmarks/bench_blocks.py [--parts equal,scaling,resume,big,seams] [--size 128]
-[--block 64] [--big 256] [--out figures/blocks]``
+[--block 64] [--big 256] [--whole-voxels N] [--out figures/blocks]``
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import signal
@@ -49,12 +56,20 @@ import npmrf3d
 from npmrf3d import data
 from npmrf3d._kernels._jit import use_threads
 from npmrf3d.analysis.metrics import autocorrelation_error, histogram_kl, sliced_wasserstein
-from npmrf3d.methods import METHODS
-from npmrf3d.methods.blocks import block_plan, synthesize_blocks, write_zarr
+from npmrf3d.methods import METHODS, npmrf
+from npmrf3d.methods.blocks import block_plan, make_block, synthesize_blocks, write_zarr
 from npmrf3d.plotting import save_figure
 
-PARTS = ("equal", "scaling", "resume", "big", "seams")
-METHOD = METHODS["npmrf"]
+PARTS = ("equal", "scaling", "resume", "big", "seams", "estimate")
+#: ``--whole-voxels``: None runs the default sampler (``npmrf3d synth``, whose levels of at most
+#: 256^3 voxels run whole: every level of a volume up to 256^3); a number runs the coherent
+#: sampler with the default's options and that threshold, so small volumes make their finer
+#: levels in blocks.
+WHOLE_VOXELS: int | None = None
+
+
+def method():
+    return METHODS["npmrf" if WHOLE_VOXELS is None else "coherent"]
 
 
 def exemplar(path: str | None) -> np.ndarray:
@@ -67,7 +82,10 @@ def views(image):
 
 
 def config(size: int):
-    return METHOD.make_config(size=size, blockwise=True, seed=0)
+    base = METHODS["npmrf"].make_config(size=size, blockwise=True, seed=0)
+    if WHOLE_VOXELS is None:
+        return base
+    return dataclasses.replace(npmrf._coherent_options(base, False, base.levels), whole_voxels=WHOLE_VOXELS)
 
 
 def part_equal(image, size: int, block: int) -> dict:
@@ -75,16 +93,16 @@ def part_equal(image, size: int, block: int) -> dict:
     out = {}
     use_threads(2)
     t0 = time.perf_counter()
-    whole = METHOD.run(views(image), cfg, np.random.default_rng(cfg.seed)).volume
+    whole = method().run(views(image), cfg, np.random.default_rng(cfg.seed)).volume
     out["whole_seconds"] = time.perf_counter() - t0
     for threads in (1, 2):
         use_threads(threads)
         with tempfile.TemporaryDirectory() as tmp:
             t0 = time.perf_counter()
-            blocks = synthesize_blocks(METHOD, views(image), cfg, block=block, start=Path(tmp) / "start.npz")
+            blocks = synthesize_blocks(method(), views(image), cfg, block=block, start=Path(tmp) / "start.npz")
             out[f"blocks_seconds_{threads}_threads"] = time.perf_counter() - t0
         out[f"equal_{threads}_threads"] = bool(np.array_equal(blocks, whole))
-    out["plan"] = block_plan(METHOD, views(image), cfg, block=block).describe()
+    out["plan"] = block_plan(method(), views(image), cfg, block=block).describe()
     out["us_per_voxel_whole_2_threads"] = 1e6 * out["whole_seconds"] / size ** 3
     print(f"equal: {size}^3 at once {out['whole_seconds']:.1f} s (2 threads); blocks of {block}: "
           f"{out['blocks_seconds_1_threads']:.1f} s (1 thread, equal {out['equal_1_threads']}), "
@@ -96,7 +114,7 @@ def part_equal(image, size: int, block: int) -> dict:
 def _zarr(image, size: int, block: int, workers: int, out: Path) -> dict:
     cfg = config(size)
     t0 = time.perf_counter()
-    summary = write_zarr(METHOD, views(image), cfg, out, block=block, record={}, workers=workers, overwrite=True)
+    summary = write_zarr(method(), views(image), cfg, out, block=block, record={}, workers=workers, overwrite=True)
     summary["wall_seconds"] = time.perf_counter() - t0
     return summary
 
@@ -115,9 +133,11 @@ def part_scaling(image, size: int, block: int, out: Path) -> dict:
 
 
 def _command(size: int, block: int, out: Path, exemplar_path: str | None) -> list[str]:
-    return [sys.executable, "-m", "npmrf3d", "synth", exemplar_path or f"bundled:{data.DEFAULT_EXEMPLAR}",
-            "--size", str(size), "--blockwise", "--block", str(block), "--workers", "2", "--seed", "0", "--quiet",
-            "--out", str(out)]
+    command = "synth" if WHOLE_VOXELS is None else "coherent"
+    whole = [] if WHOLE_VOXELS is None else ["--whole-voxels", str(WHOLE_VOXELS)]
+    return [sys.executable, "-m", "npmrf3d", command, exemplar_path or f"bundled:{data.DEFAULT_EXEMPLAR}",
+            "--size", str(size), "--blockwise", *whole, "--block", str(block), "--workers", "2", "--seed", "0",
+            "--quiet", "--out", str(out)]
 
 
 def part_resume(size: int, block: int, out: Path, exemplar_path: str | None) -> dict:
@@ -147,8 +167,8 @@ def part_big(image, size: int, block: int, out: Path) -> dict:
     row = {"size": size, "block": block, "wall_seconds": summary["wall_seconds"], "voxels_per_second": rate,
            "worker_peak_bytes": summary["worker_peak_bytes"], "plan": summary["plan"]}
     for target in (512, 1024):
-        plan = block_plan(METHOD, views(image), config(target), block=block)
-        ours = block_plan(METHOD, views(image), config(size), block=block)
+        plan = block_plan(method(), views(image), config(target), block=block)
+        ours = block_plan(method(), views(image), config(size), block=block)
         # time scales with the cones' voxels: the target's per volume voxel against ours
         row[f"estimated_seconds_{target}"] = (summary["wall_seconds"] * (target / size) ** 3
                                               * plan.overhead / ours.overhead)
@@ -156,6 +176,31 @@ def part_big(image, size: int, block: int, out: Path) -> dict:
           f"({1e6 / rate:.1f} us per voxel, {per_block:.1f} s per block), worker peak "
           f"{summary['worker_peak_bytes'] / 2**30:.2f} GiB; at this rate 512^3 takes about "
           f"{row['estimated_seconds_512'] / 60:.0f} min and 1024^3 about {row['estimated_seconds_1024'] / 3600:.1f} h")
+    return row
+
+
+def part_estimate(image, size: int, block: int) -> dict:
+    """The first block of ``size``^3 (which also makes the levels that run whole and the pilot)
+    and the next one, made here with 2 threads; the whole volume's time on these 2 cores
+    estimated as the first block plus the others at the second's time, and any size's from the
+    cones' voxels at the second block's rate."""
+    cfg = config(size)
+    use_threads(2)
+    plan = block_plan(method(), views(image), cfg, block=block)
+    seconds = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for index in ((0, 0, 0), (0, 0, 1)):
+            origin = tuple(i * block for i in index)
+            t0 = time.perf_counter()
+            make_block(method(), views(image), cfg, origin, (block,) * 3, Path(tmp) / "start.npz")
+            seconds.append(time.perf_counter() - t0)
+    cone = sum(int(np.prod(f.shape)) for f in plan.cone.frames if f is not None)
+    row = {"size": size, "block": block, "blocks": plan.blocks, "first_block_seconds": seconds[0],
+           "block_seconds": seconds[1], "cone_voxels": cone, "us_per_cone_voxel": 1e6 * seconds[1] / cone,
+           "estimated_seconds": seconds[0] + (plan.blocks - 1) * seconds[1], "plan": plan.describe()}
+    print(f"estimate: {size}^3 in {plan.blocks} blocks of {block}: the first block {seconds[0]:.0f} s (the "
+          f"levels made whole and the pilot), the next {seconds[1]:.1f} s ({row['us_per_cone_voxel']:.1f} us per "
+          f"cone voxel); the volume about {row['estimated_seconds'] / 60:.0f} min on these 2 cores")
     return row
 
 
@@ -210,14 +255,20 @@ def main(argv=None) -> int:
     parser.add_argument("--block", type=int, default=64)
     parser.add_argument("--big", type=int, default=256)
     parser.add_argument("--big-block", type=int, default=128)
+    parser.add_argument("--estimate", type=int, default=512, help="side of the volume the estimate part times")
     parser.add_argument("--exemplar", default=None)
+    parser.add_argument("--whole-voxels", type=int, default=None,
+                        help="run the coherent sampler with the default's options and this threshold of "
+                             "the levels made whole (default: the default sampler itself)")
     parser.add_argument("--out", default="figures/blocks")
     args = parser.parse_args(argv)
+    global WHOLE_VOXELS
+    WHOLE_VOXELS = args.whole_voxels
     parts = [p for p in args.parts.split(",") if p]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     image = exemplar(args.exemplar)
-    record = {"hardware": hardware(), "size": args.size, "block": args.block}
+    record = {"hardware": hardware(), "size": args.size, "block": args.block, "whole_voxels": args.whole_voxels}
     results_path = out / "blocks.json"
     if results_path.is_file():
         record = {**json.loads(results_path.read_text()), **record}
@@ -233,6 +284,8 @@ def main(argv=None) -> int:
         record["big"] = part_big(image, args.big, args.big_block, work)
     if "seams" in parts:
         record["seams"] = part_seams(image, args.block, out)
+    if "estimate" in parts:
+        record["estimate"] = part_estimate(image, args.estimate, args.big_block)
     results_path.write_text(json.dumps(record, indent=2, default=str) + "\n")
     print(f"wrote {results_path}")
     return 0

@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 import zarr
 
+import npmrf3d
+
 from npmrf3d import ParameterError
 from npmrf3d._kernels import kcoherence as _k
 from npmrf3d._kernels._jit import use_threads
@@ -26,7 +28,7 @@ from .naive import naive_global_flat, naive_voxel_batches
 #: iteration per level, blocks of 16 in a 48 x 32 x 32 volume; a pilot smaller than the volume
 #: (its cone is a true part of the finer levels too) and the phase control on.
 SMALL = dict(size=(48, 32, 32), window=3, levels=3, iterations=1, blockwise=True, pilot=16, phase_weight=16.0,
-             seed=11)
+             whole_voxels=1, seed=11)
 
 
 def _exemplar(name: str) -> np.ndarray:
@@ -133,6 +135,27 @@ def test_a_region_draws_the_batches_of_the_whole_grid():
     index = np.ix_(*[(o + np.arange(n)) % e for o, n, e in zip(origin, shape, extent)])
     np.testing.assert_array_equal(part, whole[index])
     assert np.all(np.abs(np.bincount(whole.ravel(), minlength=8) - whole.size / 8) < 0.3 * whole.size / 8)
+
+
+def test_levels_that_fit_run_whole_once_and_the_blocks_still_equal(tmp_path):
+    """With ``whole_voxels`` the middle level's size, the two coarsest levels run whole (in the
+    shared checkpoint) and the finest in blocks: still the volume made at once."""
+    method = METHODS["coherent"]
+    per_view = _views(_exemplar("gravel64"))
+    config = method.make_config(**{**SMALL, "whole_voxels": 24 * 16 * 16})
+    assert method.aprons(config, per_view)[1:] == (None, None)
+    whole = _whole(method, per_view, config, 2)
+    blocks = synthesize_blocks(method, per_view, config, block=16, start=tmp_path / "start.npz")
+    np.testing.assert_array_equal(blocks, whole)
+
+
+def test_a_blockwise_volume_whose_levels_all_fit_is_the_default_volume():
+    """At most ``whole_voxels`` voxels at the finest level: every level runs whole, as the
+    default does, and ``--blockwise`` changes nothing."""
+    image = _exemplar("gravel64")
+    kw = dict(size=32, levels=2, window=5, rng=3)
+    np.testing.assert_array_equal(npmrf3d.synthesize(image, blockwise=True, **kw).volume,
+                                  npmrf3d.synthesize(image, **kw).volume)
 
 
 def test_blocks_read_the_pilot(tmp_path):

@@ -221,6 +221,8 @@ CHEN_WANG_HELP = {
                  "and value histograms of a pilot block (made once, its histograms live) and random "
                  "numbers hashed from voxel positions, so a volume made in blocks (--out VOL.zarr) "
                  "equals the volume made at once; no global search or index histogram",
+    "whole_voxels": "with --blockwise: levels of at most this many voxels (and the coarsest) run whole, once "
+                    "for all blocks, with every histogram",
     "pilot": "with --blockwise: side of the pilot block at the finest level, whose live histograms every "
              "block reads (larger follows the whole volume's closer and costs one such block more)",
 }

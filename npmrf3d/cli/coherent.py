@@ -31,7 +31,7 @@ FIELD_HELP = {
     "random_candidates": "random valid centres added to each site's candidates (reach sparse features)",
     **{name: CHEN_WANG_HELP[name] for name in ("global_share", "coherence_bias", "value_weight",
                                                "value_prior", "value_bins", "phase_weight", "blockwise",
-                                               "pilot")},
+                                               "pilot", "whole_voxels")},
     "t0": "annealing: first temperature of each level; each voxel draws among its candidates with "
           "probability ~ exp(score / T) (0 = no annealing: the highest score decides), >= 0",
     "t_end": "annealing: last temperature of each level, in (0, t0] (geometric) or [0, t0] (linear)",

@@ -114,6 +114,9 @@ class BlockPlan:
     def describe(self) -> str:
         frames = " < ".join("x".join(map(str, f.shape)) for f in reversed(self.cone.frames) if f is not None)
         whole = sum(f is None for f in self.cone.frames)
+        if whole == len(self.cone.frames):
+            return (f"{self.blocks} blocks; every level made once, whole, by the first block, the others "
+                    f"cut from it; {self.memory.describe()}")
         shared = ("the coarsest level made once, whole; " if whole == 1 else
                   f"the coarsest {whole} levels made once, whole; " if whole else "")
         return (f"{self.blocks} blocks; {shared}each block made from a cone of {frames} voxels, "
@@ -141,7 +144,8 @@ def block_plan(method: SynthesisMethod, per_view, config, *, block: int) -> Bloc
     pyramid = sum(int(np.prod(level_shape(size, level))) for level in range(levels))
     cone = biggest[1]
     # the larger of the finest region and the finest whole level, each as a one-level run
-    sizes = [cone.frames[0].shape] + [level_shape(size, level) for level, f in enumerate(cone.frames) if f is None][:1]
+    sizes = ([f.shape for f in cone.frames[:1] if f is not None]
+             + [level_shape(size, level) for level, f in enumerate(cone.frames) if f is None][:1])
     memory = max((method.resources(dataclasses.replace(config, size=shape, levels=1), per_view) for shape in sizes),
                  key=lambda e: e.bytes)
     return BlockPlan(len(indices), cone, memory, cone_voxels / pyramid)

@@ -119,6 +119,10 @@ class ChenWangConfig:
     blockwise: bool = False
     # the pilot's block side at the finest level (its cone at the coarser ones)
     pilot: int = 64
+    # levels of at most this many voxels run whole, once for all blocks, with every histogram
+    # (256^3: at 512^3 the two coarsest levels, whose cones per block of 128 would repeat the
+    # 256^3 level 8.8 times over)
+    whole_voxels: int = 2 ** 24
     seed: int | None = None
 
     def to_dict(self) -> dict:
@@ -138,13 +142,14 @@ def make_chen_wang_config(
     global_share=DEFAULTS.global_share, coherence_bias=DEFAULTS.coherence_bias,
     value_weight=DEFAULTS.value_weight, value_prior=DEFAULTS.value_prior, value_bins=DEFAULTS.value_bins,
     phase_weight=DEFAULTS.phase_weight, batches=DEFAULTS.batches, solver=DEFAULTS.solver, balance_views=DEFAULTS.balance_views,
-    blockwise=DEFAULTS.blockwise, pilot=DEFAULTS.pilot, seed=None,
+    blockwise=DEFAULTS.blockwise, pilot=DEFAULTS.pilot, whole_voxels=DEFAULTS.whole_voxels, seed=None,
 ) -> ChenWangConfig:
     """Validate plain keyword arguments into a frozen :class:`ChenWangConfig`.
 
     ``window`` and ``iterations`` take one integer or one per level (coarsest first); when the
     default per-level tuples meet another level count, the last ``levels`` entries are used.
-    ``blockwise``: the coarsest level runs whole with every histogram; the finer ones in blocks
+    ``blockwise``: the coarsest level, and every level of at most ``whole_voxels`` voxels, runs
+    whole with every histogram, once for all blocks; the finer ones in blocks
     that read, batch by batch, the position and value histograms of a pilot block of side
     ``pilot`` made once with its histograms live, and no index histogram
     (:class:`npmrf3d.model.kcoherence_histograms.PilotHistograms`); the global search, which
@@ -191,6 +196,7 @@ def make_chen_wang_config(
         seed = check.integer("seed", seed, low=0)
     blockwise = check.boolean("blockwise", blockwise)
     pilot = check.integer("pilot", pilot, low=8)
+    whole_voxels = check.integer("whole_voxels", whole_voxels, low=1)
     if blockwise:
         global_share = 0.0
     return ChenWangConfig(size=dims, window=window, levels=levels, views=views,
@@ -201,7 +207,7 @@ def make_chen_wang_config(
                           coherence_bias=coherence_bias, value_weight=value_weight,
                           value_prior=value_prior, value_bins=value_bins, phase_weight=phase_weight,
                           batches=batches, solver=solver, balance_views=bool(balance_views), blockwise=blockwise,
-                          pilot=pilot, seed=seed)
+                          pilot=pilot, whole_voxels=whole_voxels, seed=seed)
 
 
 def _check_exemplar_levels(config: ChenWangConfig, per_view: Mapping[str, np.ndarray]) -> None:

@@ -168,9 +168,11 @@ class CoherentConfig:
     max_sweeps: int = IcmSchedule.max_sweeps
     upsample: str = IcmSchedule.upsample
     inherit: str = IcmSchedule.inherit
-    # block-local (Chen–Wang's field): no global histograms, any block can be made alone
+    # block-local (Chen–Wang's fields): the finer levels read a pilot block's histograms, any
+    # block can be made alone
     blockwise: bool = _CW.blockwise
     pilot: int = _CW.pilot
+    whole_voxels: int = _CW.whole_voxels
     seed: int | None = None
 
     def to_dict(self) -> dict:
@@ -181,7 +183,7 @@ class CoherentConfig:
 DEFAULTS = CoherentConfig()
 _SHARED = ("size", "window", "levels", "views", "iterations", "k", "index_weight", "position_weight",
            "position_boost", "random_candidates", "global_share", "coherence_bias", "value_weight",
-           "value_prior", "value_bins", "phase_weight", "blockwise", "pilot", "seed")
+           "value_prior", "value_bins", "phase_weight", "blockwise", "pilot", "whole_voxels", "seed")
 
 
 def make_coherent_config(
@@ -195,7 +197,7 @@ def make_coherent_config(
     phase_weight=DEFAULTS.phase_weight, t0=DEFAULTS.t0, t_end=DEFAULTS.t_end, schedule=DEFAULTS.schedule,
     sampler=DEFAULTS.sampler, icm=DEFAULTS.icm, xi=DEFAULTS.xi, stop=DEFAULTS.stop,
     max_sweeps=DEFAULTS.max_sweeps, upsample=DEFAULTS.upsample, inherit=DEFAULTS.inherit,
-    blockwise=DEFAULTS.blockwise, pilot=DEFAULTS.pilot, seed=None,
+    blockwise=DEFAULTS.blockwise, pilot=DEFAULTS.pilot, whole_voxels=DEFAULTS.whole_voxels, seed=None,
 ) -> CoherentConfig:
     """Validate plain keyword arguments into a frozen :class:`CoherentConfig` (the shared
     coherence fields are validated as Chen–Wang's, the ICM ones as the NP-MRF sampler's).
@@ -205,7 +207,8 @@ def make_coherent_config(
         index_weight=index_weight, position_weight=position_weight, position_boost=position_boost,
         random_candidates=random_candidates, global_share=global_share,
         coherence_bias=coherence_bias, value_weight=value_weight, value_prior=value_prior,
-        value_bins=value_bins, phase_weight=phase_weight, blockwise=blockwise, pilot=pilot, seed=seed)
+        value_bins=value_bins, phase_weight=phase_weight, blockwise=blockwise, pilot=pilot,
+        whole_voxels=whole_voxels, seed=seed)
     heuristic = check.choice("heuristic", heuristic, tuple(COHERENT_HEURISTICS))
     centre_bandwidth = check.real("centre_bandwidth", centre_bandwidth, low=0.0, low_open=True)
     outlier = check.real("outlier", outlier, low=0.0, high=1.0, high_open=True)

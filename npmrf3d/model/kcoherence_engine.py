@@ -18,7 +18,12 @@ matched) and solves every voxel (copy one voted texel under the position and val
 histograms). The random numbers, per iteration: one salt per view's search, the solver's voxel
 order, and a salt for an annealed decision.
 
-Why one module of ~500 lines: :class:`KCoherenceLevels` is one level's search and solve, whole
+A ``blockwise`` run's finer levels cut each pass into batches by a hash of the voxels' grid
+positions and read, batch by batch, the histograms of a pilot block made once after the coarsest
+level (:meth:`KCoherenceLevels.run_pilot`,
+:class:`npmrf3d.model.kcoherence_histograms.PilotHistograms`) instead of their own.
+
+Why one module of ~550 lines: :class:`KCoherenceLevels` is one level's search and solve, whole
 or on a block's region (``blockwise``, :func:`block_aprons`), and the decision types it passes
 to the kernels belong with it; the histograms live in
 :mod:`npmrf3d.model.kcoherence_histograms`, the ICM schedule (per-voxel temperatures) in
@@ -186,9 +191,10 @@ def pack_exemplars(models) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def block_aprons(config, icm: IcmSchedule | None = None) -> tuple[int, ...] | None:
     """Per level (0 the finest), a ``blockwise`` configuration's iterations times the reach of
-    one iteration (:meth:`KCoherenceLevels.aprons`), None for the coarsest level, which runs
-    whole with the global histograms (its result is shared by all blocks); None without
-    ``blockwise`` or with ICM's per-voxel temperatures (whose stop rule reads the whole level).
+    one iteration (:meth:`KCoherenceLevels.aprons`); None for the levels that run whole with
+    every histogram, once for all blocks: the coarsest, and every level of at most
+    ``config.whole_voxels`` voxels (with the levels coarser than it). None without ``blockwise``
+    or with ICM's per-voxel temperatures (whose stop rule reads the whole level).
 
     One iteration reaches ``window - 1`` voxels: a site's match reads the window at the site
     (``anchor`` before it, ``window - 1 - anchor`` after) and the neighbours' shifted sources
@@ -196,16 +202,19 @@ def block_aprons(config, icm: IcmSchedule | None = None) -> tuple[int, ...] | No
     of 2 (anchor 0) reaches one further, to the source one step before the site.
 
     >>> from npmrf3d.methods.chen_wang import make_chen_wang_config
-    >>> block_aprons(make_chen_wang_config(size=32, blockwise=True))
+    >>> block_aprons(make_chen_wang_config(size=32, blockwise=True, whole_voxels=1))
     (9, 20, None)
+    >>> block_aprons(make_chen_wang_config(size=512, blockwise=True))
+    (9, None, None)
     """
     if not getattr(config, "blockwise", False) or icm is not None:
         return None
     last = config.levels - 1
     reach = [w - 1 + (w < 3) for w in config.window]
-    return tuple(config.iterations[last - level] * reach[last - level] if level < last else None
+    whole = [level == last or int(np.prod([n // 2 ** level for n in config.size])) <= config.whole_voxels
+             for level in range(config.levels)]
+    return tuple(None if whole[level] else config.iterations[last - level] * reach[last - level]
                  for level in range(config.levels))
-
 
 
 class KCoherenceLevels(Levels):
@@ -262,10 +271,11 @@ class KCoherenceLevels(Levels):
         #: while this engine *is* the pilot: the records it is making, by level
         self.recording: dict[int, PilotHistograms] | None = None
         #: blockwise: the finest level that runs whole, with every histogram (the coarsest)
-        self.lowest_whole = config.levels - 1
+        aprons = block_aprons(config, icm)
+        self.lowest_whole = config.levels - 1 if aprons is None else aprons.index(None)
 
     def aprons(self):
-        """With ``blockwise`` (no global histograms, random numbers hashed from grid positions)
+        """With ``blockwise`` (the pilot's histograms, random numbers hashed from grid positions)
         and fixed iterations, per level (0 the finest) its iterations times its window: a voxel
         after one search and solve depends on voxels at most ``window - 1`` away (the search
         reads a window around each site, the solve the sites of every window that holds the
@@ -552,5 +562,6 @@ class KCoherenceLevels(Levels):
             specs["phase_control"] = ArraySpec(np.stack([c.to_array() for c in self.control]).shape,
                                                np.float64)
         if self.blockwise:  # made after the coarsest level, kept with every level
-            specs["pilot"] = ArraySpec((pilot_length(self._pilot_layout()),), np.float64)
+            made = level <= self.lowest_whole  # the pilot follows the finest whole level
+            specs["pilot"] = ArraySpec((pilot_length(self._pilot_layout()) if made else 0,), np.float64)
         return specs

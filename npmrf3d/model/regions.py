@@ -90,7 +90,10 @@ class RegionPlan:
         return coarse.indices_of(tuple(o // 2 for o in child.origin), tuple(n // 2 for n in child.shape))
 
     def block_indices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Indices into the finished finest frame of the block."""
+        """Indices into the finished finest frame of the block (the whole grid when every level
+        runs whole)."""
+        if self.frames[0] is None:
+            return tuple(o + np.arange(n) for o, n in zip(self.origin, self.shape))
         return self.frames[0].indices_of(self.origin, self.shape)
 
 
