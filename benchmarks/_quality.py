@@ -152,15 +152,16 @@ SAMPLER_COMBINATIONS = {
     "npmrf-H2b-metropolis": dict(heuristic="ML_H2b", relaxation="anneal", sampler="metropolis"),
 }
 METHODS.update({name: _npmrf(**options) for name, options in SAMPLER_COMBINATIONS.items()})
-#: The default run made block-local (``synth --blockwise``): the coarsest level as the default,
-#: the finer levels reading the histograms of a pilot block, no index histogram, batches and
-#: random numbers hashed from voxel positions.
+#: The default run made block-local (``synth --blockwise``): up to 256^3 every level runs whole,
+#: so this is the default's volume.
 BLOCKWISE = {"npmrf-blockwise": dict(blockwise=True)}
 METHODS.update({name: _npmrf(**options) for name, options in BLOCKWISE.items()})
-#: The same through the coherent sampler's options, with the pilot smaller than the volume (at
-#: 64^3 a pilot of 64 is the whole volume: its histograms are the run's own): how far blocks that
-#: read another region's histograms stay from the default.
-BLOCK_PILOTS = {f"npmrf-blockwise-pilot-{p}": dict(blockwise=True, pilot=p) for p in (16, 32, 64)}
+#: The block-local sampler with every level below the coarsest made in blocks (``whole_voxels``
+#: 1), reading the histograms of a pilot block of side 16, 32 or 64, through the coherent
+#: sampler's options. At 64^3 a pilot of 32 or 64 is the whole volume (its histograms are the
+#: run's own); one of 16 is a part of it: how far blocks that read another region's histograms
+#: stay from the default.
+BLOCK_PILOTS = {f"npmrf-blockwise-pilot-{p}": dict(blockwise=True, pilot=p, whole_voxels=1) for p in (16, 32, 64)}
 METHODS.update({name: _npmrf_coherent_with(**options) for name, options in BLOCK_PILOTS.items()})
 METHODS["npmrf-coherent-default"] = _npmrf_coherent_with()
 #: The default run without its global histograms: the index and position histograms of the

@@ -14,7 +14,7 @@ Parts (each ``--parts`` name):
 * ``scaling``: the same volume into Zarr on a local cluster of 1, then 2 workers: the wall
   time of the blocks made on the cluster (the first block, which also makes the shared coarsest
   level, runs before the cluster starts and is left out) and its speed-up, peak resident
-  memory of a worker.
+  memory of a worker; ``scaling_workers.png``.
 * ``resume``: the Zarr command run as a subprocess, interrupted (SIGINT) once a third of the
   blocks are done, then run again: equal to the uninterrupted volume or not.
 * ``big``: ``--big`` (default 256) into Zarr with 2 workers: wall time, block rate, worker
@@ -119,7 +119,7 @@ def _zarr(image, size: int, block: int, workers: int, out: Path) -> dict:
     return summary
 
 
-def part_scaling(image, size: int, block: int, out: Path) -> dict:
+def part_scaling(image, size: int, block: int, out: Path, figures: Path) -> dict:
     rows = {}
     for workers in (1, 2):
         summary = _zarr(image, size, block, workers, out / f"scaling_{workers}.zarr")
@@ -129,6 +129,16 @@ def part_scaling(image, size: int, block: int, out: Path) -> dict:
     print(f"scaling: {rows[1]['blocks']} blocks of {block} ({size}^3) on the cluster after the first: 1 worker "
           f"{rows[1]['cluster_seconds']:.1f} s, 2 workers {rows[2]['cluster_seconds']:.1f} s, speed-up {speedup:.2f}; "
           f"worker peak {rows[2]['worker_peak_bytes'] / 2**30:.2f} GiB")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(4.5, 3.2))
+    seconds = [rows[w]["cluster_seconds"] for w in (1, 2)]
+    ax.bar(["1 worker", "2 workers"], seconds, color=["tab:gray", "tab:blue"])
+    ax.axhline(seconds[0] / 2, color="k", lw=0.8, ls="--", label="ideal for 2 workers")
+    ax.set_ylabel("seconds")
+    ax.set_title(f"{rows[1]['blocks']} blocks of {block} ({size}^3): speed-up {speedup:.2f}", fontsize=9)
+    ax.legend(fontsize=8)
+    save_figure(fig, figures / "scaling_workers.png")
     return {"workers": rows, "speedup": speedup}
 
 
@@ -277,7 +287,7 @@ def main(argv=None) -> int:
     if "equal" in parts:
         record["equal"] = part_equal(image, args.size, args.block)
     if "scaling" in parts:
-        record["scaling"] = part_scaling(image, args.size, args.block, work)
+        record["scaling"] = part_scaling(image, args.size, args.block, work, out)
     if "resume" in parts:
         record["resume"] = part_resume(args.size, args.block, work, args.exemplar)
     if "big" in parts:
