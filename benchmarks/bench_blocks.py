@@ -23,6 +23,11 @@ Parts (each ``--parts`` name):
 * ``estimate``: ``--estimate`` (default 512) in blocks of ``--big-block``: the first block (the
   levels that run whole, the pilot, the block) and the next, made here with 2 threads, and the
   volume's time on these 2 cores estimated from them.
+* ``quality``: ``--quality-size`` (default 128) from the held-out photographs
+  ``--quality-exemplars`` of ``bench_quality.py``, seed 7: the default at once against the
+  block-local sampler with every level below the coarsest in blocks (the pilot of 64 a part of
+  the grid), the measures of ``bench_quality.py`` as ratios to the structureless control, and
+  ``quality_SIZE.png`` (a slice of each beside the exemplar).
 * ``seams``: slices of the ``equal`` volume that cross block borders (the planes through the
   block corners) against slices inside blocks: the slice metrics of
   :func:`npmrf3d.analysis.metrics` (histogram KL, autocorrelation error, sliced Wasserstein
@@ -60,7 +65,7 @@ from npmrf3d.methods import METHODS, npmrf
 from npmrf3d.methods.blocks import block_plan, make_block, synthesize_blocks, write_zarr
 from npmrf3d.plotting import save_figure
 
-PARTS = ("equal", "scaling", "resume", "big", "seams", "estimate")
+PARTS = ("equal", "scaling", "resume", "big", "seams", "estimate", "quality")
 #: ``--whole-voxels``: None runs the default sampler (``npmrf3d synth``, whose levels of at most
 #: 256^3 voxels run whole: every level of a volume up to 256^3); a number runs the coherent
 #: sampler with the default's options and that threshold, so small volumes make their finer
@@ -214,6 +219,47 @@ def part_estimate(image, size: int, block: int) -> dict:
     return row
 
 
+def part_quality(size: int, names: list[str], seed: int, figures: Path) -> dict:
+    """The default at once against the block-local sampler with every level below the coarsest
+    made in blocks (``whole_voxels`` 1, the pilot of 64 a part of the grid from 128^3 on), at
+    ``size``^3 from the 64 x 64 crops A of held-out photographs of ``bench_quality.py``: its
+    measures as ratios to the structureless control, and a slice of each beside the exemplar."""
+    import _quality as q
+    import matplotlib.pyplot as plt
+
+    runs = {"default": q.METHODS["npmrf-coherent-default"], "block-local": q.METHODS["npmrf-blockwise-pilot-64"]}
+    rows = {}
+    fig, axes = plt.subplots(len(names), 3, figsize=(9, 3 * len(names)), squeeze=False)
+    for r, name in enumerate(names):
+        crop = q.BY_NAME[name].crops()[0]
+        control = q.measure(crop, q.structureless(crop, size, np.random.default_rng(seed)))
+        axes[r, 0].imshow(np.clip(crop, 0, 1).squeeze(), cmap="gray", vmin=0, vmax=1)
+        axes[r, 0].set_title(f"{name} (held out)", fontsize=9)
+        rows[name] = {}
+        for c, (label, run) in enumerate(runs.items()):
+            t0 = time.perf_counter()
+            volume = run(crop, size, 3, seed)
+            raw = q.measure(crop, volume)
+            rows[name][label] = {**q.ratios(raw, control), "hist_kl_raw": raw["hist_kl"],
+                                 "seconds": time.perf_counter() - t0}
+            ratio = rows[name][label]
+            print(f"quality {size}^3 {name} {label}: ac {ratio['ac']:.3f} okl {ratio['orient_kl']:.3f} "
+                  f"sw {ratio['sw']:.3f} hist KL {raw['hist_kl']:.4f}", flush=True)
+            axes[r, c + 1].imshow(np.clip(volume[size // 2], 0, 1).squeeze(), cmap="gray", vmin=0, vmax=1)
+            axes[r, c + 1].set_title(f"{label}, slice x1 = {size // 2}", fontsize=9)
+    for ax in axes.ravel():
+        ax.set_xticks([])
+        ax.set_yticks([])
+    fig.suptitle(f"{size}^3 from 64 x 64, seed {seed}: the default at once and block-local (pilot 64)", fontsize=10)
+    save_figure(fig, figures / f"quality_{size}.png")
+    means = {label: {k: float(np.mean([rows[n][label][k] for n in names])) for k in ("ac", "orient_kl", "sw",
+                                                                                     "hist_kl_raw")}
+             for label in runs}
+    print("quality means: " + "; ".join(f"{label} " + ", ".join(f"{k} {v:.3f}" for k, v in m.items())
+                                        for label, m in means.items()))
+    return {"rows": rows, "means": means}
+
+
 def slice_scores(one: np.ndarray, image: np.ndarray) -> dict:
     """Histogram KL, autocorrelation error and sliced Wasserstein distance of patches of one
     slice ``(N, N, C)`` against the exemplar (a one-slice volume seen from the view whose
@@ -266,6 +312,9 @@ def main(argv=None) -> int:
     parser.add_argument("--big", type=int, default=256)
     parser.add_argument("--big-block", type=int, default=128)
     parser.add_argument("--estimate", type=int, default=512, help="side of the volume the estimate part times")
+    parser.add_argument("--quality-size", type=int, default=128)
+    parser.add_argument("--quality-exemplars", default="etr_sand01,etr_rock06,etr_pebbles04",
+                        help="held-out photographs of bench_quality.py (extremetuxracer-data)")
     parser.add_argument("--exemplar", default=None)
     parser.add_argument("--whole-voxels", type=int, default=None,
                         help="run the coherent sampler with the default's options and this threshold of "
@@ -294,6 +343,8 @@ def main(argv=None) -> int:
         record["big"] = part_big(image, args.big, args.big_block, work)
     if "seams" in parts:
         record["seams"] = part_seams(image, args.block, out)
+    if "quality" in parts:
+        record["quality"] = part_quality(args.quality_size, args.quality_exemplars.split(","), 7, out)
     if "estimate" in parts:
         record["estimate"] = part_estimate(image, args.estimate, args.big_block)
     results_path.write_text(json.dumps(record, indent=2, default=str) + "\n")

@@ -338,7 +338,6 @@ class KCoherenceLevels(Levels):
         return order, bounds
 
     def prepare(self, level, shape):
-        self.prepared = level
         window = self.config.window[self.config.levels - 1 - level]
         self.level_ex = {id(a): coh.downsample_exemplar(a, level) for a in self.distinct}
         models = {key: coh.build_level_model(ex, window, dims=self.config.pca_dims, k=self.config.k,
@@ -464,6 +463,9 @@ class KCoherenceLevels(Levels):
                 order, bounds = self._hashed_batches(shape, origin, extent, int(rng.integers(0, 2**31)), batches)
             else:
                 order = rng.permutation(n_vox).astype(np.int64)
+            if icm is not None:
+                order = icm.visit(order)
+                bounds = np.linspace(0, len(order), min(config.batches, len(order)) + 1).astype(np.int64)
             temperature = decision.temperature(li, it)
             if replay is not None:
                 target = replay.targets[it]
