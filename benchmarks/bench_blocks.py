@@ -4,8 +4,8 @@ workers, a cut-off Zarr run resumed, and seams.
 The default sampler with ``blockwise=True`` (``npmrf3d synth --blockwise``, the sampler of
 ``--out VOL.zarr``) on a 64 x 64 exemplar: a crop of the bundled grey ``gravel`` photograph
 (``--exemplar`` for another image), seed 0. Its levels of at most 256^3 voxels run whole, so
-below 512^3 every level does; ``--whole-voxels N`` runs the coherent sampler with the default's
-options and that threshold instead, so that small volumes make their finer levels in blocks.
+below 512^3 every level does; ``--whole-voxels N`` (``synth --whole-voxels``) lowers that
+threshold, so that small volumes make their finer levels in blocks.
 Parts (each ``--parts`` name):
 
 * ``equal``: ``--size`` (default 128) at once and as blocks of ``--block`` (default 64), the
@@ -43,7 +43,6 @@ Usage: ``python benchmarks/bench_blocks.py [--parts equal,scaling,resume,big,sea
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import os
 import signal
@@ -61,20 +60,18 @@ import npmrf3d
 from npmrf3d import data
 from npmrf3d._kernels._jit import use_threads
 from npmrf3d.analysis.metrics import autocorrelation_error, histogram_kl, sliced_wasserstein
-from npmrf3d.methods import METHODS, npmrf
+from npmrf3d.methods import METHODS
 from npmrf3d.methods.blocks import block_plan, make_block, synthesize_blocks, write_zarr
 from npmrf3d.plotting import save_figure
 
 PARTS = ("equal", "scaling", "resume", "big", "seams", "estimate", "quality")
-#: ``--whole-voxels``: None runs the default sampler (``npmrf3d synth``, whose levels of at most
-#: 256^3 voxels run whole: every level of a volume up to 256^3); a number runs the coherent
-#: sampler with the default's options and that threshold, so small volumes make their finer
-#: levels in blocks.
+#: ``--whole-voxels`` (``synth --whole-voxels``): None keeps the default's 256^3, so every level of
+#: a volume up to 256^3 runs whole; a small number makes small volumes' finer levels in blocks.
 WHOLE_VOXELS: int | None = None
 
 
 def method():
-    return METHODS["npmrf" if WHOLE_VOXELS is None else "coherent"]
+    return METHODS["npmrf"]
 
 
 def exemplar(path: str | None) -> np.ndarray:
@@ -87,10 +84,8 @@ def views(image):
 
 
 def config(size: int):
-    base = METHODS["npmrf"].make_config(size=size, blockwise=True, seed=0)
-    if WHOLE_VOXELS is None:
-        return base
-    return dataclasses.replace(npmrf._coherent_options(base, False, base.levels), whole_voxels=WHOLE_VOXELS)
+    whole = {} if WHOLE_VOXELS is None else {"whole_voxels": WHOLE_VOXELS}
+    return METHODS["npmrf"].make_config(size=size, blockwise=True, seed=0, **whole)
 
 
 def part_equal(image, size: int, block: int) -> dict:
@@ -148,9 +143,8 @@ def part_scaling(image, size: int, block: int, out: Path, figures: Path) -> dict
 
 
 def _command(size: int, block: int, out: Path, exemplar_path: str | None) -> list[str]:
-    command = "synth" if WHOLE_VOXELS is None else "coherent"
     whole = [] if WHOLE_VOXELS is None else ["--whole-voxels", str(WHOLE_VOXELS)]
-    return [sys.executable, "-m", "npmrf3d", command, exemplar_path or f"bundled:{data.DEFAULT_EXEMPLAR}",
+    return [sys.executable, "-m", "npmrf3d", "synth", exemplar_path or f"bundled:{data.DEFAULT_EXEMPLAR}",
             "--size", str(size), "--blockwise", *whole, "--block", str(block), "--workers", "2", "--seed", "0",
             "--quiet", "--out", str(out)]
 
@@ -317,8 +311,7 @@ def main(argv=None) -> int:
                         help="held-out photographs of bench_quality.py (extremetuxracer-data)")
     parser.add_argument("--exemplar", default=None)
     parser.add_argument("--whole-voxels", type=int, default=None,
-                        help="run the coherent sampler with the default's options and this threshold of "
-                             "the levels made whole (default: the default sampler itself)")
+                        help="levels of at most this many voxels run whole (default: the default's, 256^3)")
     parser.add_argument("--out", default="figures/blocks")
     args = parser.parse_args(argv)
     global WHOLE_VOXELS

@@ -128,6 +128,9 @@ class SynthesisConfig:
     toroidal_exemplar: bool = False
     temperatures: bool = False
     blockwise: bool = False
+    # blockwise: levels of at most this many voxels run whole, once for all blocks (256^3: the
+    # cones of blocks of 128 at 512^3 would repeat its 256^3 level 8.8 times over)
+    whole_voxels: int = 2 ** 24
     # the coherent sampler's phase control (docs/materials.md, "Phase control in the default"):
     # on scan slices the minority phase keeps its share and the two-point correlation shape
     # comes nearer the scans' crops; photographs' quality unchanged (docs/quality.md)

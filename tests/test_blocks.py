@@ -80,7 +80,7 @@ def test_the_apron_is_needed_in_full(tmp_path):
 def test_the_default_sampler_blockwise_in_blocks(tmp_path, exemplar):
     method = METHODS["npmrf"]
     per_view = _views(_exemplar(exemplar))
-    config = method.make_config(size=(32, 32, 32), window=3, levels=2, blockwise=True, seed=4)
+    config = method.make_config(size=(32, 32, 32), window=3, levels=2, blockwise=True, whole_voxels=1, seed=4)
     whole = _whole(method, per_view, config, 2)
     np.testing.assert_array_equal(synthesize_blocks(method, per_view, config, block=16, start=tmp_path / "s.npz"),
                                   whole)
@@ -190,10 +190,10 @@ SYNTH = ["synth", "bundled:gravel64", "--size", "32", "--window", "3", "--levels
 
 def test_synth_into_zarr_equals_the_blockwise_run_and_resumes(tmp_path, capsys):
     out = tmp_path / "v.zarr"
-    argv = [*SYNTH, "--out", str(out), "--blockwise", "--block", "16", "--workers", "1"]
+    argv = [*SYNTH, "--out", str(out), "--blockwise", "--whole-voxels", "1", "--block", "16", "--workers", "1"]
     assert main(argv) == 0
     assert "8 blocks written, 0 already done" in capsys.readouterr().out
-    assert main([*SYNTH, "--blockwise", "--out", str(tmp_path / "whole"), "--quiet"]) == 0
+    assert main([*SYNTH, "--blockwise", "--whole-voxels", "1", "--out", str(tmp_path / "whole"), "--quiet"]) == 0
     expected = np.load(tmp_path / "whole" / "volume.npy")
     array = zarr.open_array(out, mode="r")
     assert array.shape == (32, 32, 32, 1) and array.chunks == (16, 16, 16, 1)
@@ -213,6 +213,8 @@ def test_synth_zarr_refusals(tmp_path, capsys):
                    words=("--scheduler", ".zarr"))
     refused_naming([*SYNTH, "--out", str(tmp_path / "v.zarr"), "--blockwise", "--checkpoint", str(tmp_path / "c.npz")],
                    tmp_path, capsys, words=("--checkpoint",))
+    refused_naming([*SYNTH, "--out", str(tmp_path / "v.zarr"), "--whole-voxels", "8"], tmp_path, capsys,
+                   words=("--whole-voxels", "--blockwise"))
     refused_naming([*SYNTH, "--out", str(tmp_path / "v.zarr"), "--blockwise", "--temperatures"], tmp_path, capsys,
                    words=("temperatures",))
     refused_naming([*SYNTH, "--out", str(tmp_path / "v.zarr"), "--workers", "2"], tmp_path, capsys,

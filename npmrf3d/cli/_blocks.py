@@ -21,6 +21,7 @@ import zarr
 from tqdm import tqdm
 
 from .._cluster import check_scheduler, probe_scheduler
+from ..config import SynthesisConfig
 from ..errors import ParameterError
 from ..io.runs import run_record
 from ..io.zarr_blocks import block_box, block_indices, open_blocks, write_block
@@ -45,10 +46,15 @@ def add_block_options(group: argparse._ArgumentGroup) -> None:
     """``--blockwise``, ``--block``, ``--workers`` and ``--scheduler`` into ``group``."""
     group.add_argument(
         "--blockwise", action="store_true", default=False,
-        help="the block-local sampler (the coarsest level whole, the finer levels reading the "
-             "histograms of a pilot block, random numbers hashed from voxel positions), which makes a volume "
-             "of any size in blocks with --out VOL.zarr, bit for bit the volume it makes at once "
-             "(docs/blocks.md)")
+        help="the block-local sampler (the levels of at most --whole-voxels voxels made whole, once; "
+             "the finer levels reading the histograms of a pilot block, random numbers hashed from voxel "
+             "positions), which makes a volume of any size in blocks with --out VOL.zarr, bit for bit the "
+             "volume it makes at once (docs/blocks.md)")
+    group.add_argument(
+        "--whole-voxels", type=positive_int, default=SynthesisConfig.whole_voxels, metavar="N",
+        help="--blockwise: levels of at most N voxels (and the coarsest) run whole, once for all blocks, "
+             "with the default's histograms; more repeats less work in the cones and makes the first "
+             "block hold a larger level (default: %(default)s = 256^3)")
     group.add_argument(
         "--block", type=positive_int, default=DEFAULT_BLOCK, metavar="N",
         help="--out VOL.zarr --blockwise: side of the blocks and of the Zarr chunks; each worker "
@@ -76,6 +82,8 @@ def blockwise_requested(args: argparse.Namespace) -> bool:
         if not blocks and (given(args, name) or (name == "scheduler" and args.scheduler is not None)):
             need = "--blockwise" if zarr_output(args) else "--out VOL.zarr --blockwise"
             raise ParameterError(f"--{name} applies to volumes made in blocks: add {need}")
+    if given(args, "whole_voxels") and not args.blockwise:
+        raise ParameterError("--whole-voxels applies to the block-local sampler: add --blockwise")
     return bool(args.blockwise)
 
 

@@ -335,7 +335,8 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
         tau=args.tau, histogram_weight=args.histogram_weight, outlier=args.outlier,
         grey_levels=args.grey_levels,
         palette=args.palette, toroidal_exemplar=args.toroidal_exemplar, temperatures=args.temperatures,
-        blockwise=blockwise_requested(args), phase_weight=args.phase_weight, seed=args.seed,
+        blockwise=blockwise_requested(args), whole_voxels=args.whole_voxels, phase_weight=args.phase_weight,
+        seed=args.seed,
     )
     out, checkpoint, per_view, sources = prepare_run(args, METHOD, config, whole=not zarr_output(args))
 

@@ -141,7 +141,8 @@ def make_config(
     schedule=_C.schedule, t0=_C.t0, t_end=_C.t_end, proposals=_C.proposals, proposal=_C.proposal,
     variant=None, segmented=_C.segmented, bandwidth=None, centre_bandwidth=None, adaptive=None,
     decision=None, tau=None, histogram_weight=None, outlier=None, grey_levels=None, palette=None,
-    toroidal_exemplar=False, temperatures=None, blockwise=False, phase_weight=None, seed=None,
+    toroidal_exemplar=False, temperatures=None, blockwise=False, whole_voxels=_C.whole_voxels, phase_weight=None,
+    seed=None,
 ) -> SynthesisConfig:
     """Validate plain keyword arguments into a frozen :class:`SynthesisConfig`.
 
@@ -155,8 +156,9 @@ def make_config(
     support ``coherent`` then weights its searches and votes by trust and re-decides warm voxels
     only (``xi``, ``stop``, ``max_sweeps``, ``inherit`` and ``upsample`` 1/8 need it there).
     ``blockwise`` (support ``coherent`` without per-voxel temperatures): the block-local sampler
-    (the coarsest level whole, the finer ones reading a pilot block's histograms, random numbers
-    hashed from voxel positions), whose volume can be made in blocks
+    (the coarsest level and every level of at most ``whole_voxels`` voxels whole, the finer ones
+    reading a pilot block's histograms, random numbers hashed from voxel positions), whose volume
+    can be made in blocks
     (:mod:`npmrf3d.methods.blocks`); a segmented exemplar then runs the segmented preset's deeper
     pyramid only. ``phase_weight`` (support ``coherent``; None:
     :attr:`SynthesisConfig.phase_weight`, 0 for the full support): the phase control of the histogram prior
@@ -236,6 +238,7 @@ def make_config(
     if seed is not None:
         seed = check.integer("seed", seed, low=0)
     blockwise = check.boolean("blockwise", blockwise)
+    whole_voxels = check.integer("whole_voxels", whole_voxels, low=1)
     if support != "coherent":  # no phase control there
         phase_weight = 0.0
     elif phase_weight is None:
@@ -253,5 +256,6 @@ def make_config(
         sampler=sampler, schedule=schedule, t0=t0, t_end=t_end, proposals=proposals,
         proposal=proposal, support=support, preset=preset_name, segmented=segmented, rule=rule,
         grey_levels=grey_levels, palette=palette, toroidal_exemplar=bool(toroidal_exemplar),
-        temperatures=temperatures, blockwise=blockwise, phase_weight=phase_weight, seed=seed,
+        temperatures=temperatures, blockwise=blockwise, whole_voxels=whole_voxels, phase_weight=phase_weight,
+        seed=seed,
     )
