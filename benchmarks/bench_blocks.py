@@ -17,17 +17,6 @@ Parts (each ``--parts`` name):
   memory of a worker; ``scaling_workers.png``.
 * ``resume``: the Zarr command run as a subprocess, interrupted (SIGINT) once a third of the
   blocks are done, then run again: equal to the uninterrupted volume or not.
-* ``big``: ``--big`` (default 256) into Zarr with 2 workers: wall time, block rate, worker
-  peak memory, and the time 512^3 and 1024^3 would take at that rate (their cones counted by
-  the block plan).
-* ``estimate``: ``--estimate`` (default 512) in blocks of ``--big-block``: the first block (the
-  levels that run whole, the pilot, the block) and the next, made here with 2 threads, and the
-  volume's time on these 2 cores estimated from them.
-* ``quality``: ``--quality-size`` (default 128) from the held-out photographs
-  ``--quality-exemplars`` of ``bench_quality.py``, seed 7: the default at once against the
-  block-local sampler with every level below the coarsest in blocks (the pilot of 64 a part of
-  the grid), the measures of ``bench_quality.py`` as ratios to the structureless control, and
-  ``quality_SIZE.png`` (a slice of each beside the exemplar).
 * ``seams``: slices of the ``equal`` volume that cross block borders (the planes through the
   block corners) against slices inside blocks: the slice metrics of
   :func:`npmrf3d.analysis.metrics` (histogram KL, autocorrelation error, sliced Wasserstein
@@ -36,8 +25,8 @@ Parts (each ``--parts`` name):
 
 Prints a table and writes ``figures/blocks/blocks.json``.
 
-Usage: ``python benchmarks/bench_blocks.py [--parts equal,scaling,resume,big,seams] [--size 128]
-[--block 64] [--big 256] [--whole-voxels N] [--out figures/blocks]``
+Usage: ``python benchmarks/bench_blocks.py [--parts equal,scaling,resume,seams,estimate,quality]
+[--size 128] [--block 64] [--estimate 512] [--big-block 128] [--whole-voxels N] [--out figures/blocks]``
 """
 
 from __future__ import annotations
@@ -64,7 +53,7 @@ from npmrf3d.methods import METHODS
 from npmrf3d.methods.blocks import block_plan, make_block, synthesize_blocks, write_zarr
 from npmrf3d.plotting import save_figure
 
-PARTS = ("equal", "scaling", "resume", "big", "seams", "estimate", "quality")
+PARTS = ("equal", "scaling", "resume", "seams", "estimate", "quality")
 #: ``--whole-voxels`` (``synth --whole-voxels``): None keeps the default's 256^3, so every level of
 #: a volume up to 256^3 runs whole; a small number makes small volumes' finer levels in blocks.
 WHOLE_VOXELS: int | None = None
@@ -167,25 +156,6 @@ def part_resume(size: int, block: int, out: Path, exemplar_path: str | None) -> 
     print(f"resume: {size}^3 in blocks of {block} interrupted (exit {code}) with {kept} of {blocks} blocks "
           f"done, run again: equal to the uninterrupted volume {equal}")
     return {"blocks": blocks, "kept": kept, "exit": code, "equal": equal}
-
-
-def part_big(image, size: int, block: int, out: Path) -> dict:
-    summary = _zarr(image, size, block, 2, out / "big.zarr")
-    per_block = summary["wall_seconds"] / summary["blocks"]
-    rate = size ** 3 / summary["wall_seconds"]
-    row = {"size": size, "block": block, "wall_seconds": summary["wall_seconds"], "voxels_per_second": rate,
-           "worker_peak_bytes": summary["worker_peak_bytes"], "plan": summary["plan"]}
-    for target in (512, 1024):
-        plan = block_plan(method(), views(image), config(target), block=block)
-        ours = block_plan(method(), views(image), config(size), block=block)
-        # time scales with the cones' voxels: the target's per volume voxel against ours
-        row[f"estimated_seconds_{target}"] = (summary["wall_seconds"] * (target / size) ** 3
-                                              * plan.overhead / ours.overhead)
-    print(f"big: {size}^3 in blocks of {block}, 2 workers: {summary['wall_seconds']:.0f} s "
-          f"({1e6 / rate:.1f} us per voxel, {per_block:.1f} s per block), worker peak "
-          f"{summary['worker_peak_bytes'] / 2**30:.2f} GiB; at this rate 512^3 takes about "
-          f"{row['estimated_seconds_512'] / 60:.0f} min and 1024^3 about {row['estimated_seconds_1024'] / 3600:.1f} h")
-    return row
 
 
 def part_estimate(image, size: int, block: int) -> dict:
@@ -303,7 +273,6 @@ def main(argv=None) -> int:
     parser.add_argument("--parts", default=",".join(PARTS))
     parser.add_argument("--size", type=int, default=128)
     parser.add_argument("--block", type=int, default=64)
-    parser.add_argument("--big", type=int, default=256)
     parser.add_argument("--big-block", type=int, default=128)
     parser.add_argument("--estimate", type=int, default=512, help="side of the volume the estimate part times")
     parser.add_argument("--quality-size", type=int, default=128)
@@ -332,8 +301,6 @@ def main(argv=None) -> int:
         record["scaling"] = part_scaling(image, args.size, args.block, work, out)
     if "resume" in parts:
         record["resume"] = part_resume(args.size, args.block, work, args.exemplar)
-    if "big" in parts:
-        record["big"] = part_big(image, args.big, args.big_block, work)
     if "seams" in parts:
         record["seams"] = part_seams(image, args.block, out)
     if "quality" in parts:
