@@ -18,16 +18,16 @@ matched) and solves every voxel (copy one voted texel under the position and val
 histograms). The random numbers, per iteration: one salt per view's search, the solver's voxel
 order, and a salt for an annealed decision.
 
-A ``blockwise`` run's finer levels cut each pass into batches by a hash of the voxels' grid
-positions and read, batch by batch, the histograms of a pilot block made once after the coarsest
-level (:meth:`KCoherenceLevels.run_pilot`,
-:class:`npmrf3d.model.kcoherence_histograms.PilotHistograms`) instead of their own.
-
 Why one module of ~550 lines: :class:`KCoherenceLevels` is one level's search and solve, whole
 or on a block's region (``blockwise``, :func:`block_aprons`), and the decision types it passes
 to the kernels belong with it; the histograms live in
 :mod:`npmrf3d.model.kcoherence_histograms`, the ICM schedule (per-voxel temperatures) in
 :mod:`npmrf3d.model.kcoherence_icm`.
+
+A ``blockwise`` run's finer levels cut each pass into batches by a hash of the voxels' grid
+positions and read, batch by batch, the histograms of a pilot block made once after the levels
+that run whole (:meth:`KCoherenceLevels.run_pilot`,
+:class:`npmrf3d.model.kcoherence_histograms.PilotHistograms`) instead of their own.
 """
 
 from __future__ import annotations
