@@ -259,54 +259,34 @@ def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w, d
 
 
 @jit
-def group_table_size(votes):
-    """Entries of :func:`_group_votes`'s table for at most ``votes`` votes: the smallest power of
-    two of at least twice as many (at most half full, so a probe ends soon)."""
-    size = 16
-    while size < 2 * votes:
-        size *= 2
-    return size
-
-
-@jit
-def _group_votes(vg, vv, vw, count, n_views, keys, slots, used, ug, uv, uw, umax, uarg):
-    """Merge the ``count`` votes by (texel, view) (views may share an exemplar's rows): group
-    ``i`` (in order of first appearance) has texel ``ug[i]``, view ``uv[i]``, summed weight
-    ``uw[i]``, heaviest single weight ``umax[i]`` and the index ``uarg[i]`` of its first vote of
-    that weight. The groups are found through an open-addressing table (``keys`` all -1 and
-    ``slots``, a power of two of entries larger than ``count``, :func:`group_table_size`;
-    ``used`` remembers the entries taken, and ``keys`` is left all -1): a table sized by the
-    votes stays in the cache where one entry per texel and view would not. Returns the number of groups. A score summed over the groups equals the sum over the
-    votes (up to rounding) at a fraction of the cost: coherent neighbourhoods vote for the same
-    texels."""
-    mask = keys.shape[0] - 1
+def _group_votes(vg, vv, vw, count, n_views, slot, ug, uv, uw, umax, uarg):
+    """Merge the ``count`` votes by (texel, view) (views may share an exemplar's rows): group ``i`` (in order of first appearance) has texel
+    ``ug[i]``, view ``uv[i]``, summed weight ``uw[i]``, heaviest single weight ``umax[i]`` and
+    the index ``uarg[i]`` of its first vote of that weight. ``slot`` (one entry per texel and view,
+    all -1) is scratch and is left all -1. Returns the number of groups. A score summed over the
+    groups equals the sum over the votes (up to rounding) at a fraction of the cost: coherent
+    neighbourhoods vote for the same texels."""
     u = 0
     for q in range(count):
-        key = vg[q] * n_views + vv[q]
-        h = (key * 40503) & mask
-        while True:
-            k = keys[h]
-            if k == key:
-                i = slots[h]
-                uw[i] += vw[q]
-                if vw[q] > umax[i]:
-                    umax[i] = vw[q]
-                    uarg[i] = q
-                break
-            if k < 0:
-                keys[h] = key
-                slots[h] = u
-                used[u] = h
-                ug[u] = vg[q]
-                uv[u] = vv[q]
-                uw[u] = vw[q]
-                umax[u] = vw[q]
-                uarg[u] = q
-                u += 1
-                break
-            h = (h + 1) & mask
+        g = vg[q]
+        key = g * n_views + vv[q]
+        i = slot[key]
+        if i < 0:
+            i = u
+            slot[key] = i
+            ug[i] = g
+            uv[i] = vv[q]
+            uw[i] = vw[q]
+            umax[i] = vw[q]
+            uarg[i] = q
+            u += 1
+        else:
+            uw[i] += vw[q]
+            if vw[q] > umax[i]:
+                umax[i] = vw[q]
+                uarg[i] = q
     for i in range(u):
-        keys[used[i]] = -1
+        slot[ug[i] * n_views + uv[i]] = -1
     return u
 
 
@@ -429,9 +409,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
             vw = np.empty(cap, dtype=np.float64)
             mean = np.empty(channels, dtype=np.float64)
             vsum = np.empty(n_views, dtype=np.float64)
-            keys = np.full(group_table_size(cap), -1, dtype=np.int64)
-            slots = np.empty(keys.shape[0], dtype=np.int64)
-            used = np.empty(cap, dtype=np.int64)
+            slot = np.full(ex_flat.shape[0] * n_views, -1, dtype=np.int32)
             ug = np.empty(cap, dtype=np.int64)
             uv = np.empty(cap, dtype=np.int64)
             uw = np.empty(cap, dtype=np.float64)
@@ -469,7 +447,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                         vw[q] /= vsum[vv[q]]
                 # the votes merged by (texel, view): summed weight, heaviest
                 # single vote and its index; groups in order of first appearance
-                u = _group_votes(vg, vv, vw, count, n_views, keys, slots, used, ug, uv, uw, umax, uarg)
+                u = _group_votes(vg, vv, vw, count, n_views, slot, ug, uv, uw, umax, uarg)
                 best = 0
                 if medoid:
                     # candidates: the `medoid` heaviest votes with distinct (texel, view), heaviest
