@@ -1015,3 +1015,19 @@ def naive_voxel_batches(shape, origin, extent, salt, batches):
     for p in np.ndindex(*shape):
         out[p] = naive_mix(naive_mix(naive_global_flat(p, shape, origin, extent)) + salt) % batches
     return out
+
+
+def naive_group_votes(vg, vv, vw, n_views):
+    """The votes merged by (texel, view) in order of first appearance: per group its texel, view,
+    summed weight, heaviest single weight and the index of its first vote of that weight."""
+    groups = {}
+    for q, (g, v, w) in enumerate(zip(vg, vv, vw)):
+        key = int(g) * n_views + int(v)
+        if key not in groups:
+            groups[key] = [int(g), int(v), float(w), float(w), q]
+        else:
+            entry = groups[key]
+            entry[2] += float(w)
+            if w > entry[3]:
+                entry[3], entry[4] = float(w), q
+    return list(groups.values())
