@@ -217,7 +217,7 @@ CHEN_WANG_HELP = {
     "solver": "how a voxel picks among its voted texels: medoid (weighted medoid of the 8 heaviest, "
               "chosen by measurement) or mean (nearest to the weighted mean, the paper's practice)",
     "balance_views": "give every view's votes the same total weight at each voxel (the paper: off)",
-    "blockwise": "block-local run: the coarsest level whole, the finer levels reading the position "
+    "blockwise": "block-local run: the levels up to --whole-voxels whole, the finer levels reading the position "
                  "and value histograms of a pilot block (made once, its histograms live) and random "
                  "numbers hashed from voxel positions, so a volume made in blocks (--out VOL.zarr) "
                  "equals the volume made at once; no global search or index histogram",

@@ -113,7 +113,7 @@ class ChenWangConfig:
     batches: int = 8
     solver: str = "medoid"
     balance_views: bool = False
-    # block-local runs: the coarsest level whole, the finer ones reading the histograms of a
+    # block-local runs: the levels up to whole_voxels whole, the finer ones reading the histograms of a
     # pilot region and random numbers hashed from grid positions, so any block can be made alone
     # (model.regions, model.kcoherence_histograms.PilotHistograms)
     blockwise: bool = False
