@@ -43,7 +43,7 @@ DEFAULT_WORKERS = 2
 
 
 def add_block_options(group: argparse._ArgumentGroup) -> None:
-    """``--blockwise``, ``--block``, ``--workers`` and ``--scheduler`` into ``group``."""
+    """``--blockwise``, ``--whole-voxels``, ``--block``, ``--workers`` and ``--scheduler`` into ``group``."""
     group.add_argument(
         "--blockwise", action="store_true", default=False,
         help="the block-local sampler (the levels of at most --whole-voxels voxels made whole, once; "

@@ -270,7 +270,7 @@ class KCoherenceLevels(Levels):
         self.pilot: dict[int, PilotHistograms] | None = None
         #: while this engine *is* the pilot: the records it is making, by level
         self.recording: dict[int, PilotHistograms] | None = None
-        #: blockwise: the finest level that runs whole, with every histogram (the coarsest)
+        #: blockwise: the finest level that runs whole, with every histogram
         aprons = block_aprons(config, icm)
         self.lowest_whole = config.levels - 1 if aprons is None else aprons.index(None)
 
@@ -288,15 +288,15 @@ class KCoherenceLevels(Levels):
         return self.per_view[view].shape[0] // f, self.per_view[view].shape[1] // f
 
     def after_level(self, level, state, rng):
-        """``blockwise``: after the coarsest level, the pilot (:meth:`run_pilot`), unless a
-        checkpoint already held its records."""
+        """``blockwise``: after the finest level that runs whole, the pilot (:meth:`run_pilot`),
+        unless a checkpoint already held its records."""
         if self.blockwise and level == self.lowest_whole and level > 0 and self.recording is None \
                 and self.pilot is None:
             self.pilot = self.run_pilot(state, rng)
 
     def run_pilot(self, state, rng) -> dict[int, PilotHistograms]:
         """The records of the finer levels' pilot: the dependency cone of the block of side
-        ``config.pilot`` at the grid's first corner, made from the finished coarsest ``state``
+        ``config.pilot`` at the grid's first corner, made from the finished whole ``state``
         with its histograms live (a copy of this engine, of ``rng`` and of the phase control, so
         the run itself goes on as if the pilot had not been made)."""
         pilot = copy.copy(self)
@@ -396,9 +396,8 @@ class KCoherenceLevels(Levels):
         if replay is not None:
             values = values._replace(unit=grid_voxels / config.value_bins)
         if local and replay is None:
-            record = self.recording[level] = PilotHistograms.empty(
-                config.iterations[li], config.batches, sum(m.pixels for m in vmodels), volume.shape[3],
-                config.value_bins)
+            layout = {lev: shape_of for lev, *shape_of in self._pilot_layout()}
+            record = self.recording[level] = PilotHistograms.empty(*layout[level])
         pos_hist = np.concatenate([position_histogram(src[vi], m.pixels) for vi, m in enumerate(vmodels)])
         theta = np.array([grid_voxels / m.pixels for m in vmodels])
         histograms = _solver.SolverHistograms(
@@ -476,7 +475,7 @@ class KCoherenceLevels(Levels):
             if local and replay is None:
                 record.targets[it] = target
             salt = int(rng.integers(0, 2**31)) if temperature > 0.0 else 0
-            for b in range(len(bounds) - 1):
+            for b in range(0 if local else len(bounds) - 1):  # hashed batches come in memory order
                 # within a batch the histograms are frozen and every voxel depends only on them
                 # and the votes, so visiting a batch in memory order gives the same volume faster
                 order[bounds[b]:bounds[b + 1]].sort()

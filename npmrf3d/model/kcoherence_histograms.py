@@ -89,7 +89,7 @@ class PilotHistograms(NamedTuple):
 
     A block cannot keep the default's histograms (every batch of a pass reads the counts of the
     whole level so far). The pilot -- the dependency cone of one fixed block, made once after the
-    coarsest level with its own histograms updated between batches as the default does -- shows
+    levels that run whole, with its own histograms updated between batches as the default does -- shows
     how those histograms move through a level; every block then reads the pilot's counts at the
     same batch, scaled to the level's whole grid, so its decisions feel the pull the whole
     volume's would, and depend on nothing outside their cone.
@@ -108,11 +108,15 @@ class PilotHistograms(NamedTuple):
     values: np.ndarray
     targets: np.ndarray
 
+    @staticmethod
+    def shapes(iterations: int, batches: int, pixels: int, channels: int, bins: int) -> tuple[tuple[int, ...], ...]:
+        """The shapes of the three arrays of a record."""
+        return (iterations, batches, pixels), (iterations, batches, channels, bins), (iterations, channels, bins)
+
     @classmethod
-    def empty(cls, iterations: int, batches: int, pixels: int, channels: int, bins: int) -> "PilotHistograms":
-        """A record to fill, zeros."""
-        return cls(np.zeros((iterations, batches, pixels)), np.zeros((iterations, batches, channels, bins)),
-                   np.zeros((iterations, channels, bins)))
+    def empty(cls, *layout) -> "PilotHistograms":
+        """A record to fill, zeros: ``layout`` as :meth:`shapes` takes it."""
+        return cls(*(np.zeros(shape) for shape in cls.shapes(*layout)))
 
 
 def pack_pilot(records, layout) -> np.ndarray:
@@ -128,11 +132,11 @@ def unpack_pilot(flat: np.ndarray, layout) -> dict | None:
     if flat.size == 0:
         return None
     records, at = {}, 0
-    for level, iterations, batches, pixels, channels, bins in layout:
+    for level, *shape_of in layout:
         parts = []
-        for shape in PilotHistograms.empty(iterations, batches, pixels, channels, bins):
-            n = shape.size
-            parts.append(np.asarray(flat[at:at + n], dtype=np.float64).reshape(shape.shape))
+        for shape in PilotHistograms.shapes(*shape_of):
+            n = int(np.prod(shape))
+            parts.append(np.asarray(flat[at:at + n], dtype=np.float64).reshape(shape))
             at += n
         records[level] = PilotHistograms(*parts)
     return records
@@ -140,4 +144,4 @@ def unpack_pilot(flat: np.ndarray, layout) -> dict | None:
 
 def pilot_length(layout) -> int:
     """The length of :func:`pack_pilot`'s array for ``layout``."""
-    return sum(i * b * p + i * b * c * n + i * c * n for _, i, b, p, c, n in layout)
+    return sum(int(np.prod(shape)) for _, *shape_of in layout for shape in PilotHistograms.shapes(*shape_of))

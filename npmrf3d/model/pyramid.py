@@ -289,7 +289,7 @@ def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressC
         if checkpoint is not None or method.aprons() is None:
             raise ValueError("a region runs without a checkpoint, for a method with aprons only")
         checkpoint = region.start
-    resumed = _load(checkpoint, method, rng)
+    resumed = None if after is not None else _load(checkpoint, method, rng)
     if after is not None:
         done_level, state = after
         first_level = done_level - 1
