@@ -57,10 +57,7 @@ PARTS = ("equal", "scaling", "resume", "seams", "estimate", "quality")
 #: ``--whole-voxels`` (``synth --whole-voxels``): None keeps the default's 256^3, so every level of
 #: a volume up to 256^3 runs whole; a small number makes small volumes' finer levels in blocks.
 WHOLE_VOXELS: int | None = None
-
-
-def method():
-    return METHODS["npmrf"]
+METHOD = METHODS["npmrf"]
 
 
 def exemplar(path: str | None) -> np.ndarray:
@@ -74,7 +71,7 @@ def views(image):
 
 def config(size: int):
     whole = {} if WHOLE_VOXELS is None else {"whole_voxels": WHOLE_VOXELS}
-    return METHODS["npmrf"].make_config(size=size, blockwise=True, seed=0, **whole)
+    return METHOD.make_config(size=size, blockwise=True, seed=0, **whole)
 
 
 def part_equal(image, size: int, block: int) -> dict:
@@ -82,16 +79,16 @@ def part_equal(image, size: int, block: int) -> dict:
     out = {}
     use_threads(2)
     t0 = time.perf_counter()
-    whole = method().run(views(image), cfg, np.random.default_rng(cfg.seed)).volume
+    whole = METHOD.run(views(image), cfg, np.random.default_rng(cfg.seed)).volume
     out["whole_seconds"] = time.perf_counter() - t0
     for threads in (1, 2):
         use_threads(threads)
         with tempfile.TemporaryDirectory() as tmp:
             t0 = time.perf_counter()
-            blocks = synthesize_blocks(method(), views(image), cfg, block=block, start=Path(tmp) / "start.npz")
+            blocks = synthesize_blocks(METHOD, views(image), cfg, block=block, start=Path(tmp) / "start.npz")
             out[f"blocks_seconds_{threads}_threads"] = time.perf_counter() - t0
         out[f"equal_{threads}_threads"] = bool(np.array_equal(blocks, whole))
-    out["plan"] = block_plan(method(), views(image), cfg, block=block).describe()
+    out["plan"] = block_plan(METHOD, views(image), cfg, block=block).describe()
     out["us_per_voxel_whole_2_threads"] = 1e6 * out["whole_seconds"] / size ** 3
     print(f"equal: {size}^3 at once {out['whole_seconds']:.1f} s (2 threads); blocks of {block}: "
           f"{out['blocks_seconds_1_threads']:.1f} s (1 thread, equal {out['equal_1_threads']}), "
@@ -103,7 +100,7 @@ def part_equal(image, size: int, block: int) -> dict:
 def _zarr(image, size: int, block: int, workers: int, out: Path) -> dict:
     cfg = config(size)
     t0 = time.perf_counter()
-    summary = write_zarr(method(), views(image), cfg, out, block=block, record={}, workers=workers, overwrite=True)
+    summary = write_zarr(METHOD, views(image), cfg, out, block=block, record={}, workers=workers, overwrite=True)
     summary["wall_seconds"] = time.perf_counter() - t0
     return summary
 
@@ -165,13 +162,13 @@ def part_estimate(image, size: int, block: int) -> dict:
     cones' voxels at the second block's rate."""
     cfg = config(size)
     use_threads(2)
-    plan = block_plan(method(), views(image), cfg, block=block)
+    plan = block_plan(METHOD, views(image), cfg, block=block)
     seconds = []
     with tempfile.TemporaryDirectory() as tmp:
         for index in ((0, 0, 0), (0, 0, 1)):
             origin = tuple(i * block for i in index)
             t0 = time.perf_counter()
-            make_block(method(), views(image), cfg, origin, (block,) * 3, Path(tmp) / "start.npz")
+            make_block(METHOD, views(image), cfg, origin, (block,) * 3, Path(tmp) / "start.npz")
             seconds.append(time.perf_counter() - t0)
     cone = sum(int(np.prod(f.shape)) for f in plan.cone.frames if f is not None)
     row = {"size": size, "block": block, "blocks": plan.blocks, "first_block_seconds": seconds[0],
