@@ -1017,17 +1017,13 @@ def naive_voxel_batches(shape, origin, extent, salt, batches):
     return out
 
 
-def naive_group_votes(vg, vv, vw, n_views):
-    """The votes merged by (texel, view) in order of first appearance: per group its texel, view,
-    summed weight, heaviest single weight and the index of its first vote of that weight."""
-    groups = {}
+def naive_top_votes(vg, vv, vw, most):
+    """The ``most`` heaviest distinct (texel, view) of the votes, heaviest first: each weighs its
+    heaviest vote, ties to the earlier vote; returned as that vote's index."""
+    best = {}
     for q, (g, v, w) in enumerate(zip(vg, vv, vw)):
-        key = int(g) * n_views + int(v)
-        if key not in groups:
-            groups[key] = [int(g), int(v), float(w), float(w), q]
-        else:
-            entry = groups[key]
-            entry[2] += float(w)
-            if w > entry[3]:
-                entry[3], entry[4] = float(w), q
-    return list(groups.values())
+        key = (int(g), int(v))
+        if key not in best or w > vw[best[key]]:
+            best[key] = q
+    ranked = sorted(best.values(), key=lambda q: (-vw[q], q))
+    return ranked[:most]

@@ -30,13 +30,13 @@ from npmrf3d.model.kcoherence_engine import (CandidateDecision, KCoherenceLevels
                                               pack_exemplars)
 from npmrf3d.model.neighbourhood import VIEW_AXES
 from tests.naive import (
-    naive_group_votes,
-    naive_kernel_table,
     naive_candidates,
     naive_exemplar_patch,
     naive_k_coherence,
+    naive_kernel_table,
     naive_search_view,
     naive_solve,
+    naive_top_votes,
     naive_upsample_sources,
     naive_value_bin,
     naive_volume_patch,
@@ -614,20 +614,17 @@ def test_periodic_exemplar_pattern_appears_in_the_constrained_slices():
         assert 0.3 < v.mean() < 0.7
 
 
-@pytest.mark.parametrize("count,texels", [(147, 40), (363, 4096), (3072, 50)])
-def test_group_votes_match_their_twin(count, texels):
-    """Many repeats, nearly none, and the most a window of 32 casts."""
-    rng = np.random.default_rng(count)
+@pytest.mark.parametrize("count,texels", [(147, 40), (147, 4096), (20, 3), (5, 100)])
+@pytest.mark.parametrize("most", [1, 8])
+def test_top_votes_match_their_twin(count, texels, most):
+    """The candidates: repeated (texel, view)s with tied weights, all distinct, fewer than asked."""
+    rng = np.random.default_rng(count + texels)
     vg = rng.integers(0, texels, count).astype(np.int64)
     vv = rng.integers(0, 3, count).astype(np.int64)
-    vw = rng.integers(1, 5, count).astype(np.float64)
-    slot = np.full(texels * 3, -1, dtype=np.int32)
-    out = [np.empty(count, dtype=t) for t in (np.int64, np.int64, np.float64, np.float64, np.int64)]
-    u = _s._group_votes(vg, vv, vw, count, 3, slot, *out)
-    expected = naive_group_votes(vg, vv, vw, 3)
-    assert u == len(expected) and np.all(slot == -1)
-    for column, got in enumerate(out):
-        np.testing.assert_array_equal(got[:u], [e[column] for e in expected])
+    vw = rng.integers(1, 6, count).astype(np.float64)
+    tops, keys, weights = np.empty(most, dtype=np.int64), np.empty(most, dtype=np.int64), np.empty(most)
+    n = _s._top_votes(vg, vv, vw, count, 3, most, tops, keys, weights)
+    np.testing.assert_array_equal(tops[:n], naive_top_votes(vg, vv, vw, most))
 
 
 @pytest.mark.parametrize("phase_weight,blockwise", [(0.0, {}), (8.0, {}), (8.0, {"blockwise": True, "pilot": 8})])

@@ -1,7 +1,7 @@
 """Compiled NP-MRF decisions among a voxel's candidates (the coherent NP-MRF sampler).
 
 Private helpers of :func:`npmrf3d._kernels.kcoherence_solver.solve`: the per-view Parzen
-estimate of a colour from a voxel's merged votes, the heuristics of Urs, Da Costa and Germain
+estimate of a colour from a voxel's votes, the heuristics of Urs, Da Costa and Germain
 2014 (docs/model.md, section 3) over the candidates, and the Metropolis step of an annealed
 decision (docs/model.md, section 5). Each is a plain function of its arguments, so the solver
 stays parallel over voxels and a result depends on no thread count: random numbers are hashes
@@ -44,20 +44,20 @@ def value_prior(bins, val_hist, val_target, val_unit, kappa):
 
 
 @jit
-def view_likelihoods(colour, ex_flat, ug, uv, uw, u, vsum, h2c, outlier, lik):
+def view_likelihoods(colour, ex_flat, vg, vv, vw, count, vsum, h2c, outlier, lik):
     """Every view's Parzen estimate of ``colour`` (C,) float32 into ``lik`` (V,):
-    ``(1 - outlier) * sum_{q in v} uw[q] exp(-||colour - e_q||^2 / h2c) / vsum[v] + outlier``
-    over the ``u`` merged votes (texel ``ug[q]``, view ``uv[q]``, weight ``uw[q]``); ``outlier``
+    ``(1 - outlier) * sum_{q in v} vw[q] exp(-||colour - e_q||^2 / h2c) / vsum[v] + outlier``
+    over the ``count`` votes (texel ``vg[q]``, view ``vv[q]``, weight ``vw[q]``); ``outlier``
     alone for a view without votes (``vsum[v] == 0``)."""
     n_views = lik.shape[0]
     for v in range(n_views):
         lik[v] = 0.0
-    for q in range(u):
+    for q in range(count):
         dd = np.float64(0.0)  # float64 also without the compiler (float32 terms)
         for ch in range(ex_flat.shape[1]):
-            diff = colour[ch] - ex_flat[ug[q], ch]
+            diff = colour[ch] - ex_flat[vg[q], ch]
             dd += diff * diff
-        lik[uv[q]] += uw[q] * np.exp(-dd / h2c)
+        lik[vv[q]] += vw[q] * np.exp(-dd / h2c)
     for v in range(n_views):
         lik[v] = (1.0 - outlier) * lik[v] / vsum[v] + outlier if vsum[v] > 0.0 else outlier
 
@@ -79,32 +79,31 @@ def kernel_table(ex_flat, reps, h2c, out):
 
 
 @jit
-def view_likelihoods_table(row, uid, uv, uw, u, vsum, outlier, lik):
+def view_likelihoods_table(row, uid, vv, vw, count, vsum, outlier, lik):
     """:func:`view_likelihoods` with the kernels looked up: ``row`` the candidate colour's row of
-    :func:`kernel_table`, ``uid[q]`` the colour index of merged vote ``q``. Same sums in the same
+    :func:`kernel_table`, ``uid[q]`` the colour index of vote ``q``. Same sums in the same
     order, so the same bits."""
     n_views = lik.shape[0]
     for v in range(n_views):
         lik[v] = 0.0
-    for q in range(u):
-        lik[uv[q]] += uw[q] * row[uid[q]]
+    for q in range(count):
+        lik[vv[q]] += vw[q] * row[uid[q]]
     for v in range(n_views):
         lik[v] = (1.0 - outlier) * lik[v] / vsum[v] + outlier if vsum[v] > 0.0 else outlier
 
 
 @jit
-def candidate_likelihoods(kernel, rows, n_try, uid, uv, uw, u, vsum, outlier, out):
+def candidate_likelihoods(kernel, rows, n_try, uid, vv, vw, count, vsum, outlier, out):
     """:func:`view_likelihoods_table` of ``n_try`` candidates at once: candidate ``a``'s estimates
-    (its kernel row ``kernel[rows[a]]``) into ``out[a]`` (n_try, V). The merged votes come
-    sorted by view (the votes are enumerated view by view and merged in order of first
-    appearance), so each view's sum runs over one stretch of them; four candidates go side by
-    side, each with its own sums in the same order, so the same bits. Votes not sorted by view:
-    one candidate at a time."""
+    (its kernel row ``kernel[rows[a]]``) into ``out[a]`` (n_try, V). The votes come sorted by
+    view (the solver enumerates them view by view), so each view's sum runs over one stretch of
+    them; four candidates go side by side, each with its own sums in the same order, so the
+    same bits. Votes not sorted by view: one candidate at a time."""
     n_views = out.shape[1]
-    for q in range(1, u):
-        if uv[q] < uv[q - 1]:
+    for q in range(1, count):
+        if vv[q] < vv[q - 1]:
             for a in range(n_try):
-                view_likelihoods_table(kernel[rows[a]], uid, uv, uw, u, vsum, outlier, out[a])
+                view_likelihoods_table(kernel[rows[a]], uid, vv, vw, count, vsum, outlier, out[a])
             return
     for a in range(0, n_try, 4):
         k0 = kernel[rows[a]]
@@ -117,8 +116,8 @@ def candidate_likelihoods(kernel, rows, n_try, uid, uv, uw, u, vsum, outlier, ou
             s1 = 0.0
             s2 = 0.0
             s3 = 0.0
-            while q < u and uv[q] == v:
-                w = uw[q]
+            while q < count and vv[q] == v:
+                w = vw[q]
                 i = uid[q]
                 s0 += w * k0[i]
                 s1 += w * k1[i]
@@ -157,14 +156,14 @@ def objective(lik, likelihood, prior):
 
 
 @jit
-def colour_score(colour, ex_flat, ug, uv, uw, u, vsum, h2c, outlier, likelihood, hist_args, bins, lik):
+def colour_score(colour, ex_flat, vg, vv, vw, count, vsum, h2c, outlier, likelihood, hist_args, bins, lik):
     """Log-score of any colour (C,) float32 -- the voxel's current one for a Metropolis step --
     by the same Parzen estimate against the same votes as a candidate (:func:`view_likelihoods`,
     :func:`objective`, the log of ML_H2a's), with the histogram prior of the colour's value bins
     (``hist_args`` = ``(val_hist, val_target, val_unit, val_prior, val_lo, val_scale)``;
     ``bins`` (C,) int64 scratch)."""
     val_hist, val_target, val_unit, val_prior, val_lo, val_scale = hist_args
-    view_likelihoods(colour, ex_flat, ug, uv, uw, u, vsum, h2c, outlier, lik)
+    view_likelihoods(colour, ex_flat, vg, vv, vw, count, vsum, h2c, outlier, lik)
     prior = 0.0
     if val_prior > 0.0:
         for ch in range(colour.shape[0]):
@@ -220,10 +219,10 @@ def least_confident(table, winners):
 
 
 @jit
-def mean_of_winners(colour, winners, tops, ug, ex_flat):
+def mean_of_winners(colour, winners, tops, vg, ex_flat):
     """ML_H1b: the mean of the views' winning colours into ``colour`` (C,) float32 (float64 sums
-    over the views that propose, in view order). Generally not an exemplar colour: Urs et al.
-    2014's averaging artefact."""
+    over the views that propose, in view order; candidate ``a`` is the texel ``vg[tops[a]]``).
+    Generally not an exemplar colour: Urs et al. 2014's averaging artefact."""
     n = 0
     for ch in range(colour.shape[0]):
         colour[ch] = 0.0
@@ -233,40 +232,41 @@ def mean_of_winners(colour, winners, tops, ug, ex_flat):
             continue
         n += 1
         for ch in range(colour.shape[0]):
-            acc[ch] += ex_flat[ug[tops[winners[v]]], ch]
+            acc[ch] += ex_flat[vg[tops[winners[v]]], ch]
     for ch in range(colour.shape[0]):
         colour[ch] = acc[ch] / n
 
 
 @jit
-def winner_sources(winners, tops, ug, uv, u, ex_flat, ex_off, new_src_t):
+def winner_sources(winners, tops, vg, vv, count, ex_flat, ex_off, new_src_t):
     """ML_H1b's sources: each proposing view's source becomes its own winner -- the winning
-    texel when it is that view's vote, else that view's voted texel nearest to the winner's
+    texel (candidate ``a`` is vote ``tops[a]`` of the ``count`` votes: texels ``vg``, views
+    ``vv``) when it is that view's vote, else that view's voted texel nearest to the winner's
     colour (first on ties). ``new_src_t`` (V,) is written for the proposing views only."""
     for v in range(winners.shape[0]):
         if winners[v] < 0:
             continue
-        g = ug[tops[winners[v]]]
-        if uv[tops[winners[v]]] == v:
+        g = vg[tops[winners[v]]]
+        if vv[tops[winners[v]]] == v:
             new_src_t[v] = g - ex_off[v]
             continue
-        near = nearest_vote(v, g, ug, uv, u, ex_flat)
+        near = nearest_vote(v, g, vg, vv, count, ex_flat)
         if near >= 0:
-            new_src_t[v] = ug[near] - ex_off[v]
+            new_src_t[v] = vg[near] - ex_off[v]
 
 
 @jit
-def nearest_vote(v, g, ug, uv, u, ex_flat):
-    """The merged vote of view ``v`` whose texel is nearest in colour to texel ``g`` (first on
+def nearest_vote(v, g, vg, vv, count, ex_flat):
+    """The vote of view ``v`` whose texel is nearest in colour to texel ``g`` (first on
     ties), -1 when the view has none."""
     near = -1
     near_d = np.inf
-    for q in range(u):
-        if uv[q] != v:
+    for q in range(count):
+        if vv[q] != v:
             continue
         dd = 0.0
         for ch in range(ex_flat.shape[1]):
-            diff = ex_flat[ug[q], ch] - ex_flat[g, ch]
+            diff = ex_flat[vg[q], ch] - ex_flat[g, ch]
             dd += diff * diff
         if dd < near_d:
             near_d = dd
@@ -275,8 +275,8 @@ def nearest_vote(v, g, ug, uv, u, ex_flat):
 
 
 @jit
-def nearest_in(lo, hi, g, ug, ex_flat):
-    """:func:`nearest_vote` over the merged votes ``lo .. hi - 1`` (one view's stretch when the
+def nearest_in(lo, hi, g, vg, ex_flat):
+    """:func:`nearest_vote` over the votes ``lo .. hi - 1`` (one view's stretch when the
     votes are sorted by view): the one whose texel is nearest in colour to texel ``g`` (first
     on ties), -1 for an empty stretch."""
     near = -1
@@ -284,7 +284,7 @@ def nearest_in(lo, hi, g, ug, ex_flat):
     for q in range(lo, hi):
         dd = 0.0
         for ch in range(ex_flat.shape[1]):
-            diff = ex_flat[ug[q], ch] - ex_flat[g, ch]
+            diff = ex_flat[vg[q], ch] - ex_flat[g, ch]
             dd += diff * diff
         if dd < near_d:
             near_d = dd

@@ -198,55 +198,59 @@ def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w, d
     view_axes, ex_off, ewidth = views.axes, views.offsets, views.widths
     window, anchor, grid = views.window, views.anchor, views.grid
     hist_off, val_weight = hist.position_offsets, hist.value_weight
-    shape = assign.shape
+    n1 = assign.shape[2]
+    n2 = assign.shape[3]
+    strides = (n1 * n2, n2, 1)
+    n_vox = assign.shape[1] * n1 * n2
+    flat_assign = assign.reshape(-1)
+    flat_omega = omega.reshape(-1)
     weighted = trust.voxels.shape[0] > 0
+    flat_windows = trust.windows.reshape(-1)
     own = np.float64(trust.voxels[p0, p1, p2]) if weighted else 0.0
+    here = p0 * strides[0] + p1 * strides[1] + p2
     count = 0
     for v in range(assign.shape[0]):
         ra = view_axes[v, 0]
         ca = view_axes[v, 1]
-        nr = shape[1 + ra]
-        nc = shape[1 + ca]
+        nr = assign.shape[1 + ra]
+        nc = assign.shape[1 + ca]
         xr = p0 if ra == 0 else (p1 if ra == 1 else p2)
         xc = p0 if ca == 0 else (p1 if ca == 1 else p2)
+        step_r = strides[ra]
+        step_c = strides[ca]
+        # the flat index of site (u_r, u_c) of this view: base + u_r * step_r + u_c * step_c
+        base = v * n_vox + here - xr * step_r - xc * step_c
         w = ewidth[v]
         for orow in range(-anchor, window - anchor):
-            u_r = (xr - orow) % nr
+            u_r = xr - orow
+            if u_r < 0:
+                u_r += nr
+            elif u_r >= nr:
+                u_r -= nr
             if grid > 1 and u_r % grid:
                 continue
+            row = base + u_r * step_r
             for ocol in range(-anchor, window - anchor):
                 u_c = xc - ocol
-                if u_c < 0 or u_c >= nc:  # the division only where the window wraps
-                    u_c %= nc
+                if u_c < 0:
+                    u_c += nc
+                elif u_c >= nc:
+                    u_c -= nc
                 if grid > 1 and u_c % grid:
                     continue
-                q0 = p0
-                q1 = p1
-                q2 = p2
-                if ra == 0:
-                    q0 = u_r
-                elif ra == 1:
-                    q1 = u_r
-                else:
-                    q2 = u_r
-                if ca == 0:
-                    q0 = u_c
-                elif ca == 1:
-                    q1 = u_c
-                else:
-                    q2 = u_c
-                e = assign[v, q0, q1, q2]
+                site = row + u_c * step_c
+                e = flat_assign[site]
                 if e < 0:
                     continue
                 share = 1.0
                 if weighted:
-                    share = (np.float64(trust.windows[v, q0, q1, q2]) - own) / (window * window - 1)
+                    share = (np.float64(flat_windows[site]) - own) / (window * window - 1)
                     if share <= 0.0:
                         continue
                 local = e + orow * w + ocol  # (e // w + orow) * w + (e % w + ocol)
                 i = hist_off[v] + local
                 # omega / (1 + position_weight * excess) or omega * (1 - position_boost * excess)
-                weight = np.float64(omega[v, q0, q1, q2]) / div[i] * mul[i]
+                weight = np.float64(flat_omega[site]) / div[i] * mul[i]
                 if val_weight > 0.0:
                     weight = weight / vdiv[ex_off[v] + local]
                 if weighted:
@@ -259,62 +263,44 @@ def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w, d
 
 
 @jit
-def _group_votes(vg, vv, vw, count, n_views, slot, ug, uv, uw, umax, uarg):
-    """Merge the ``count`` votes by (texel, view) (views may share an exemplar's rows): group ``i`` (in order of first appearance) has texel
-    ``ug[i]``, view ``uv[i]``, summed weight ``uw[i]``, heaviest single weight ``umax[i]`` and
-    the index ``uarg[i]`` of its first vote of that weight. ``slot`` (one entry per texel and view,
-    all -1) is scratch and is left all -1. Returns the number of groups. A score summed over the
-    groups equals the sum over the votes (up to rounding) at a fraction of the cost: coherent
-    neighbourhoods vote for the same texels."""
-    u = 0
-    for q in range(count):
-        g = vg[q]
-        key = g * n_views + vv[q]
-        i = slot[key]
-        if i < 0:
-            i = u
-            slot[key] = i
-            ug[i] = g
-            uv[i] = vv[q]
-            uw[i] = vw[q]
-            umax[i] = vw[q]
-            uarg[i] = q
-            u += 1
-        else:
-            uw[i] += vw[q]
-            if vw[q] > umax[i]:
-                umax[i] = vw[q]
-                uarg[i] = q
-    for i in range(u):
-        slot[ug[i] * n_views + uv[i]] = -1
-    return u
-
-
-@jit
-def _heaviest(umax, uarg, u, most, tops):
-    """The ``most`` heaviest of the ``u`` merged votes into ``tops``, heaviest first: by
-    ``umax`` descending, ties by ``uarg`` ascending (the earlier vote; ``uarg`` are distinct, so
-    the order is total). One pass keeping the sorted best so far. Returns how many (at most
-    ``u``)."""
+def _top_votes(vg, vv, vw, count, n_views, most, tops, keys, weights):
+    """The votes of the ``most`` heaviest distinct (texel, view) into ``tops``, heaviest first:
+    a (texel, view) weighs its heaviest vote, ties go to the earlier vote, and it is represented
+    by the first of its heaviest votes. One pass keeping the sorted best so far (their keys
+    ``texel * n_views + view`` and weights in the scratch ``keys`` and ``weights``, ``most``
+    each); a vote whose (texel, view) is kept already replaces it only when heavier. Returns how
+    many (at most the distinct (texel, view) among the votes)."""
     n = 0
-    for q in range(u):
-        wq = umax[q]
-        aq = uarg[q]
-        if n == most:
-            last = tops[n - 1]
-            if not (wq > umax[last] or (wq == umax[last] and aq < uarg[last])):
-                continue
-            n -= 1
-        i = n
-        while i > 0:
-            prev = tops[i - 1]
-            if wq > umax[prev] or (wq == umax[prev] and aq < uarg[prev]):
-                tops[i] = prev
-                i -= 1
-            else:
+    last = np.inf  # the weight to beat once ``most`` are kept
+    for q in range(count):
+        wq = vw[q]
+        if n == most and not wq > last:
+            continue
+        key = vg[q] * n_views + vv[q]
+        # (texel, view) kept already: only a heavier vote moves it up
+        i = -1
+        for j in range(n):
+            if keys[j] == key:
+                i = j
                 break
+        if i >= 0:
+            if not wq > weights[i]:
+                continue
+        elif n < most:
+            i = n
+            n += 1
+        else:
+            i = n - 1
+        while i > 0 and wq > weights[i - 1]:
+            tops[i] = tops[i - 1]
+            keys[i] = keys[i - 1]
+            weights[i] = weights[i - 1]
+            i -= 1
         tops[i] = q
-        n += 1
+        keys[i] = key
+        weights[i] = wq
+        if n == most:
+            last = weights[n - 1]
     return n
 
 
@@ -409,18 +395,14 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
             vw = np.empty(cap, dtype=np.float64)
             mean = np.empty(channels, dtype=np.float64)
             vsum = np.empty(n_views, dtype=np.float64)
-            slot = np.full(ex_flat.shape[0] * n_views, -1, dtype=np.int32)
-            ug = np.empty(cap, dtype=np.int64)
-            uv = np.empty(cap, dtype=np.int64)
-            uw = np.empty(cap, dtype=np.float64)
-            umax = np.empty(cap, dtype=np.float64)
-            uarg = np.empty(cap, dtype=np.int64)
             uid = np.empty(cap, dtype=np.int64)
             vlo = np.empty(n_views, dtype=np.int64)
             vhi = np.empty(n_views, dtype=np.int64)
             rows = np.empty(max(medoid, 1), dtype=np.int64)
             liks = np.empty((max(medoid, 1), n_views), dtype=np.float64)
             tops = np.empty(max(medoid, 1), dtype=np.int64)
+            top_keys = np.empty(max(medoid, 1), dtype=np.int64)
+            top_weights = np.empty(max(medoid, 1), dtype=np.float64)
             lik = np.empty(n_views, dtype=np.float64)
             scores = np.empty(max(medoid, 1), dtype=np.float64)
             table = np.empty((max(medoid, 1), n_views), dtype=np.float64)
@@ -445,14 +427,11 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                         vsum[vv[q]] += vw[q]
                     for q in range(count):
                         vw[q] /= vsum[vv[q]]
-                # the votes merged by (texel, view): summed weight, heaviest
-                # single vote and its index; groups in order of first appearance
-                u = _group_votes(vg, vv, vw, count, n_views, slot, ug, uv, uw, umax, uarg)
                 best = 0
                 if medoid:
-                    # candidates: the `medoid` heaviest votes with distinct (texel, view), heaviest
-                    # first (ties: the earlier vote) -- the groups of the heaviest single votes
-                    n_try = _heaviest(umax, uarg, u, medoid, tops)
+                    # candidates: the votes of the `medoid` heaviest distinct (texel, view), heaviest
+                    # first (ties: the earlier vote)
+                    n_try = _top_votes(vg, vv, vw, count, n_views, medoid, tops, top_keys, top_weights)
                     best_e = np.inf
                     if likelihood:
                         for v in range(n_views):
@@ -460,19 +439,19 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                         for q in range(count):
                             vsum[vv[q]] += vw[q]
                         if tabled:
-                            for q in range(u):
-                                uid[q] = colour_ids[ug[q]]
+                            for q in range(count):
+                                uid[q] = colour_ids[vg[q]]
                             for a in range(n_try):
-                                rows[a] = colour_ids[ug[tops[a]]]
-                            _decide.candidate_likelihoods(kernel, rows, n_try, uid, uv, uw, u, vsum, outlier, liks)
+                                rows[a] = colour_ids[vg[tops[a]]]
+                            _decide.candidate_likelihoods(kernel, rows, n_try, uid, vv, vw, count, vsum, outlier, liks)
                     for a in range(n_try):
-                        ga = ug[tops[a]]
+                        ga = vg[tops[a]]
                         if likelihood:
                             if tabled:
                                 for v in range(n_views):
                                     lik[v] = liks[a, v]
                             else:
-                                _decide.view_likelihoods(ex_flat[ga], ex_flat, ug, uv, uw, u, vsum, h2c, outlier, lik)
+                                _decide.view_likelihoods(ex_flat[ga], ex_flat, vg, vv, vw, count, vsum, h2c, outlier, lik)
                             prior = 0.0
                             if val_prior > 0.0:
                                 prior = priors[ga]
@@ -485,39 +464,39 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                             scores[a] = score if likelihood == ML_H2B else np.log(score)
                             if -score < best_e:
                                 best_e = -score
-                                best = uarg[tops[a]]
+                                best = tops[a]
                             continue
                         e_sum = 0.0
-                        for q2 in range(u):
+                        for q2 in range(count):
                             dd = 0.0
                             for ch in range(channels):
-                                diff = ex_flat[ga, ch] - ex_flat[ug[q2], ch]
+                                diff = ex_flat[ga, ch] - ex_flat[vg[q2], ch]
                                 dd += diff * diff
-                            e_sum += uw[q2] * np.sqrt(dd)
+                            e_sum += vw[q2] * np.sqrt(dd)
                         if val_prior > 0.0:
                             e_sum *= np.exp(-priors[ga])
                         if e_sum < best_e:
                             best_e = e_sum
-                            best = uarg[tops[a]]
+                            best = tops[a]
                     if likelihood >= ML_H1A:
                         _decide.view_winners(table, n_try, vsum, winners)
                         if winners.max() < 0:
                             continue
                         if likelihood == ML_H1B:
-                            _decide.mean_of_winners(colour, winners, tops, ug, ex_flat)
+                            _decide.mean_of_winners(colour, winners, tops, vg, ex_flat)
                             flags[t] = _decide.write_colour(volume, p0, p1, p2, colour, hist_args, old_bins[t],
                                                             new_bins[t])
-                            _decide.winner_sources(winners, tops, ug, uv, u, ex_flat, ex_off, new_src[t])
+                            _decide.winner_sources(winners, tops, vg, vv, count, ex_flat, ex_off, new_src[t])
                             continue
-                        best = uarg[tops[_decide.least_confident(table, winners)]]
+                        best = tops[_decide.least_confident(table, winners)]
                     elif likelihood and temperature > 0.0 and sampler == METROPOLIS:
-                        current = _decide.colour_score(volume[p0, p1, p2], ex_flat, ug, uv, uw, u, vsum, h2c,
+                        current = _decide.colour_score(volume[p0, p1, p2], ex_flat, vg, vv, vw, count, vsum, h2c,
                                                        outlier, likelihood, hist_args, bins, lik)
                         key = salt * n_vox + global_flat(p0, p1, p2, volume.shape, rule.origin, rule.extent)
                         pick = _decide.metropolis(scores, n_try, current, temperature, key)
                         if pick < 0:
                             continue
-                        best = uarg[tops[pick]]
+                        best = tops[pick]
                     elif likelihood and temperature > 0.0 and n_try > 1:
                         top_l = scores[0]
                         for a in range(1, n_try):
@@ -535,7 +514,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                                 if x < acc:
                                     pick = a
                                     break
-                            best = uarg[tops[pick]]
+                            best = tops[pick]
                 else:
                     total = 0.0
                     for ch in range(channels):
@@ -547,26 +526,26 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                     for ch in range(channels):
                         mean[ch] /= total
                     best_d = np.inf
-                    for q in range(u):
+                    for q in range(count):
                         dd = 0.0
                         for ch in range(channels):
-                            diff = ex_flat[ug[q], ch] - mean[ch]
+                            diff = ex_flat[vg[q], ch] - mean[ch]
                             dd += diff * diff
                         if dd < best_d:
                             best_d = dd
-                            best = uarg[q]
+                            best = q
                 g = vg[best]
-                # each view's stretch of the merged votes (they come sorted by view)
+                # each view's stretch of the votes (they come sorted by view)
                 by_view = True
                 for v in range(n_views):
-                    vlo[v] = u
+                    vlo[v] = count
                     vhi[v] = 0
-                for q in range(u):
-                    if q > 0 and uv[q] < uv[q - 1]:
+                for q in range(count):
+                    if q > 0 and vv[q] < vv[q - 1]:
                         by_view = False
-                    if q < vlo[uv[q]]:
-                        vlo[uv[q]] = q
-                    vhi[uv[q]] = q + 1
+                    if q < vlo[vv[q]]:
+                        vlo[vv[q]] = q
+                    vhi[vv[q]] = q + 1
                 for ch in range(channels):
                     if volume[p0, p1, p2, ch] != ex_flat[g, ch]:
                         flags[t] = 1
@@ -581,10 +560,10 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                     if v == vv[best]:
                         new_src[t, v] = g - ex_off[v]
                         continue
-                    near = _decide.nearest_vote(v, g, ug, uv, u, ex_flat) if not by_view else \
-                        _decide.nearest_in(vlo[v], vhi[v], g, ug, ex_flat)
+                    near = _decide.nearest_vote(v, g, vg, vv, count, ex_flat) if not by_view else \
+                        _decide.nearest_in(vlo[v], vhi[v], g, vg, ex_flat)
                     if near >= 0:
-                        new_src[t, v] = ug[near] - ex_off[v]
+                        new_src[t, v] = vg[near] - ex_off[v]
         # sequential, fixed order: histograms follow the new sources
         for t in range(m):
             flat = order[start + t]
