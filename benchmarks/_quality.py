@@ -180,6 +180,12 @@ METHODS.update({name: _npmrf_coherent_with(**options)
 #: photographs as they were.
 PHASE_CONTROL = {f"npmrf-phase-{w}": {"phase_weight": float(w)} for w in (0, 8, 16, 32)}
 METHODS.update({name: _npmrf(**options) for name, options in PHASE_CONTROL.items()})
+#: The default run with its neighbourhoods searched and voting every ``grid`` voxels along both
+#: plane axes of every view (``synth --grid N``; the default's is 1, every voxel): a quarter of the
+#: searches and of the votes at 2.
+GRID_VARIANTS = {"npmrf-grid-2": dict(grid=2), "npmrf-grid-2-iterations-4-4-2": dict(grid=2, iterations=(4, 4, 2)),
+                 "npmrf-grid-2-iterations-3-3-2": dict(grid=2, iterations=(3, 3, 2))}
+METHODS.update({name: _npmrf_coherent_with(**options) for name, options in GRID_VARIANTS.items()})
 #: Methods that take ``palette`` (the others never see it, and their cache key has none).
 PALETTE_METHODS = {"npmrf-default", "npmrf-sharp", "npmrf-anneal", *SAMPLER_COMBINATIONS,
                    *BLOCKWISE, *PHASE_CONTROL}

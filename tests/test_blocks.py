@@ -60,6 +60,33 @@ def test_blocks_equal_the_volume_made_at_once(tmp_path, name, exemplar, threads)
     np.testing.assert_array_equal(blocks, whole)
 
 
+@pytest.mark.parametrize("name", ["coherent", "chen-wang"])
+def test_blocks_with_sparse_sites_equal_the_volume_made_at_once(tmp_path, name):
+    """Sites every 4 voxels: a block whose region starts off the sites' lattice (at grid
+    position 2 of a level) searches the whole grid's sites there."""
+    method = METHODS[name]
+    per_view = _views(_exemplar("gravel64"))
+    config = method.make_config(**{**SMALL, "grid": 4, "window": 5})
+    whole = _whole(method, per_view, config, 2)
+    plan = plan_region(config.size, config.levels, method.aprons(config, per_view), (16, 16, 0), (16, 16, 16))
+    assert any(o % 4 for frame in plan.frames if frame is not None for o in frame.origin)
+    blocks = synthesize_blocks(method, per_view, config, block=16, start=tmp_path / "start.npz")
+    np.testing.assert_array_equal(blocks, whole)
+
+
+def test_first_site_is_the_whole_grids():
+    """Along an axis, a region's search sites are the whole grid's positions that are
+    multiples of the grid spacing."""
+    for grid in (1, 2, 3):
+        extent = np.array([12, 12, 12], dtype=np.int64)
+        for o in range(12):
+            origin = np.array([o, 0, 0], dtype=np.int64)
+            first = _k.first_site(origin, extent, 0, grid)
+            sites = list(range(first, 7, grid))
+            assert sites == [i for i in range(7) if (o + i) % 12 % grid == 0]
+        assert _k.first_site(origin, np.zeros(3, dtype=np.int64), 0, grid) == 0
+
+
 def test_the_apron_is_needed_in_full(tmp_path):
     """One voxel less of apron at the finest level and a block differs from the whole volume:
     the test above could fail."""

@@ -73,7 +73,8 @@ NO_TRUST = np.zeros((0, 0, 0), dtype=np.float32)
 class SearchRule(NamedTuple):
     """The settings of one view's search (:func:`search_view`).
 
-    grid : int, sites every ``grid`` voxels along both plane axes
+    grid : int, sites every ``grid`` voxels of the level's whole grid along both plane axes (at
+        grid positions that are multiples of ``grid``: :func:`first_site`)
     batches : int, the slices along the normal axis ``n`` form batches ``n % batches``
     phi, index_weight : float, the index histogram's even share and strength; a candidate's
         distance is multiplied by ``1 + index_weight * max(0, index_hist[e] / phi - 1)``
@@ -108,6 +109,17 @@ def global_flat(p0, p1, p2, shape, origin, extent):
     g1 = (origin[1] + p1) % extent[1]
     g2 = (origin[2] + p2) % extent[2]
     return (g0 * extent[1] + g1) * extent[2] + g2
+
+
+@jit
+def first_site(origin, extent, axis, grid):
+    """The array index of the first search site along ``axis`` of a volume that is the region
+    of a level's grid starting at ``origin`` (``extent`` as :func:`global_flat`): sites lie at the
+    grid positions that are multiples of ``grid``, so a region made alone searches the sites the
+    whole grid searches there (0 for the whole grid)."""
+    if extent[0] == 0:
+        return 0
+    return (grid - origin[axis] % grid) % grid
 
 
 @jit
@@ -442,8 +454,10 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
     dims = basis.shape[1]
     kk = 1 + exemplar.kcoh.shape[1]
     cap = 9 * kk + n_random
-    gr = nr // grid
-    gc = nc // grid
+    sr = first_site(rule.origin, rule.extent, ra, grid)
+    sc = first_site(rule.origin, rule.extent, ca, grid)
+    gr = (nr - sr + grid - 1) // grid
+    gc = (nc - sc + grid - 1) // grid
     for b in range(batches):
         nb = (nn - b + batches - 1) // batches
         for t in prange(nb):
@@ -456,9 +470,9 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
             weights = np.empty(window * window, dtype=np.float32)
             acc = 0.0
             for ar in range(gr):
-                u_r = ar * grid
+                u_r = sr + ar * grid
                 for ac in range(gc):
-                    u_c = ac * grid
+                    u_c = sc + ac * grid
                     p0 = n if na == 0 else (u_r if ra == 0 else u_c)
                     p1 = n if na == 1 else (u_r if ra == 1 else u_c)
                     p2 = n if na == 2 else (u_r if ra == 2 else u_c)
@@ -498,8 +512,8 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
             n = b + t * batches
             for ar in range(gr):
                 for ac in range(gc):
-                    u_r = ar * grid
-                    u_c = ac * grid
+                    u_r = sr + ar * grid
+                    u_c = sc + ac * grid
                     p0 = n if na == 0 else (u_r if ra == 0 else u_c)
                     p1 = n if na == 1 else (u_r if ra == 1 else u_c)
                     p2 = n if na == 2 else (u_r if ra == 2 else u_c)

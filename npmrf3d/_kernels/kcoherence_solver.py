@@ -29,7 +29,7 @@ import numpy as np
 from . import candidate_decision as _decide
 from ._jit import jit, jit_parallel, prange
 from .candidate_decision import HEAT_BATH, METROPOLIS, ML_H1A, ML_H1B, ML_H2B, value_prior
-from .kcoherence import global_flat, grid_voxels, mix, value_bin
+from .kcoherence import first_site, global_flat, grid_voxels, mix, value_bin
 
 
 class PackedViews(NamedTuple):
@@ -168,7 +168,7 @@ def _texel_factors(views, hist, n_views, div, mul, vdiv, priors):
 
 
 @jit
-def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w, div, mul, vdiv):
+def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w, div, mul, vdiv, sites):
     """Texels voted for voxel ``(p0, p1, p2)`` by every overlapping neighbourhood of every view.
 
     A neighbourhood at site ``u`` matched with centre ``e`` votes for the texel ``e + (x - u)``
@@ -193,7 +193,9 @@ def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w, d
     (``position_offsets``), ``theta``, the strengths, ``ex_bins`` (``texel_bins``), ``val_hist``
     (``values``) and ``val_target`` (``value_target``).
 
-    ``div``, ``mul`` and ``vdiv`` are the histograms' factors of every texel (:func:`_texel_factors`).
+    ``div``, ``mul`` and ``vdiv`` are the histograms' factors of every texel (:func:`_texel_factors`);
+    ``sites`` (3,) the array index of the first search site along each axis
+    (:func:`npmrf3d._kernels.kcoherence.first_site`).
     """
     view_axes, ex_off, ewidth = views.axes, views.offsets, views.widths
     window, anchor, grid = views.window, views.anchor, views.grid
@@ -227,7 +229,7 @@ def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w, d
                 u_r += nr
             elif u_r >= nr:
                 u_r -= nr
-            if grid > 1 and u_r % grid:
+            if grid > 1 and (u_r - sites[ra]) % grid:
                 continue
             row = base + u_r * step_r
             for ocol in range(-anchor, window - anchor):
@@ -236,7 +238,7 @@ def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w, d
                     u_c += nc
                 elif u_c >= nc:
                     u_c -= nc
-                if grid > 1 and u_c % grid:
+                if grid > 1 and (u_c - sites[ca]) % grid:
                     continue
                 site = row + u_c * step_c
                 e = flat_assign[site]
@@ -380,6 +382,9 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
     mul = np.empty(pos_hist.shape[0], dtype=np.float64)
     vdiv = np.empty(ex_flat.shape[0], dtype=np.float64)
     priors = np.zeros(ex_flat.shape[0], dtype=np.float64)
+    sites = np.empty(3, dtype=np.int64)
+    for axis in range(3):
+        sites[axis] = first_site(rule.origin, rule.extent, axis, views.grid)
     for b in range(batch_bounds.shape[0] - 1):
         start = batch_bounds[b]
         m = batch_bounds[b + 1] - start
@@ -414,7 +419,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                 p0 = flat // (n1 * n2)
                 p1 = (flat // n2) % n1
                 p2 = flat % n2
-                count = _votes(p0, p1, p2, assign, omega, views, hist, trust, vg, vv, vw, div, mul, vdiv)
+                count = _votes(p0, p1, p2, assign, omega, views, hist, trust, vg, vv, vw, div, mul, vdiv, sites)
                 for v in range(n_views):
                     new_src[t, v] = src[v, p0, p1, p2]
                 if count == 0:

@@ -17,6 +17,8 @@ FIELD_HELP = {
     "window": "window side per level, coarsest first: one number or one per level",
     "levels": "resolution levels, coarse to fine",
     "iterations": "search + decision iterations per level: one number or one per level, coarsest first",
+    "grid": "neighbourhoods searched and voting every GRID voxels along both plane axes of each view "
+            "(1 = every voxel)",
     "heuristic": "how the views' Parzen estimates decide among the candidates: ML_H2b (product) or "
                  "ML_H2a (minimum) of the views' estimates; ML_H1a (each view picks its best, the least "
                  "confident view's pick wins) or ML_H1b (the mean of the views' picks: makes colours the "

@@ -139,6 +139,7 @@ class CoherentConfig:
     levels: int = _CW.levels
     views: tuple[str, ...] = VIEWS
     iterations: tuple[int, ...] = _CW.iterations
+    grid: int = _CW.grid
     heuristic: str = "ML_H2b"
     centre_bandwidth: float = 0.1
     outlier: float = 0.01
@@ -181,14 +182,14 @@ class CoherentConfig:
 
 
 DEFAULTS = CoherentConfig()
-_SHARED = ("size", "window", "levels", "views", "iterations", "k", "index_weight", "position_weight",
+_SHARED = ("size", "window", "levels", "views", "iterations", "grid", "k", "index_weight", "position_weight",
            "position_boost", "random_candidates", "global_share", "coherence_bias", "value_weight",
            "value_prior", "value_bins", "phase_weight", "blockwise", "pilot", "whole_voxels", "seed")
 
 
 def make_coherent_config(
     *, size=DEFAULTS.size, window=DEFAULTS.window, levels=DEFAULTS.levels, views=DEFAULTS.views,
-    iterations=DEFAULTS.iterations, heuristic=DEFAULTS.heuristic,
+    iterations=DEFAULTS.iterations, grid=DEFAULTS.grid, heuristic=DEFAULTS.heuristic,
     centre_bandwidth=DEFAULTS.centre_bandwidth, outlier=DEFAULTS.outlier, k=DEFAULTS.k,
     index_weight=DEFAULTS.index_weight, position_weight=DEFAULTS.position_weight,
     position_boost=DEFAULTS.position_boost, random_candidates=DEFAULTS.random_candidates,
@@ -203,7 +204,7 @@ def make_coherent_config(
     coherence fields are validated as Chen–Wang's, the ICM ones as the NP-MRF sampler's).
     ML_H1a and ML_H1b are ICM-only: with ``t0 > 0`` they are refused."""
     cw = chen_wang.make_chen_wang_config(
-        size=size, window=window, levels=levels, views=views, iterations=iterations, k=k,
+        size=size, window=window, levels=levels, views=views, iterations=iterations, grid=grid, k=k,
         index_weight=index_weight, position_weight=position_weight, position_boost=position_boost,
         random_candidates=random_candidates, global_share=global_share,
         coherence_bias=coherence_bias, value_weight=value_weight, value_prior=value_prior,

@@ -439,7 +439,9 @@ class KCoherenceLevels(Levels):
                 ra, ca = VIEW_AXES[v]
                 na = 3 - ra - ca
                 energy = np.zeros(shape[na], dtype=np.float64)
-                n_sites = shape[na] * (shape[ra] // config.grid) * (shape[ca] // config.grid)
+                n_sites = shape[na] * math.prod(
+                    len(range(_search.first_site(origin, extent, axis, config.grid), shape[axis], config.grid))
+                    for axis in (ra, ca))
                 phi = n_sites / m.centres
                 rule = _search.SearchRule(config.grid, min(config.batches, shape[na]), phi, index_weight,
                                           config.r, floor, config.random_candidates, int(rng.integers(0, 2**31)),
