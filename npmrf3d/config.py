@@ -135,6 +135,8 @@ class SynthesisConfig:
     # on scan slices the minority phase keeps its share and the two-point correlation shape
     # comes nearer the scans' crops; photographs' quality unchanged (docs/quality.md)
     phase_weight: float = 16.0
+    # support coherent: neighbourhoods searched and voting every `grid` voxels along both plane axes
+    grid: int = 1
     seed: int | None = None
 
     def to_dict(self) -> dict:

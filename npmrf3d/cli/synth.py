@@ -93,6 +93,12 @@ def register(commands, formatter_class) -> None:
              "coherent on a segmented exemplar: 5, see --segmented)",
     )
     shape.add_argument(
+        "--grid", type=int, default=_d("grid"), metavar="G",
+        help="support coherent: the neighbourhoods that are searched and vote lie every G voxels "
+             "along both plane axes of each view (1 = every voxel; 2 = a quarter of the work), an "
+             "integer from 1 to the window; every level's side a multiple of it (default: %(default)s)",
+    )
+    shape.add_argument(
         "--levels", type=int, default=_d("levels"), metavar="L",
         help="number of pyramid levels (the paper's scales), an integer from 1 to 8 (support "
              "coherent on a segmented exemplar: this many and one fewer are both run, see "
@@ -336,7 +342,7 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
         grey_levels=args.grey_levels,
         palette=args.palette, toroidal_exemplar=args.toroidal_exemplar, temperatures=args.temperatures,
         blockwise=blockwise_requested(args), whole_voxels=args.whole_voxels, phase_weight=args.phase_weight,
-        seed=args.seed,
+        grid=args.grid, seed=args.seed,
     )
     out, checkpoint, per_view, sources = prepare_run(args, METHOD, config, whole=not zarr_output(args))
 

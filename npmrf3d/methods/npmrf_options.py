@@ -142,7 +142,7 @@ def make_config(
     variant=None, segmented=_C.segmented, bandwidth=None, centre_bandwidth=None, adaptive=None,
     decision=None, tau=None, histogram_weight=None, outlier=None, grey_levels=None, palette=None,
     toroidal_exemplar=False, temperatures=None, blockwise=False, whole_voxels=_C.whole_voxels, phase_weight=None,
-    seed=None,
+    grid=_C.grid, seed=None,
 ) -> SynthesisConfig:
     """Validate plain keyword arguments into a frozen :class:`SynthesisConfig`.
 
@@ -163,7 +163,9 @@ def make_config(
     pyramid only. ``phase_weight`` (support ``coherent``; None:
     :attr:`SynthesisConfig.phase_weight`, 0 for the full support): the phase control of the histogram prior
     (:class:`npmrf3d.methods.npmrf_coherent.CoherentConfig`), which holds the share of the voxels
-    above the exemplars' Otsu threshold to the exemplars' (0: off).
+    above the exemplars' Otsu threshold to the exemplars' (0: off). ``grid`` (support ``coherent``):
+    the sites whose neighbourhoods are searched and vote lie every ``grid`` voxels along both plane
+    axes of each view (1: every voxel), so each level's side must be a multiple of it.
     """
     levels = check.integer("levels", levels, low=1, high=8)
     window = check.window(window)
@@ -244,6 +246,15 @@ def make_config(
     elif phase_weight is None:
         phase_weight = _C.phase_weight
     phase_weight = check.real("phase_weight", phase_weight, low=0.0)
+    grid = check.integer("grid", grid, low=1, high=window)
+    if grid != 1 and support != "coherent":
+        check.fail(f"grid {grid} needs support 'coherent' (the full-Parzen sampler estimates every voxel); "
+                   "use grid 1 or support 'coherent'")
+    for level in range(levels):
+        for n in dims:
+            if (n // 2 ** level) % grid:
+                check.fail(f"size {n} does not suit grid {grid} with {levels} levels: level {level} has "
+                           f"{n // 2 ** level} voxels per side, not a multiple of {grid}")
     if blockwise and support != "coherent":
         check.fail("blockwise runs need support 'coherent' (the full-Parzen sampler's estimates "
                    "read the whole exemplar and its ICM stop rule the whole volume)")
@@ -257,5 +268,5 @@ def make_config(
         proposal=proposal, support=support, preset=preset_name, segmented=segmented, rule=rule,
         grey_levels=grey_levels, palette=palette, toroidal_exemplar=bool(toroidal_exemplar),
         temperatures=temperatures, blockwise=blockwise, whole_voxels=whole_voxels, phase_weight=phase_weight,
-        seed=seed,
+        grid=grid, seed=seed,
     )
