@@ -51,3 +51,16 @@ def test_coherent_refuses_to_anneal_a_heuristic_without_objective(tmp_path, caps
     assert "heuristic ML_H1a cannot be annealed (t0 > 0): ML_H1a and ML_H1b are ICM-only" in capsys.readouterr().err
     assert main(["coherent", "--heuristic", "ML_H3", "--out", str(tmp_path / "y")]) == 2
     assert "--heuristic must be one of ML_H2b, ML_H2a, ML_H1a, ML_H1b" in capsys.readouterr().err
+
+
+def test_synth_grid_is_refused_where_it_cannot_apply(tmp_path, capsys):
+    """Sparse sites need the coherent support, a spacing within the window and levels it divides."""
+    from tests.cli_checks import refused_naming
+    base = ["synth", "--size", "16", "--levels", "2", "--window", "3", "--out", str(tmp_path / "o")]
+    refused_naming([*base, "--grid", "2", "--support", "full"], tmp_path, capsys, words=("grid 2", "coherent"))
+    refused_naming([*base, "--grid", "5"], tmp_path, capsys, words=("grid",))
+    refused_naming(["synth", "--size", "36", "--levels", "3", "--window", "3", "--grid", "2", "--out",
+                    str(tmp_path / "o")], tmp_path, capsys, words=("grid 2", "level 2", "9 voxels"))
+    assert not (tmp_path / "o").exists()
+    assert main([*base, "--grid", "2", "--seed", "1"]) == 0
+    assert json.loads((tmp_path / "o" / "run.json").read_text())["config"]["grid"] == 2
