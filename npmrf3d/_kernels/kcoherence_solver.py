@@ -223,23 +223,26 @@ def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w, d
         # the flat index of site (u_r, u_c) of this view: base + u_r * step_r + u_c * step_c
         base = v * n_vox + here - xr * step_r - xc * step_c
         w = ewidth[v]
-        for orow in range(-anchor, window - anchor):
+        # the offsets whose sites are searched: x - offset on the sites' lattice (every offset
+        # when grid is 1; a level's side is a multiple of grid, so wrapping keeps the lattice)
+        first_r = -anchor
+        first_c = -anchor
+        if grid > 1:
+            first_r += (xr - sites[ra] + anchor) % grid
+            first_c += (xc - sites[ca] + anchor) % grid
+        for orow in range(first_r, window - anchor, grid):
             u_r = xr - orow
             if u_r < 0:
                 u_r += nr
             elif u_r >= nr:
                 u_r -= nr
-            if grid > 1 and (u_r - sites[ra]) % grid:
-                continue
             row = base + u_r * step_r
-            for ocol in range(-anchor, window - anchor):
+            for ocol in range(first_c, window - anchor, grid):
                 u_c = xc - ocol
                 if u_c < 0:
                     u_c += nc
                 elif u_c >= nc:
                     u_c -= nc
-                if grid > 1 and (u_c - sites[ca]) % grid:
-                    continue
                 site = row + u_c * step_c
                 e = flat_assign[site]
                 if e < 0:
