@@ -175,6 +175,14 @@ HISTOGRAM_ABLATIONS = {
 }
 METHODS.update({name: _npmrf_coherent_with(**options)
                 for name, options in HISTOGRAM_ABLATIONS.items()})
+#: The default run with fewer search + solve iterations per level (coarsest first; the default's
+#: are (4, 4, 3)): what the finest level's iterations, most of the run time, add to quality.
+ITERATION_VARIANTS = {
+    f"npmrf-iterations-{'-'.join(map(str, its))}": dict(iterations=its)
+    for its in ((4, 4, 2), (3, 3, 2), (4, 4, 1), (2, 2, 2))
+}
+METHODS.update({name: _npmrf_coherent_with(**options)
+                for name, options in ITERATION_VARIANTS.items()})
 #: The default run with another weight of its histogram prior's phase control (``synth
 #: --phase-weight W``; the default's is 16): the guard that a weight chosen on scans leaves
 #: photographs as they were.
