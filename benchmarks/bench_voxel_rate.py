@@ -10,7 +10,8 @@ rate. Per site and view and iteration, the search projects the site's window ont
 (``2 d D`` floating-point operations, ``d`` = 49 window values, ``D`` = the PCA dimensions) and
 measures each candidate's distance in the reduced space (``2 D`` per candidate); per voxel and
 iteration the solver scores its ``8`` heaviest candidates against every vote (``2`` per vote and
-candidate, ``3 x 49`` votes). Summed over the levels' voxels and iterations and divided by the
+candidate; ``3 x 49 / g**2`` votes on average with the sites every ``g`` voxels, ``3 x 49`` at
+``g = 1``). Summed over the levels' voxels and iterations and divided by the
 voxels of the volume, that is the floor in operations per voxel; at the machine's float32
 matrix-multiply rate (BLAS, all cores: the most this machine computes per second) it is the
 floor in microseconds. The ratio says how far the kernels are from it; the target of
@@ -56,7 +57,7 @@ def floor_operations(stats: dict, channels: int = 1) -> float:
         voxels = float(np.prod(level["shape"]))
         views = len(level["pca_dims"])
         search = level["sites_per_iteration"] * (2 * d * dims + 2 * dims * level["candidates_per_site"])
-        solve = voxels * 2 * MEDOID_CANDIDATES * views * window * window
+        solve = voxels * 2 * MEDOID_CANDIDATES * views * window * window / level["grid"] ** 2
         total += iterations * (search + solve)
     return total
 

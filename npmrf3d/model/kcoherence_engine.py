@@ -516,7 +516,7 @@ class KCoherenceLevels(Levels):
                 on_step(it, level_history[-1], icm.expected() if icm.warm(it) else it)
         used = [float((position_histogram(src[vi], m.pixels) > 0).mean()) for vi, m in enumerate(vmodels)]
         stats = {
-            "shape": list(shape), "window": window, "iterations": it,
+            "shape": list(shape), "window": window, "grid": config.grid, "iterations": it,
             "candidates_per_site": 9 * (1 + config.k) + config.random_candidates, "sites_per_iteration": sites,
             "pca_dims": {v: int(vmodels[vi].basis.shape[1]) for vi, v in enumerate(views)},
             "centres": {v: int(vmodels[vi].centres) for vi, v in enumerate(views)},
