@@ -78,7 +78,7 @@ PER_VIEW_HEURISTICS = {"ML_H1a": _decide.ML_H1A, "ML_H1b": _decide.ML_H1B}
 COHERENT_HEURISTICS = {**CANDIDATE_HEURISTICS, **PER_VIEW_HEURISTICS}
 #: The annealed draws among the candidates, and the solver kernel's code of each.
 CANDIDATE_SAMPLERS = {"heat-bath": _decide.HEAT_BATH, "metropolis": _decide.METROPOLIS}
-#: The medoid solver tries the heaviest (merged) votes only; the energy sums over all votes.
+#: The medoid solver tries the texels of the heaviest votes only; the energy sums over all votes.
 MEDOID_CANDIDATES = 8
 #: Voxels per parallel work item of the solver (any value gives the same result).
 SOLVE_CHUNK = 512

@@ -27,6 +27,8 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .._kernels._jit import thread_count
+
 __all__ = ["QUERY_CHUNK", "REPEAT_BUDGET", "PatchIndex", "first_valid", "nearest_others", "repeats"]
 
 #: Extra distance evaluations that repeated vectors may cost a plain tree before the index keeps
@@ -186,7 +188,7 @@ def nearest_others(index: PatchIndex, k: int, *, exclude: float = 0.0,
     want = min(n, k + (2 * reach + 1) ** 2)
     unique = index.tree.data                                  # distinct vector g = group g
     out = np.empty((n, k), dtype=np.int64)
-    _, lists = index.query(unique, want)                     # (distinct, want) points
+    _, lists = index.query(unique, want, workers=thread_count())  # (distinct, want) points
     chunk = max(1, index.chunk // max(1, want // 8))
     for lo in range(0, n, chunk):
         points = np.arange(lo, min(lo + chunk, n))
