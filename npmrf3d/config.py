@@ -135,8 +135,10 @@ class SynthesisConfig:
     # on scan slices the minority phase keeps its share and the two-point correlation shape
     # comes nearer the scans' crops; photographs' quality unchanged (docs/quality.md)
     phase_weight: float = 16.0
-    # support coherent: neighbourhoods searched and voting every `grid` voxels along both plane axes
-    grid: int = 1
+    # support coherent: neighbourhoods searched and voting every `grid` voxels along both plane axes;
+    # None: 2 where every level's side is even (docs/quality.md, "Sparse sites": as good on the
+    # held-out photographs, 2.5x faster), else 1
+    grid: int | None = None
     seed: int | None = None
 
     def to_dict(self) -> dict:

@@ -19,7 +19,7 @@ from ..errors import ParameterError
 from ..io.runs import RUN_FILES
 from ..methods.npmrf import METHOD, segmented
 from ..methods.npmrf_coherent import SEGMENTED, SEGMENTED_MAX_VALUES
-from ..methods.npmrf_options import DEFAULT_SAMPLER, DEFAULT_XI
+from ..methods.npmrf_options import DEFAULT_SAMPLER, DEFAULT_XI, SPARSE_GRID
 from ..model.exemplar import BUNDLED_PREFIX
 from ..model.heuristics import DECISIONS, HEURISTICS
 from ..model.neighbourhood import VIEWS
@@ -96,7 +96,8 @@ def register(commands, formatter_class) -> None:
         "--grid", type=int, default=_d("grid"), metavar="G",
         help="support coherent: the neighbourhoods that are searched and vote lie every G voxels "
              "along both plane axes of each view (1 = every voxel; 2 = a quarter of the work), an "
-             "integer from 1 to the window; every level's side a multiple of it (default: %(default)s)",
+             "integer from 1 to the window; every level's side a multiple of it (default: "
+             f"{SPARSE_GRID} where every level's side is even, else 1; 1 with --support full)",
     )
     shape.add_argument(
         "--levels", type=int, default=_d("levels"), metavar="L",

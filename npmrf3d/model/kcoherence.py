@@ -33,7 +33,6 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from .._kernels import kcoherence as _k
-from .._kernels._jit import thread_count
 from .nearest import PatchIndex, nearest_others
 from .neighbourhood import VIEW_AXES
 
@@ -217,7 +216,7 @@ def k_coherence_sets(points: np.ndarray, k: int = 5, *, exclude: float = 0.0,
     out = np.empty((n, k), dtype=np.int64)
     todo = np.arange(n)
     while todo.size:
-        _, idx = tree.query(points[todo], want, workers=thread_count())  # the same answer on any threads
+        _, idx = tree.query(points[todo], want)
         ok = idx != todo[:, None]
         if exclude > 0:
             cheb = np.abs(coords[idx] - coords[todo][:, None, :]).max(axis=2)

@@ -83,11 +83,12 @@ class PatchIndex:
     def __len__(self) -> int:
         return len(self.points)
 
-    def query(self, vectors, k: int, *, eps: float = 0.0, workers: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    def query(self, vectors, k: int, *, eps: float = 0.0, workers: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``(dist, idx)``, both ``(q, k)``: the ``k`` (at most ``n``) nearest points of every
         row of ``vectors``, nearest first; identical points in index order when deduplicated.
         ``eps`` and ``workers`` as in ``cKDTree.query`` (an approximate search; threads, which
-        do not change the answer)."""
+        do not change the answer; None: numba's thread count)."""
+        workers = thread_count() if workers is None else workers
         vectors = np.ascontiguousarray(vectors, dtype=np.float64).reshape(-1, self.points.shape[1])
         k = min(int(k), len(self.points))
         dist = np.empty((len(vectors), k), dtype=np.float64)
@@ -188,7 +189,7 @@ def nearest_others(index: PatchIndex, k: int, *, exclude: float = 0.0,
     want = min(n, k + (2 * reach + 1) ** 2)
     unique = index.tree.data                                  # distinct vector g = group g
     out = np.empty((n, k), dtype=np.int64)
-    _, lists = index.query(unique, want, workers=thread_count())  # (distinct, want) points
+    _, lists = index.query(unique, want)                     # (distinct, want) points
     chunk = max(1, index.chunk // max(1, want // 8))
     for lo in range(0, n, chunk):
         points = np.arange(lo, min(lo + chunk, n))
