@@ -29,7 +29,7 @@ import numpy as np
 from . import candidate_decision as _decide
 from ._jit import jit, jit_parallel, prange
 from .candidate_decision import HEAT_BATH, METROPOLIS, ML_H1A, ML_H1B, ML_H2B, value_prior
-from .kcoherence import first_site, global_flat, grid_voxels, mix, value_bin
+from .kcoherence import first_site, global_flat, grid_voxels, mix, value_bin, wrap
 
 
 class PackedViews(NamedTuple):
@@ -231,19 +231,9 @@ def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w, d
             first_r += (xr - sites[ra] + anchor) % grid
             first_c += (xc - sites[ca] + anchor) % grid
         for orow in range(first_r, window - anchor, grid):
-            u_r = xr - orow
-            if u_r < 0:
-                u_r += nr
-            elif u_r >= nr:
-                u_r -= nr
-            row = base + u_r * step_r
+            row = base + wrap(xr - orow, nr) * step_r
             for ocol in range(first_c, window - anchor, grid):
-                u_c = xc - ocol
-                if u_c < 0:
-                    u_c += nc
-                elif u_c >= nc:
-                    u_c -= nc
-                site = row + u_c * step_c
+                site = row + wrap(xc - ocol, nc) * step_c
                 e = flat_assign[site]
                 if e < 0:
                     continue
