@@ -176,10 +176,11 @@ HISTOGRAM_ABLATIONS = {
 METHODS.update({name: _npmrf_coherent_with(**options)
                 for name, options in HISTOGRAM_ABLATIONS.items()})
 #: The default run with fewer search + solve iterations per level (coarsest first; the default's
-#: are (4, 4, 3)): what the finest level's iterations, most of the run time, add to quality.
+#: are (4, 4, 3)), with its sparse sites or with every site (``grid`` 1): what the finest level's
+#: iterations, most of the run time, add to quality.
 ITERATION_VARIANTS = {
-    f"npmrf-iterations-{'-'.join(map(str, its))}": dict(iterations=its)
-    for its in ((4, 4, 2), (3, 3, 2), (4, 4, 1), (2, 2, 2))
+    f"npmrf-{'every-site-' if grid == 1 else ''}iterations-{'-'.join(map(str, its))}": dict(iterations=its, grid=grid)
+    for grid, its in ((2, (4, 4, 2)), (2, (3, 3, 2)), (2, (4, 4, 1)), (2, (2, 2, 2)), (1, (4, 4, 2)), (1, (4, 4, 1)))
 }
 METHODS.update({name: _npmrf_coherent_with(**options)
                 for name, options in ITERATION_VARIANTS.items()})
@@ -188,12 +189,9 @@ METHODS.update({name: _npmrf_coherent_with(**options)
 #: photographs as they were.
 PHASE_CONTROL = {f"npmrf-phase-{w}": {"phase_weight": float(w)} for w in (0, 8, 16, 32)}
 METHODS.update({name: _npmrf(**options) for name, options in PHASE_CONTROL.items()})
-#: The default run with its neighbourhoods searched and voting every ``grid`` voxels along both
-#: plane axes of every view (``synth --grid N``; the default's is 1, every voxel): a quarter of the
-#: searches and of the votes at 2.
-GRID_VARIANTS = {"npmrf-grid-2": dict(grid=2), "npmrf-grid-2-iterations-4-4-2": dict(grid=2, iterations=(4, 4, 2)),
-                 "npmrf-grid-2-iterations-3-3-2": dict(grid=2, iterations=(3, 3, 2))}
-METHODS.update({name: _npmrf_coherent_with(**options) for name, options in GRID_VARIANTS.items()})
+#: The default run with the neighbourhoods of every site searched and voting (``synth --grid 1``;
+#: the default's lie every 2nd voxel along both plane axes of each view).
+METHODS["npmrf-every-site"] = _npmrf_coherent_with(grid=1)
 #: Methods that take ``palette`` (the others never see it, and their cache key has none).
 PALETTE_METHODS = {"npmrf-default", "npmrf-sharp", "npmrf-anneal", *SAMPLER_COMBINATIONS,
                    *BLOCKWISE, *PHASE_CONTROL}

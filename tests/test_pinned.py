@@ -63,22 +63,29 @@ PINNED = {
     # repeated patches once (npmrf3d.model.nearest): these exemplars repeat too few patches for
     # that path, so their volumes must not move
     "coherent_ihc64": (
-        lambda: npmrf3d.synthesize(_ihc(), size=16, levels=2, phase_weight=0.0, rng=7),
+        lambda: npmrf3d.synthesize(_ihc(), size=16, levels=2, phase_weight=0.0, grid=1, rng=7),
         "8b75adb0bd7193ef09e4032e748f4a07a98e2ef3d0691d8333593aa46847df9e"),
     "coherent_gravel64_grey": (
         lambda: npmrf3d.synthesize(data.path("gravel64"), size=16, levels=2, window=5, phase_weight=0.0,
-                                   rng=3),
+                                   grid=1, rng=3),
         "f93e66edc88cfc2ea4413cec91ff1d2a5002d901dd120fc14a9627e1c04de196"),
-    # the default, with its phase control
+    # with every site searched and voting (grid 1)
     "coherent_ihc64_phase": (
-        lambda: npmrf3d.synthesize(_ihc(), size=16, levels=2, rng=7),
+        lambda: npmrf3d.synthesize(_ihc(), size=16, levels=2, grid=1, rng=7),
         "66b501bb096b4f53d6644fac4f3a7b62092a2e4cf0777bdcddbfd572684c8b7e"),
     "coherent_gravel64_grey_phase": (
-        lambda: npmrf3d.synthesize(data.path("gravel64"), size=16, levels=2, window=5, rng=3),
+        lambda: npmrf3d.synthesize(data.path("gravel64"), size=16, levels=2, window=5, grid=1, rng=3),
         "9f7830ade79b98c159ecdd105122dd5830e4b19d425497bb4dbc93de013639ca"),
     "coherent_checker": (
-        lambda: npmrf3d.synthesize(checker(), size=16, levels=2, window=5, rng=7),
+        lambda: npmrf3d.synthesize(checker(), size=16, levels=2, window=5, grid=1, rng=7),
         "60f60dee26b389fc239b76813e1c92010e9b126b0cbd91f1f86148c8551df2c1"),
+    # the default: its phase control, sites every 2nd voxel
+    "coherent_ihc64_default": (
+        lambda: npmrf3d.synthesize(_ihc(), size=16, levels=2, rng=7),
+        "76c56e6bb0b79fd279c72042cca5cf0acf6e4fca63205d05c7288831c5118092"),
+    "coherent_gravel64_grey_default": (
+        lambda: npmrf3d.synthesize(data.path("gravel64"), size=16, levels=2, window=5, rng=3),
+        "bfc5554848f0b13fdb8f24c3715f91ee6868d02363356c06b850ec7bfcae4f10"),
     "chen_wang_global_exclude": (
         lambda: chen_wang_synthesize(_ihc(), size=16, window=(6, 4), levels=2, iterations=(2, 2),
                                      global_share=0.2, coherence_exclude=2.0, rng=5),
