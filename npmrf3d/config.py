@@ -136,8 +136,8 @@ class SynthesisConfig:
     # comes nearer the scans' crops; photographs' quality unchanged (docs/quality.md)
     phase_weight: float = 16.0
     # support coherent: neighbourhoods searched and voting every `grid` voxels along both plane axes;
-    # None: 2 where every level's side is even (docs/quality.md, "Sparse sites": as good on the
-    # held-out photographs, 2.5x faster), else 1
+    # None: the run's own (methods.npmrf_options.coherent_grid: 2 on photographs where every level's
+    # side is even, docs/quality.md "Sparse sites"; else every site)
     grid: int | None = None
     seed: int | None = None
 

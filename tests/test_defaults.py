@@ -195,3 +195,15 @@ def test_the_supports_own_defaults_are_written_once():
         anneal = make_config(size=16, levels=2, window=5, support=support, relaxation="anneal")
         assert icm.xi == DEFAULT_XI[support] and anneal.sampler == DEFAULT_SAMPLER[support]
 
+
+
+def test_the_default_site_spacing_follows_the_run():
+    """Every 2nd site on a photograph whose levels all have even sides; every site for a
+    segmented exemplar or odd sides; a spacing given is kept."""
+    from npmrf3d.methods.npmrf_options import SPARSE_GRID, coherent_grid, make_config
+    assert coherent_grid(make_config(size=64), False, 3) == SPARSE_GRID == 2
+    assert coherent_grid(make_config(size=64), True, 3) == 1
+    assert coherent_grid(make_config(size=36), False, 3) == 1  # level 2 has 9 voxels per side
+    assert coherent_grid(make_config(size=36), False, 2) == 2
+    assert coherent_grid(make_config(size=64, grid=1), False, 3) == 1
+    assert coherent_grid(make_config(size=64, grid=2), True, 3) == 2

@@ -97,7 +97,8 @@ def register(commands, formatter_class) -> None:
         help="support coherent: the neighbourhoods that are searched and vote lie every G voxels "
              "along both plane axes of each view (1 = every voxel; 2 = a quarter of the work), an "
              "integer from 1 to the window; every level's side a multiple of it (default: "
-             f"{SPARSE_GRID} where every level's side is even, else 1; 1 with --support full)",
+             f"{SPARSE_GRID} where every level's side is even, else 1; 1 for a segmented exemplar "
+             "and with --support full)",
     )
     shape.add_argument(
         "--levels", type=int, default=_d("levels"), metavar="L",

@@ -22,7 +22,7 @@ from ..model.relax.icm import expected_sweeps
 from ..resources import coherent_estimate, npmrf_estimate, one_after_another
 from . import npmrf_coherent
 from ._api import prepare
-from .npmrf_options import make_config
+from .npmrf_options import coherent_grid, make_config
 
 __all__ = ["METHOD", "make_config", "npmrf_method", "npmrf_synthesize", "run"]
 
@@ -292,7 +292,7 @@ def _coherent_options(config: SynthesisConfig, phases: bool, levels: int) -> npm
         outlier=config.rule.outlier, value_weight=value_weight, phase_weight=config.phase_weight,
         t0=config.t0 if anneal else 0.0,
         t_end=config.t_end, schedule=config.schedule, sampler=config.sampler, blockwise=config.blockwise,
-        whole_voxels=config.whole_voxels, grid=config.grid,
+        whole_voxels=config.whole_voxels, grid=coherent_grid(config, phases, levels),
         seed=config.seed,
         **({"iterations": (config.proposals,) * levels} if anneal else {}),
         **({"icm": True, "xi": config.xi, "stop": config.stop, "max_sweeps": config.max_sweeps,

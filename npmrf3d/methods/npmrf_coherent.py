@@ -92,7 +92,8 @@ class SegmentedPreset:
     volume kept is the one whose two-point correlation shape is nearer the exemplars'
     (:func:`npmrf3d.analysis.metrics.two_point_shape_error`): the coarsest level builds the large pores
     of one slice and smears the small throats of another, and only the exemplar can tell which
-    (docs/segmented.md, "Two pyramids, the better kept").
+    (docs/segmented.md, "Two pyramids, the better kept"). The preset searches every site
+    (:func:`npmrf3d.methods.npmrf_options.coherent_grid`; docs/segmented.md, "The segmented preset").
     """
 
     window: int = 5

@@ -47,6 +47,23 @@ DEFAULT_SAMPLER = {"full": SynthesisConfig.sampler, "coherent": "metropolis"}
 #: multiple of it): a quarter of the searches and votes, as good on the held-out photographs as
 #: every voxel (docs/quality.md, "Sparse sites").
 SPARSE_GRID = 2
+def fits_grid(size, levels: int, grid: int) -> bool:
+    """Whether every level's side is a multiple of ``grid``."""
+    return all((n // 2 ** level) % grid == 0 for level in range(levels) for n in size)
+
+
+def coherent_grid(config: SynthesisConfig, segmented: bool, levels: int) -> int:
+    """The site spacing of a ``coherent``-support run with ``levels`` levels: ``config.grid`` when
+    given, else every site for a segmented exemplar (the segmented preset's, measured on scans:
+    docs/segmented.md) and :data:`SPARSE_GRID` for the others where every level's side is a
+    multiple of it (else every site)."""
+    if config.grid is not None:
+        return config.grid
+    if segmented or not fits_grid(config.size, levels, SPARSE_GRID):
+        return 1
+    return SPARSE_GRID
+
+
 #: The options whose default depends on the support (None in :func:`make_config` means "the
 #: support's"): any value given for them counts as given.
 BY_SUPPORT = {"xi": DEFAULT_XI, "sampler": DEFAULT_SAMPLER}
@@ -169,9 +186,8 @@ def make_config(
     (:class:`npmrf3d.methods.npmrf_coherent.CoherentConfig`), which holds the share of the voxels
     above the exemplars' Otsu threshold to the exemplars' (0: off). ``grid`` (support ``coherent``):
     the sites whose neighbourhoods are searched and vote lie every ``grid`` voxels along both plane
-    axes of each view (1: every voxel), so each level's side must be a multiple of it; None:
-    :data:`SPARSE_GRID` where every level's side is a multiple of it, else 1 (1 for the full
-    support).
+    axes of each view (1: every voxel), so each level's side must be a multiple of it; None: the
+    run's own (:func:`coherent_grid`).
     """
     levels = check.integer("levels", levels, low=1, high=8)
     window = check.window(window)
@@ -252,18 +268,15 @@ def make_config(
     elif phase_weight is None:
         phase_weight = _C.phase_weight
     phase_weight = check.real("phase_weight", phase_weight, low=0.0)
-    if grid is None:
-        grid = SPARSE_GRID if support == "coherent" and all(
-            (n // 2 ** level) % SPARSE_GRID == 0 for level in range(levels) for n in dims) else 1
-    grid = check.integer("grid", grid, low=1, high=window)
-    if grid != 1 and support != "coherent":
-        check.fail(f"grid {grid} needs support 'coherent' (the full-Parzen sampler estimates every voxel); "
-                   "use grid 1 or support 'coherent'")
-    for level in range(levels):
-        for n in dims:
-            if (n // 2 ** level) % grid:
-                check.fail(f"size {n} does not suit grid {grid} with {levels} levels: level {level} has "
-                           f"{n // 2 ** level} voxels per side, not a multiple of {grid}")
+    if grid is not None:
+        grid = check.integer("grid", grid, low=1, high=window)
+        if grid != 1 and support != "coherent":
+            check.fail(f"grid {grid} needs support 'coherent' (the full-Parzen sampler estimates every "
+                       "voxel); use grid 1 or support 'coherent'")
+        if not fits_grid(dims, levels, grid):
+            level, n = next((lv, n // 2 ** lv) for lv in range(levels) for n in dims if (n // 2 ** lv) % grid)
+            check.fail(f"size {','.join(map(str, dims))} does not suit grid {grid} with {levels} levels: "
+                       f"level {level} has {n} voxels per side, not a multiple of {grid}")
     if blockwise and support != "coherent":
         check.fail("blockwise runs need support 'coherent' (the full-Parzen sampler's estimates "
                    "read the whole exemplar and its ICM stop rule the whole volume)")
