@@ -168,7 +168,7 @@ def _texel_factors(views, hist, n_views, div, mul, vdiv, priors):
 
 
 @jit
-def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w, div, mul, vdiv, sites):
+def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w, div, mul, vdiv, sites, view_starts):
     """Texels voted for voxel ``(p0, p1, p2)`` by every overlapping neighbourhood of every view.
 
     A neighbourhood at site ``u`` matched with centre ``e`` votes for the texel ``e + (x - u)``
@@ -180,7 +180,9 @@ def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w, d
     ``ex_bins[texel, c]``; histograms in units of an even bin's share, this project's addition
     after Kopf et al. 2007's histogram matching). Votes are enumerated view by view, then by row offset
     ``x_r - u_r`` from ``-anchor`` to ``window - 1 - anchor``, then by column offset; texels are
-    written as packed rows ``ex_off[v] + local``. Returns the number of votes.
+    written as packed rows ``ex_off[v] + local``, and view ``v``'s votes are
+    ``view_starts[v] .. view_starts[v + 1] - 1`` (``view_starts``: V + 1 entries). Returns the
+    number of votes.
 
     With ``trust`` (:class:`VoteTrust`, not empty) a vote's weight is further multiplied by the
     mean trust of its neighbourhood's pixels other than the voxel decided,
@@ -212,6 +214,7 @@ def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w, d
     here = p0 * strides[0] + p1 * strides[1] + p2
     count = 0
     for v in range(assign.shape[0]):
+        view_starts[v] = count
         ra = view_axes[v, 0]
         ca = view_axes[v, 1]
         nr = assign.shape[1 + ra]
@@ -254,6 +257,7 @@ def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w, d
                 out_v[count] = v
                 out_w[count] = weight
                 count += 1
+    view_starts[assign.shape[0]] = count
     return count
 
 
@@ -394,8 +398,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
             mean = np.empty(channels, dtype=np.float64)
             vsum = np.empty(n_views, dtype=np.float64)
             uid = np.empty(cap, dtype=np.int64)
-            vlo = np.empty(n_views, dtype=np.int64)
-            vhi = np.empty(n_views, dtype=np.int64)
+            view_starts = np.empty(n_views + 1, dtype=np.int64)
             rows = np.empty(max(medoid, 1), dtype=np.int64)
             liks = np.empty((max(medoid, 1), n_views), dtype=np.float64)
             tops = np.empty(max(medoid, 1), dtype=np.int64)
@@ -412,7 +415,8 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                 p0 = flat // (n1 * n2)
                 p1 = (flat // n2) % n1
                 p2 = flat % n2
-                count = _votes(p0, p1, p2, assign, omega, views, hist, trust, vg, vv, vw, div, mul, vdiv, sites)
+                count = _votes(p0, p1, p2, assign, omega, views, hist, trust, vg, vv, vw, div, mul, vdiv, sites,
+                               view_starts)
                 for v in range(n_views):
                     new_src[t, v] = src[v, p0, p1, p2]
                 if count == 0:
@@ -533,17 +537,6 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                             best_d = dd
                             best = q
                 g = vg[best]
-                # each view's stretch of the votes (they come sorted by view)
-                by_view = True
-                for v in range(n_views):
-                    vlo[v] = count
-                    vhi[v] = 0
-                for q in range(count):
-                    if q > 0 and vv[q] < vv[q - 1]:
-                        by_view = False
-                    if q < vlo[vv[q]]:
-                        vlo[vv[q]] = q
-                    vhi[vv[q]] = q + 1
                 for ch in range(channels):
                     if volume[p0, p1, p2, ch] != ex_flat[g, ch]:
                         flags[t] = 1
@@ -558,8 +551,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                     if v == vv[best]:
                         new_src[t, v] = g - ex_off[v]
                         continue
-                    near = _decide.nearest_vote(v, g, vg, vv, count, ex_flat) if not by_view else \
-                        _decide.nearest_in(vlo[v], vhi[v], g, vg, ex_flat)
+                    near = _decide.nearest_in(view_starts[v], view_starts[v + 1], g, vg, ex_flat)
                     if near >= 0:
                         new_src[t, v] = vg[near] - ex_off[v]
         # sequential, fixed order: histograms follow the new sources
