@@ -273,10 +273,6 @@ def make_config(
         if grid != 1 and support != "coherent":
             check.fail(f"grid {grid} needs support 'coherent' (the full-Parzen sampler estimates every "
                        "voxel); use grid 1 or support 'coherent'")
-        if not fits_grid(dims, levels, grid):
-            level, n = next((lv, n // 2 ** lv) for lv in range(levels) for n in dims if (n // 2 ** lv) % grid)
-            check.fail(f"size {','.join(map(str, dims))} does not suit grid {grid} with {levels} levels: "
-                       f"level {level} has {n} voxels per side, not a multiple of {grid}")
     if blockwise and support != "coherent":
         check.fail("blockwise runs need support 'coherent' (the full-Parzen sampler's estimates "
                    "read the whole exemplar and its ICM stop rule the whole volume)")
