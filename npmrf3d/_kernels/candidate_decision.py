@@ -28,6 +28,11 @@ HEAT_BATH, METROPOLIS = 0, 1
 
 _TWO_31 = 2147483648.0
 
+#: Relative gap between two candidates' scores as products (:func:`highest_objective`) below
+#: which their order is settled by the exact objectives: a product of a few estimates and a
+#: sum of their logarithms each round within about 1e-13 of the exact value, far inside it.
+NEAR_TIE = 1e-9
+
 
 @jit
 def value_prior(bins, val_hist, val_target, val_unit, kappa):
@@ -153,6 +158,35 @@ def objective(lik, likelihood, prior):
     if prior != 0.0:
         score = score + prior if likelihood == ML_H2B else score * np.exp(prior)
     return score
+
+
+@jit
+def highest_objective(products, n_try, liks, likelihood, prior_of, first):
+    """The first of the ``n_try`` candidates with the highest :func:`objective` (its estimates
+    ``liks[a]`` (V,), its prior ``prior_of[a]``, 0 without), ranked by ``products[a]`` -- the
+    objective as a product, ``prod_v L_v * exp(prior)`` for ML_H2b (the exponential of its
+    log-score, without a logarithm per view) or ``min_v L_v * exp(prior)`` for ML_H2a (its very
+    value) -- and, among the candidates within :data:`NEAR_TIE` of the highest product, by their
+    objectives themselves, so the winner is the one the objectives pick. A highest product
+    outside ``[1e-200, 1e200]`` (an extreme prior) is not trusted: every objective is computed.
+    Returns the winner's index, or ``first`` when no score beats ``-inf`` (the objectives'
+    own rule: a strictly higher score wins, the first on ties)."""
+    top = 0
+    for a in range(1, n_try):
+        if products[a] > products[top]:
+            top = a
+    cut = -np.inf
+    if 1e-200 <= products[top] <= 1e200:
+        cut = products[top] * (1.0 - NEAR_TIE)
+    best = first
+    best_e = np.inf
+    for a in range(n_try):
+        if products[a] >= cut:
+            score = objective(liks[a], likelihood, prior_of[a])
+            if -score < best_e:
+                best_e = -score
+                best = a
+    return best
 
 
 @jit

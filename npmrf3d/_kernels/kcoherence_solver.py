@@ -28,7 +28,7 @@ import numpy as np
 
 from . import candidate_decision as _decide
 from ._jit import jit, jit_parallel, prange
-from .candidate_decision import HEAT_BATH, METROPOLIS, ML_H1A, ML_H1B, ML_H2B, value_prior
+from .candidate_decision import HEAT_BATH, METROPOLIS, ML_H1A, ML_H1B, ML_H2A, ML_H2B, value_prior
 from .kcoherence import first_site, global_flat, grid_voxels, mix, value_bin, wrap
 
 
@@ -131,14 +131,15 @@ NO_TRUST = VoteTrust(np.zeros((0, 0, 0), dtype=np.float32), np.zeros((0, 0, 0, 0
 
 
 @jit
-def _texel_factors(views, hist, n_views, div, mul, vdiv, priors):
+def _texel_factors(views, hist, n_views, div, mul, vdiv, priors, exp_priors):
     """Per packed position-histogram entry, the factors :func:`_votes` weighs a vote for that
     texel by while the histograms are frozen (one batch): ``div`` the position divisor
     ``1 + position_weight * excess`` (1.0 when not over-used), ``mul`` the boost
     ``1 - position_boost * excess`` (1.0 when over-used or without boost); per packed texel
     ``vdiv`` the value-histogram divisor ``1 + val_weight * over`` (1.0 without). A factor of
     1.0 leaves a weight exactly as it is, so the weights keep their bits. With ``value_prior >
-    0``, ``priors`` gets every packed texel's histogram prior (:func:`value_prior`)."""
+    0``, ``priors`` gets every packed texel's histogram prior (:func:`value_prior`) and
+    ``exp_priors`` its exponential."""
     pos_hist, hist_off, theta = hist.positions, hist.position_offsets, hist.theta
     position_weight, position_boost = hist.position_weight, hist.position_boost
     ex_bins, val_hist, val_target, val_weight = hist.texel_bins, hist.values, hist.value_target, hist.value_weight
@@ -165,6 +166,7 @@ def _texel_factors(views, hist, n_views, div, mul, vdiv, priors):
     if hist.value_prior > 0.0:
         for g in range(priors.shape[0]):
             priors[g] = value_prior(ex_bins[g], val_hist, val_target, hist.value_unit, hist.value_prior)
+            exp_priors[g] = np.exp(priors[g])
 
 
 @jit
@@ -379,6 +381,9 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
     mul = np.empty(pos_hist.shape[0], dtype=np.float64)
     vdiv = np.empty(ex_flat.shape[0], dtype=np.float64)
     priors = np.zeros(ex_flat.shape[0], dtype=np.float64)
+    exp_priors = np.ones(ex_flat.shape[0], dtype=np.float64)
+    # the highest objective alone (no annealed draw): ranked by products, no logarithms
+    ranked = (likelihood == ML_H2B or likelihood == ML_H2A) and temperature == 0.0
     sites = np.empty(3, dtype=np.int64)
     for axis in range(3):
         sites[axis] = first_site(rule.origin, rule.extent, axis, views.grid)
@@ -390,7 +395,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
         old_bins = np.zeros((m, channels), dtype=np.int64)
         new_bins = np.zeros((m, channels), dtype=np.int64)
         n_chunks = (m + chunk - 1) // chunk
-        _texel_factors(views, hist, n_views, div, mul, vdiv, priors)
+        _texel_factors(views, hist, n_views, div, mul, vdiv, priors, exp_priors)
         for c in prange(n_chunks):
             vg = np.empty(cap, dtype=np.int64)
             vv = np.empty(cap, dtype=np.int64)
@@ -406,6 +411,8 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
             top_weights = np.empty(max(medoid, 1), dtype=np.float64)
             lik = np.empty(n_views, dtype=np.float64)
             scores = np.empty(max(medoid, 1), dtype=np.float64)
+            products = np.empty(max(medoid, 1), dtype=np.float64)
+            prior_of = np.zeros(max(medoid, 1), dtype=np.float64)
             table = np.empty((max(medoid, 1), n_views), dtype=np.float64)
             winners = np.empty(n_views, dtype=np.int64)
             colour = np.empty(channels, dtype=np.float32)
@@ -457,6 +464,22 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                             prior = 0.0
                             if val_prior > 0.0:
                                 prior = priors[ga]
+                            if ranked:
+                                product = exp_priors[ga]
+                                if likelihood == ML_H2B:
+                                    for v in range(n_views):
+                                        product *= lik[v]
+                                else:
+                                    least = np.inf
+                                    for v in range(n_views):
+                                        least = min(least, lik[v])
+                                    product = least * product
+                                products[a] = product
+                                prior_of[a] = prior
+                                if not tabled:
+                                    for v in range(n_views):
+                                        liks[a, v] = lik[v]
+                                continue
                             if likelihood >= ML_H1A:
                                 # per-view rules: each view's estimate, times the prior's factor
                                 for v in range(n_views):
@@ -480,7 +503,10 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                         if e_sum < best_e:
                             best_e = e_sum
                             best = tops[a]
-                    if likelihood >= ML_H1A:
+                    if ranked:
+                        win = _decide.highest_objective(products, n_try, liks, likelihood, prior_of, -1)
+                        best = tops[win] if win >= 0 else 0
+                    elif likelihood >= ML_H1A:
                         _decide.view_winners(table, n_try, vsum, winners)
                         if winners.max() < 0:
                             continue
