@@ -442,10 +442,11 @@ def naive_random_centres(salt, site_flat, n_random, bounds, ewidth):
 
 
 def naive_search_view(volume, src_v, view, model, *, grid, batches, index_hist, phi, index_weight,
-                      r, floor, assign_v, n_random=0, salt=0, trust=None):
+                      r, floor, assign_v, n_random=0, salt=0, trust=None, box=None):
     """Literal search phase of one view; returns (assign, omega, energy per slice, index_hist).
     ``trust`` (N0, N1, N2): the full-dimensional distances with every pixel's term weighted by
-    its trust, instead of the PCA ones (Urs et al. 2014)."""
+    its trust, instead of the PCA ones (Urs et al. 2014). ``box`` ((lo0, lo1, lo2), (hi0, hi1,
+    hi2)): only the sites with ``lo <= index < hi`` along every axis are searched."""
     ra, ca = NAIVE_VIEW_AXES[view]
     na = 3 - ra - ca
     ex = model.exemplar
@@ -461,6 +462,8 @@ def naive_search_view(volume, src_v, view, model, *, grid, batches, index_hist, 
             for row in range(0, volume.shape[ra], grid):
                 for col in range(0, volume.shape[ca], grid):
                     site = naive_site(view, n, row, col)
+                    if box is not None and not all(lo <= i < hi for i, lo, hi in zip(site, *box)):
+                        continue
                     patch = naive_volume_patch(volume, view, site, window)
                     y = (patch - model.mean) @ model.basis.astype(np.float64)
                     best, best_cost, best_d2 = None, np.inf, 0.0
@@ -1027,3 +1030,19 @@ def naive_top_votes(vg, vv, vw, most):
             best[key] = q
     ranked = sorted(best.values(), key=lambda q: (-vw[q], q))
     return ranked[:most]
+
+
+def naive_group_by_batch(ids, batches):
+    """Voxel indices grouped by batch (a stable sort of their batch ids) and each batch's first
+    position."""
+    order = np.argsort(ids, kind="stable")
+    bounds = np.concatenate([[0], np.cumsum(np.bincount(ids, minlength=batches))])
+    return order, bounds
+
+
+def naive_central_texels(texels):
+    """Per voxel, of the views' texels (V, n, C) the one nearest to their mean (first on ties)."""
+    centre = texels.astype(np.float64).mean(axis=0)
+    dist = ((texels - centre) ** 2).sum(axis=-1)
+    pick = np.argmin(dist, axis=0)
+    return np.take_along_axis(texels, pick[None, :, None], axis=0)[0]

@@ -22,7 +22,7 @@ from npmrf3d.resources import ResourceError
 from npmrf3d.studies.catalog import load_exemplar
 
 from .cli_checks import refused_naming
-from .naive import naive_global_flat, naive_voxel_batches
+from .naive import naive_global_flat, naive_group_by_batch, naive_voxel_batches
 
 #: A cone that is a true part of its level at the two finer levels: window 3 (reach 2), one
 #: iteration per level, blocks of 16 in a 48 x 32 x 32 volume; a pilot smaller than the volume
@@ -87,6 +87,27 @@ def test_first_site_is_the_whole_grids():
         assert _k.first_site(origin, np.zeros(3, dtype=np.int64), 0, grid) == 0
 
 
+@pytest.mark.parametrize("name", ["coherent", "chen-wang"])
+def test_a_block_decides_at_each_pass_only_what_the_next_needs(tmp_path, name):
+    """Two passes per level: a block's first pass decides its region shrunk by one reach of a
+    pass, its second by two (where the region does not wrap an axis whole), and the block still
+    equals the same part of the volume made at once."""
+    method = METHODS[name]
+    per_view = _views(_exemplar("gravel64"))
+    config = method.make_config(**{**SMALL, "iterations": 2})
+    whole = _whole(method, per_view, config, 2)
+    plan = plan_region(config.size, config.levels, method.aprons(config, per_view), (16, 16, 0), (16, 16, 16),
+                       start=tmp_path / "s.npz")
+    run = method.run(per_view, config, np.random.default_rng(config.seed), region=plan)
+    np.testing.assert_array_equal(run.volume, whole[16:32, 16:32, :16])
+    frame = plan.frames[0]
+    finest = run.stats["levels"]["level_0"]
+    assert finest["shape"] == list(frame.shape)
+    reach = 2  # window 3
+    shrunk = [[n if n == e else n - 2 * t * reach for n, e in zip(frame.shape, frame.extent)] for t in (1, 2)]
+    assert finest["voxels_decided"] == sum(int(np.prod(s)) for s in shrunk) < 2 * int(np.prod(frame.shape))
+
+
 def test_the_apron_is_needed_in_full(tmp_path):
     """One voxel less of apron at the finest level and a block differs from the whole volume:
     the test above could fail."""
@@ -135,6 +156,17 @@ def test_global_flat_matches_its_twin():
             got = _k.global_flat(p[0], p[1], p[2], tuple(int(n) for n in shape), origin.astype(np.int64),
                                  e.astype(np.int64))
             assert got == naive_global_flat(p, shape, origin, e)
+
+
+def test_grouping_by_batch_matches_its_twin():
+    rng = np.random.default_rng(4)
+    for batches in (1, 3, 8):
+        ids = rng.integers(0, batches, size=int(rng.integers(0, 500))).astype(np.int8)
+        order, bounds = np.empty(ids.size, dtype=np.int64), np.empty(batches + 1, dtype=np.int64)
+        _k.group_by_batch(ids, batches, order, bounds)
+        want_order, want_bounds = naive_group_by_batch(ids, batches)
+        np.testing.assert_array_equal(order, want_order)
+        np.testing.assert_array_equal(bounds, want_bounds)
 
 
 def test_voxel_batches_match_their_twin():

@@ -30,6 +30,7 @@ from npmrf3d.model.kcoherence_engine import (CandidateDecision, KCoherenceLevels
                                               pack_exemplars)
 from npmrf3d.model.neighbourhood import VIEW_AXES
 from tests.naive import (
+    naive_central_texels,
     naive_candidates,
     naive_exemplar_patch,
     naive_k_coherence,
@@ -153,8 +154,12 @@ def _search_case(rng, view, window, channels, grid):
 
 @pytest.mark.kernels
 @pytest.mark.parametrize("view", VIEWS3)
-@pytest.mark.parametrize("window,channels,grid,batches,n_random", [(3, 1, 1, 1, 0), (4, 3, 2, 3, 4), (4, 1, 1, 2, 0)])
-def test_search_view_matches_twin(rng, view, window, channels, grid, batches, n_random):
+@pytest.mark.parametrize("window,channels,grid,batches,n_random,box", [
+    (3, 1, 1, 1, 0, None), (4, 3, 2, 3, 4, None), (4, 1, 1, 2, 0, None),
+    (3, 1, 2, 2, 0, ((1, 2, 0), (7, 5, 3))), (3, 1, 1, 1, 2, ((3, 0, 1), (5, 6, 4)))])
+def test_search_view_matches_twin(rng, view, window, channels, grid, batches, n_random, box):
+    """Every site, or only the sites of a box (a block's pass: the others keep their assignment
+    and weight)."""
     ex, m, vol, src, assign = _search_case(rng, view, window, channels, grid)
     ra, ca = VIEW_AXES[view]
     na = 3 - ra - ca
@@ -169,13 +174,15 @@ def test_search_view_matches_twin(rng, view, window, channels, grid, batches, n_
     phi = n_sites / m.centres
     want_assign, want_omega, want_energy, want_hist = naive_search_view(
         vol, src, view, m, grid=grid, batches=batches, index_hist=hist, phi=phi, index_weight=2.0,
-        r=0.8, floor=1e-3, assign_v=prev, n_random=n_random, salt=123456789)
+        r=0.8, floor=1e-3, assign_v=prev, n_random=n_random, salt=123456789, box=box)
     got_assign = prev.copy()
     got_hist = hist.copy()
     omega = np.zeros(vol.shape[:3], dtype=np.float32)
     energy = np.zeros(vol.shape[na])
-    _k.search_view(vol, src, ra, ca, coh.search_exemplar(m),
-                   _k.SearchRule(grid, batches, phi, 2.0, 0.8, 1e-3, n_random, 123456789), got_hist, got_assign,
+    rule = _k.SearchRule(grid, batches, phi, 2.0, 0.8, 1e-3, n_random, 123456789)
+    if box is not None:
+        rule = rule._replace(box_lo=np.array(box[0], dtype=np.int64), box_hi=np.array(box[1], dtype=np.int64))
+    _k.search_view(vol, src, ra, ca, coh.search_exemplar(m), rule, got_hist, got_assign,
                    np.empty(vol.shape[:3], dtype=np.int32), omega, energy, _k.NO_TRUST)
     np.testing.assert_array_equal(got_assign, want_assign)
     np.testing.assert_allclose(omega, want_omega, rtol=1e-4)
@@ -415,6 +422,54 @@ def test_kernel_table_matches_twin(rng, channels, levels):
             one = np.empty(n_views)
             _decide.view_likelihoods_table(table[rows[a]], ids[ug][order], uv[order], uw[order], u, vsum, 0.01, one)
             np.testing.assert_array_equal(many[a], one)
+
+
+@pytest.mark.kernels
+@pytest.mark.parametrize("views,channels", [(2, 1), (3, 1), (3, 3)])
+def test_central_texels_match_their_twin(rng, views, channels):
+    """The most central of the views' texels, with ties (equal texels, and a texel equidistant
+    from two others) going to the first view."""
+    levels = rng.integers(0, 4, size=(views, 300, channels)).astype(np.float32) / 3
+    out = np.empty((300, channels), dtype=np.float32)
+    _k.central_texels(levels, out)
+    np.testing.assert_array_equal(out, naive_central_texels(levels))
+
+
+@pytest.mark.kernels
+@pytest.mark.parametrize("likelihood", [ML_H2B, ML_H2A])
+def test_the_highest_objective_ranked_by_products_is_the_objectives(rng, likelihood):
+    """Ranked by products of the estimates, settled by the objectives among near ties: the
+    first candidate of the highest objective (the literal loop over :func:`objective`), with
+    candidates whose estimates are permutations of one another (equal products, log-sums that
+    may differ in the last bit), equal candidates, zero priors and an extreme prior."""
+    for trial in range(300):
+        n_try, n_views = int(rng.integers(1, 9)), 3
+        liks = rng.uniform(0.01, 1.0, size=(n_try, n_views))
+        for a in range(1, n_try):
+            if rng.random() < 0.4:
+                liks[a] = rng.permutation(liks[int(rng.integers(0, a))])
+        prior = np.where(rng.random(n_try) < 0.5, 0.0, rng.normal(0.0, 3.0, n_try))
+        if trial % 50 == 0:
+            prior[:] = 900.0 * rng.choice([-1.0, 1.0])  # products out of range: every objective
+        with np.errstate(over="ignore"):
+            if likelihood == ML_H2B:
+                products = np.exp(prior) * liks.prod(axis=1)
+            else:
+                products = liks.min(axis=1) * np.exp(prior)
+        scores = [_decide.objective(liks[a], likelihood, prior[a]) for a in range(n_try)]
+        want = -1
+        for a in range(n_try):
+            if want < 0 and scores[a] > -np.inf or want >= 0 and scores[a] > scores[want]:
+                want = a
+        assert _decide.highest_objective(products, n_try, liks, likelihood, prior, -1) == want
+    if likelihood == ML_H2B:
+        # a permutation whose product is one bit higher and whose log-sum is one bit lower
+        liks = np.array([[0.8294255678822373, 0.4151071450054697, 0.554097750796329],
+                         [0.4151071450054697, 0.554097750796329, 0.8294255678822373]])
+        products = np.array([liks[0, 0] * liks[0, 1] * liks[0, 2], liks[1, 0] * liks[1, 1] * liks[1, 2]])
+        scores = [_decide.objective(row, ML_H2B, 0.0) for row in liks]
+        assert products[1] > products[0] and scores[0] > scores[1]
+        assert _decide.highest_objective(products, 2, liks, ML_H2B, np.zeros(2), -1) == 0
 
 
 @pytest.mark.parametrize("views", [("front", "top"), VIEWS3])

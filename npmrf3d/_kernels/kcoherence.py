@@ -83,6 +83,9 @@ class SearchRule(NamedTuple):
         with the voxel's :func:`global_flat` index as site; 0 = none, the paper)
     origin, extent : (3,) int64 each, where the volume lies in the level's whole grid
         (:func:`global_flat`; the default ``extent`` 0: the volume is the whole grid)
+    box_lo, box_hi : (3,) int64 each, only the sites with ``box_lo <= index < box_hi`` along
+        every axis are searched (their assignments and weights kept elsewhere; the default: every
+        site). A block's pass needs only the sites that vote for the voxels it decides.
     """
 
     grid: int
@@ -95,6 +98,17 @@ class SearchRule(NamedTuple):
     salt: int
     origin: np.ndarray = np.zeros(3, dtype=np.int64)
     extent: np.ndarray = np.zeros(3, dtype=np.int64)
+    box_lo: np.ndarray = np.zeros(3, dtype=np.int64)
+    box_hi: np.ndarray = np.full(3, np.iinfo(np.int64).max, dtype=np.int64)
+
+
+@jit
+def _lattice_span(lo, hi, first, grid, count):
+    """The lattice indices ``i`` (of ``count`` sites ``first + i * grid``) whose site lies in
+    ``lo <= site < hi``: ``(i_lo, i_hi)``, empty when ``i_lo >= i_hi``."""
+    i_lo = 0 if lo <= first else (lo - first + grid - 1) // grid
+    i_hi = count if hi >= first + count * grid else max(0, (hi - first + grid - 1) // grid)
+    return i_lo, min(i_hi, count)
 
 
 @jit
@@ -259,6 +273,50 @@ def voxel_batches(shape, origin, extent, salt, batches, out):
         for p1 in range(shape[1]):
             for p2 in range(shape[2]):
                 out[p0, p1, p2] = mix(mix(global_flat(p0, p1, p2, shape, origin, extent)) + salt) % batches
+
+
+@jit
+def group_by_batch(ids, batches, order, bounds):
+    """The flat indices of ``ids`` (int8, every voxel's batch ``0 .. batches - 1``) grouped by
+    batch, in index order within a batch, into ``order``, and each batch's first position in it
+    into ``bounds`` (``batches + 1`` entries): a counting sort, the order a stable sort of
+    ``ids`` gives."""
+    for b in range(batches + 1):
+        bounds[b] = 0
+    for i in range(ids.shape[0]):
+        bounds[ids[i] + 1] += 1
+    for b in range(batches):
+        bounds[b + 1] += bounds[b]
+    fill = bounds[:batches].copy()
+    for i in range(ids.shape[0]):
+        b = ids[i]
+        order[fill[b]] = i
+        fill[b] += 1
+
+
+@jit_parallel
+def central_texels(texels, out):
+    """Every voxel's most central texel among the views' (:func:`npmrf3d.model.kcoherence_engine.initial_colours`):
+    ``texels`` (V, n, C) float32, the views' texels of ``n`` voxels; ``out`` (n, C) float32 gets
+    the one nearest (squared distance summed over channels) to their float64 mean (summed over
+    the views in order, divided by V), the first view on ties."""
+    n_views, n, channels = texels.shape
+    for i in prange(n):
+        best = 0
+        best_d = np.inf
+        for v in range(n_views):
+            d = 0.0
+            for ch in range(channels):
+                centre = 0.0
+                for u in range(n_views):
+                    centre += np.float64(texels[u, i, ch])
+                diff = np.float64(texels[v, i, ch]) - centre / n_views
+                d += diff * diff
+            if d < best_d:
+                best_d = d
+                best = v
+        for ch in range(channels):
+            out[i, ch] = texels[best, i, ch]
 
 
 @jit
@@ -458,10 +516,15 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
     sc = first_site(rule.origin, rule.extent, ca, grid)
     gr = (nr - sr + grid - 1) // grid
     gc = (nc - sc + grid - 1) // grid
+    ar_lo, ar_hi = _lattice_span(rule.box_lo[ra], rule.box_hi[ra], sr, grid, gr)
+    ac_lo, ac_hi = _lattice_span(rule.box_lo[ca], rule.box_hi[ca], sc, grid, gc)
+    n_lo, n_hi = rule.box_lo[na], rule.box_hi[na]
     for b in range(batches):
         nb = (nn - b + batches - 1) // batches
         for t in prange(nb):
             n = b + t * batches
+            if n < n_lo or n >= n_hi:
+                continue
             vec = np.empty(d, dtype=np.float64)
             y = np.empty(dims, dtype=np.float64)
             cand = np.empty(cap, dtype=np.int64)
@@ -469,9 +532,9 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
             dists = np.empty(cap, dtype=np.float64)
             weights = np.empty(window * window, dtype=np.float32)
             acc = 0.0
-            for ar in range(gr):
+            for ar in range(ar_lo, ar_hi):
                 u_r = sr + ar * grid
-                for ac in range(gc):
+                for ac in range(ac_lo, ac_hi):
                     u_c = sc + ac * grid
                     p0 = n if na == 0 else (u_r if ra == 0 else u_c)
                     p1 = n if na == 1 else (u_r if ra == 1 else u_c)
@@ -510,8 +573,10 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
         # sequential, fixed order: move the batch's sites from their old centres to the new ones
         for t in range(nb):
             n = b + t * batches
-            for ar in range(gr):
-                for ac in range(gc):
+            if n < n_lo or n >= n_hi:
+                continue
+            for ar in range(ar_lo, ar_hi):
+                for ac in range(ac_lo, ac_hi):
                     u_r = sr + ar * grid
                     u_c = sc + ac * grid
                     p0 = n if na == 0 else (u_r if ra == 0 else u_c)

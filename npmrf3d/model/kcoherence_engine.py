@@ -64,7 +64,7 @@ from .phases import PhaseControl, bin_phase_error, bin_phases, phase_prior_targe
 from .pyramid import ArraySpec, Levels, run_pyramid
 from .regions import plan_region
 
-__all__ = ["block_aprons", "PilotHistograms", "CANDIDATE_HEURISTICS", "CANDIDATE_SAMPLERS", "COHERENT_HEURISTICS", "PER_VIEW_HEURISTICS",
+__all__ = ["active_box", "block_aprons", "PilotHistograms", "CANDIDATE_HEURISTICS", "CANDIDATE_SAMPLERS", "COHERENT_HEURISTICS", "PER_VIEW_HEURISTICS",
            "CandidateDecision", "CoherentState", "KCoherenceLevels", "ValueHistogram",
            "initial_colours", "kernel_table", "pack_exemplars", "position_histogram", "value_counts", "value_scale"]
 
@@ -158,10 +158,11 @@ def initial_colours(src: np.ndarray, exemplars) -> np.ndarray:
     texels = np.stack([ex.reshape(-1, ex.shape[2])[s] for ex, s in zip(exemplars, src)])  # (V, ..., C)
     if len(texels) == 1:
         return np.ascontiguousarray(texels[0], dtype=np.float32)
-    centre = texels.astype(np.float64).mean(axis=0)
-    dist = ((texels - centre) ** 2).sum(axis=-1)
-    pick = np.argmin(dist, axis=0)
-    return np.ascontiguousarray(np.take_along_axis(texels, pick[None, ..., None], axis=0)[0], dtype=np.float32)
+    out = np.empty(texels.shape[1:], dtype=np.float32)
+    channels = texels.shape[-1]
+    _search.central_texels(np.ascontiguousarray(texels, dtype=np.float32).reshape(len(texels), -1, channels),
+                           out.reshape(-1, channels))
+    return out
 
 
 def kernel_table(ex_flat: np.ndarray, h2c: float, most: int = KERNEL_TABLE_COLOURS) -> tuple[np.ndarray, np.ndarray]:
@@ -215,6 +216,34 @@ def block_aprons(config, icm: IcmSchedule | None = None) -> tuple[int, ...] | No
              for level in range(config.levels)]
     return tuple(None if whole[level] else config.iterations[last - level] * reach[last - level]
                  for level in range(config.levels))
+
+
+def active_box(frame, window: int, iteration: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The part of a block's region that pass ``iteration`` (1 for the first) of a level must get
+    exact (:func:`block_aprons`): the region shrunk by ``iteration`` reaches of one pass along
+    every axis it does not wrap whole. Returns the sites to search, ``box_lo <= index < box_hi``
+    per axis (the voxels' box grown by one reach: every site whose votes the voxels take), and
+    the voxels to decide as a flat mask of the region.
+
+    The region starts exact (up-sampled from the coarser level's exact core), and a voxel after
+    one pass depends on voxels at most a reach away, so pass ``t`` is exact on the region shrunk
+    by ``t`` reaches from exact inputs alone; the last pass's box still holds the block (the
+    region is the block grown by the level's apron, iterations times the reach).
+
+    >>> from npmrf3d.model.regions import Frame
+    >>> lo, hi, inside = active_box(Frame((0, 0, 0), (40, 64, 40), (128, 64, 128)), 7, 2)
+    >>> lo.tolist(), hi.tolist(), int(inside.sum()) == 16 * 64 * 16
+    ([6, 0, 6], [34, 64, 34], True)
+    """
+    reach = window - 1 + (window < 3)
+    shape = np.array(frame.shape, dtype=np.int64)
+    whole = np.array([n == e for n, e in zip(frame.shape, frame.extent)])
+    shrink = np.where(whole, 0, np.minimum(iteration * reach, shape // 2))
+    lo, hi = shrink, shape - shrink
+    inside = np.zeros(frame.shape, dtype=bool)
+    inside[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] = True
+    grow = np.where(whole, 0, reach)
+    return np.maximum(lo - grow, 0), np.minimum(hi + grow, shape), inside.ravel()
 
 
 class KCoherenceLevels(Levels):
@@ -332,9 +361,9 @@ class KCoherenceLevels(Levels):
         memory order, batch after batch."""
         ids = np.empty(shape, dtype=np.int8)
         _search.voxel_batches(np.array(shape, dtype=np.int64), origin, extent, salt, batches, ids)
-        ids = ids.ravel()
-        order = np.argsort(ids, kind="stable").astype(np.int64)
-        bounds = np.concatenate([[0], np.cumsum(np.bincount(ids, minlength=batches))]).astype(np.int64)
+        order = np.empty(ids.size, dtype=np.int64)
+        bounds = np.empty(batches + 1, dtype=np.int64)
+        _search.group_by_batch(ids.ravel(), batches, order, bounds)
         return order, bounds
 
     def prepare(self, level, shape):
@@ -416,6 +445,9 @@ class KCoherenceLevels(Levels):
                                                        window, int(vmodels[0].anchor))
         n_iter = config.iterations[li] if icm is None else self.icm.max_sweeps
         origin, extent = self._grid() if local else (np.zeros(3, dtype=np.int64), np.zeros(3, dtype=np.int64))
+        # a block (not the pilot, whose histograms count every voxel of its region) decides at
+        # each pass only the voxels the next pass still needs exact
+        shrinking = replay is not None and config.global_share == 0.0 and self.frame.shape != self.frame.extent
         batches = config.batches if local else min(config.batches, n_vox)
         bounds = np.linspace(0, n_vox, batches + 1).astype(np.int64)
         index_weight = 0.0 if local else config.index_weight
@@ -426,11 +458,13 @@ class KCoherenceLevels(Levels):
                               else (np.zeros(0, dtype=np.int64), np.zeros((0, 0), dtype=np.float64)))
         level_history, changed, global_counts = [], [], []
         t_search = t_solve = 0.0
-        sites = 0
+        sites = decided = 0
         it = 0
         while it < n_iter if icm is None else icm.warm(it):
             ts = time.perf_counter()
             trust = _search.NO_TRUST if icm is None else icm.search_trust()
+            box_lo, box_hi, inside = active_box(self.frame, window, it + 1) if shrinking else (
+                np.zeros(3, dtype=np.int64), np.array(shape, dtype=np.int64), None)
             energy_sum = 0.0
             sites = 0
             global_count = 0
@@ -445,7 +479,7 @@ class KCoherenceLevels(Levels):
                 phi = n_sites / m.centres
                 rule = _search.SearchRule(config.grid, min(config.batches, shape[na]), phi, index_weight,
                                           config.r, floor, config.random_candidates, int(rng.integers(0, 2**31)),
-                                          origin, extent)
+                                          origin, extent, box_lo, box_hi)
                 _search.search_view(volume, src[vi], ra, ca, exemplars[vi], rule, index_hist[vi], assign[vi],
                                     fresh, omega[vi], energy, trust)
                 energy_sum += float(energy.sum())
@@ -456,7 +490,10 @@ class KCoherenceLevels(Levels):
                         r=config.r, floor=floor)
                     energy_sum += change
                     global_count += n_global
-                sites += n_sites
+                sites += int(box_hi[na] - box_lo[na]) * math.prod(
+                    sum(1 for u in range(_search.first_site(origin, extent, axis, config.grid), shape[axis],
+                                         config.grid) if box_lo[axis] <= u < box_hi[axis])
+                    for axis in (ra, ca)) if shrinking else n_sites
             global_counts.append(global_count)
             t_search += time.perf_counter() - ts
             ts = time.perf_counter()
@@ -487,6 +524,7 @@ class KCoherenceLevels(Levels):
             votes_trust = _solver.NO_TRUST if icm is None else icm.vote_trust()
             histograms = histograms._replace(value_target=target)
             if not local:
+                decided += len(order)
                 changed.append(int(_solver.solve(volume, src, assign, omega, packed, histograms, votes_trust, rule,
                                                  order, bounds, SOLVE_CHUNK)))
             else:  # one batch at a time: the pilot records its histograms, a block reads them
@@ -499,6 +537,9 @@ class KCoherenceLevels(Levels):
                         histograms.positions[:] = replay.positions[it, b] * grid_voxels
                         histograms.values[:] = replay.values[it, b]
                     part = order[bounds[b]:bounds[b + 1]]
+                    if inside is not None:
+                        part = part[inside[part]]
+                    decided += len(part)
                     n_changed += int(_solver.solve(volume, src, assign, omega, packed, histograms, votes_trust,
                                                    rule, part, np.array([0, len(part)], dtype=np.int64),
                                                    SOLVE_CHUNK))
@@ -518,6 +559,7 @@ class KCoherenceLevels(Levels):
         stats = {
             "shape": list(shape), "window": window, "grid": config.grid, "iterations": it,
             "candidates_per_site": 9 * (1 + config.k) + config.random_candidates, "sites_per_iteration": sites,
+            "voxels_decided": decided,
             "pca_dims": {v: int(vmodels[vi].basis.shape[1]) for vi, v in enumerate(views)},
             "centres": {v: int(vmodels[vi].centres) for vi, v in enumerate(views)},
             "search_seconds": t_search, "solve_seconds": t_solve, "changed": changed,

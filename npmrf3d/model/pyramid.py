@@ -18,6 +18,7 @@ when every member is what that level of this run writes.
 
 from __future__ import annotations
 
+import copy
 import json
 import time
 from abc import ABC, abstractmethod
@@ -289,7 +290,7 @@ def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressC
         if checkpoint is not None or method.aprons() is None:
             raise ValueError("a region runs without a checkpoint, for a method with aprons only")
         checkpoint = region.start
-    resumed = None if after is not None else _load(checkpoint, method, rng)
+    resumed = None if after is not None else (_load_start if region is not None else _load)(checkpoint, method, rng)
     if after is not None:
         done_level, state = after
         first_level = done_level - 1
@@ -333,8 +334,48 @@ def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressC
     return PyramidRun(state, history, timings, stats)
 
 
+#: The last block start read in this process (:func:`_load_start`): its file's identity and
+#: what :func:`_read` made of it.
+_START: dict = {}
+
+
+def _load_start(path, method: Levels, rng: np.random.Generator):
+    """:func:`_load` of a block run's start (the levels that run whole, shared by all blocks),
+    read once per process: a worker's later blocks take it from memory as long as the file is
+    the same (path, size, modification time) and so is the run. The arrays are read-only, the
+    lists and dicts copied."""
+    try:
+        stat = Path(path).stat()
+    except (OSError, TypeError):
+        return _load(path, method, rng)
+    key = (str(Path(path).resolve()), stat.st_size, stat.st_mtime_ns, method.key)
+    if key not in _START:
+        read = _read(path, method, rng)
+        if read is None:
+            return None
+        for value in read[0].values():
+            if isinstance(value, np.ndarray):
+                value.flags.writeable = False
+        _START.clear()
+        _START[key] = read
+    arrays, level, rng_state, history, timings, stats = _START[key]
+    return (method.from_arrays(arrays), level, copy.deepcopy(rng_state), copy.deepcopy(history), dict(timings),
+            copy.deepcopy(stats))
+
+
 def _load(path, method: Levels, rng: np.random.Generator):
-    """State after the last finished level, or None when there is nothing to resume.
+    """State after the last finished level, or None when there is nothing to resume
+    (:func:`_read`, then the method's state of its arrays)."""
+    read = _read(path, method, rng)
+    if read is None:
+        return None
+    arrays, *rest = read
+    return (method.from_arrays(arrays), *rest)
+
+
+def _read(path, method: Levels, rng: np.random.Generator):
+    """What a checkpoint holds after the last finished level -- its arrays, level, random
+    state, history, timings and stats -- or None when there is nothing to resume.
 
     Past its checksum and identity (:func:`npmrf3d.io.checkpoints.load_run_state`) every member
     is checked against what this run writes at the saved level; anything else is refused with
@@ -360,7 +401,7 @@ def _load(path, method: Levels, rng: np.random.Generator):
     stats = _json_member(path, data, "stats", dict)
     if not isinstance(stats.get("levels"), dict):
         raise refusal(path, "'stats' has no per-level statistics")
-    return method.from_arrays(arrays), level, rng_state, history, timings, stats
+    return arrays, level, rng_state, history, timings, stats
 
 
 def _json_member(path, data, name: str, kind: type):
