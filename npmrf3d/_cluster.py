@@ -22,11 +22,12 @@ import contextlib
 import logging
 import os
 import socket
+import threading
 from collections.abc import Iterator
 
 from .errors import ParameterError
 
-__all__ = ["CONNECT_TIMEOUT", "MMAP_THRESHOLD", "check_scheduler", "dashboard_link", "dask_client",
+__all__ = ["CONNECT_TIMEOUT", "ClusterStart", "MMAP_THRESHOLD", "check_scheduler", "dashboard_link", "dask_client",
            "local_cluster", "plan_workers", "probe_scheduler"]
 
 #: glibc's largest ``M_MMAP_THRESHOLD`` on 64-bit Linux (``DEFAULT_MMAP_THRESHOLD_MAX``), bytes.
@@ -98,6 +99,41 @@ def dask_client(scheduler: str | None, workers: int = 1) -> Iterator:
                 client.close()
             if cluster is not None:
                 cluster.close()
+
+
+class ClusterStart:
+    """:func:`dask_client` entered in a background thread, so that a local cluster's workers
+    start while this process goes on working (a Zarr run's first block, which makes what every
+    other block reads): :meth:`client` waits for the client (raising what its start raised), and
+    leaving the ``with`` block closes it as :func:`dask_client` does, started or not."""
+
+    def __init__(self, scheduler: str | None, workers: int = 1):
+        self._context = dask_client(scheduler, workers)
+        self._client = self._error = None
+        self._thread = threading.Thread(target=self._enter, name="npmrf3d-cluster-start", daemon=True)
+        self._thread.start()
+
+    def _enter(self) -> None:
+        try:
+            self._client = self._context.__enter__()
+        except BaseException as exc:  # noqa: BLE001 -- raised again in the caller's thread
+            self._error = exc
+
+    def client(self):
+        """The client, once the cluster is up."""
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
+        return self._client
+
+    def __enter__(self) -> "ClusterStart":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        self._thread.join()
+        if self._client is None:
+            return False
+        return bool(self._context.__exit__(exc_type, exc, tb))
 
 
 @contextlib.contextmanager

@@ -17,6 +17,7 @@ The cost of a block is its cone: the block grown at every level by that level's 
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import os
@@ -28,7 +29,7 @@ from collections.abc import Callable, Mapping
 import numpy as np
 
 from .. import _validation as check
-from .._cluster import dask_client
+from .._cluster import ClusterStart, dask_client
 from .._kernels._jit import use_threads
 from ..config import SynthesisMethod
 from ..io.zarr_blocks import (
@@ -198,7 +199,8 @@ def write_zarr(method: SynthesisMethod, per_view, config, out, *, block: int, re
     dict
         ``blocks``, ``skipped`` (already done), ``written``, ``seconds`` (of the blocks made here,
         summed over workers), ``cluster_seconds`` and ``cluster_blocks`` (the wall time of the
-        blocks made on the cluster, its start included, and their number), ``worker_peak_bytes`` (the largest peak resident memory a worker
+        blocks made on the cluster, with what is left of its start once the first block is made
+        here, and their number), ``worker_peak_bytes`` (the largest peak resident memory a worker
         reported; 0 when every block was made here), ``plan`` (:meth:`BlockPlan.describe`) and
         the estimate of one block (``block_bytes``, ``block_memory``).
     """
@@ -222,31 +224,36 @@ def write_zarr(method: SynthesisMethod, per_view, config, out, *, block: int, re
     worker_peak = 0
     if progress is not None:
         progress(done, len(indices))
-    if todo and not (out / START).exists():
-        # the first block makes the shared coarse levels here, before the others need them
-        took, _ = _task(method.name, per_view, config, os.fspath(out), todo[0], block, max(threads, workers))
-        seconds += took
-        todo = todo[1:]
-        done += 1
-        if progress is not None:
-            progress(done, len(indices))
-    cluster_seconds = 0.0
-    cluster_blocks = len(todo)
-    if todo:
-        t_cluster = time.perf_counter()
-        with dask_client(scheduler, workers) as client:
-            from distributed import as_completed
+    first = bool(todo) and not (out / START).exists()
+    # the cluster starts while the first block is made here (its workers' start-up overlaps it)
+    starting = ClusterStart(scheduler, workers) if first and len(todo) > 1 else contextlib.nullcontext()
+    with starting:
+        if first:
+            # the first block makes the shared coarse levels here, before the others need them
+            took, _ = _task(method.name, per_view, config, os.fspath(out), todo[0], block, max(threads, workers))
+            seconds += took
+            todo = todo[1:]
+            done += 1
+            if progress is not None:
+                progress(done, len(indices))
+        cluster_seconds, cluster_blocks = 0.0, len(todo)
+        if todo:
+            t_cluster = time.perf_counter()
+            connect = (contextlib.nullcontext(starting.client()) if isinstance(starting, ClusterStart)
+                       else dask_client(scheduler, workers))
+            with connect as client:
+                from distributed import as_completed
 
-            futures = [client.submit(_task, method.name, per_view, config, os.fspath(out), i, block, threads,
-                                     pure=False) for i in todo]
-            for future in as_completed(futures):
-                took, peak = future.result()
-                seconds += took
-                worker_peak = max(worker_peak, peak)
-                done += 1
-                if progress is not None:
-                    progress(done, len(indices))
-        cluster_seconds = time.perf_counter() - t_cluster
+                futures = [client.submit(_task, method.name, per_view, config, os.fspath(out), i, block, threads,
+                                         pure=False) for i in todo]
+                for future in as_completed(futures):
+                    took, peak = future.result()
+                    seconds += took
+                    worker_peak = max(worker_peak, peak)
+                    done += 1
+                    if progress is not None:
+                        progress(done, len(indices))
+            cluster_seconds = time.perf_counter() - t_cluster
     return {"blocks": len(indices), "skipped": len(indices) - written, "written": written,
             "seconds": seconds, "cluster_seconds": cluster_seconds, "cluster_blocks": cluster_blocks,
             "worker_peak_bytes": worker_peak, "plan": plan.describe(),
