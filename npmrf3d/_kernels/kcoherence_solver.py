@@ -170,7 +170,8 @@ def _texel_factors(views, hist, n_views, div, mul, vdiv, priors, exp_priors):
 
 
 @jit
-def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w, div, mul, vdiv, sites, view_starts):
+def _votes(p0, p1, p2, assign, flat_assign, flat_omega, views, hist, trust, flat_windows, out_g, out_v, out_w, div, mul,
+           vdiv, sites, view_starts):
     """Texels voted for voxel ``(p0, p1, p2)`` by every overlapping neighbourhood of every view.
 
     A neighbourhood at site ``u`` matched with centre ``e`` votes for the texel ``e + (x - u)``
@@ -199,7 +200,9 @@ def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w, d
 
     ``div``, ``mul`` and ``vdiv`` are the histograms' factors of every texel (:func:`_texel_factors`);
     ``sites`` (3,) the array index of the first search site along each axis
-    (:func:`npmrf3d._kernels.kcoherence.first_site`).
+    (:func:`npmrf3d._kernels.kcoherence.first_site`). ``flat_assign``, ``flat_omega`` and
+    ``flat_windows`` are ``assign``, ``omega`` and ``trust.windows`` flattened, once per pass
+    rather than per voxel (``assign`` gives the shapes).
     """
     view_axes, ex_off, ewidth = views.axes, views.offsets, views.widths
     window, anchor, grid = views.window, views.anchor, views.grid
@@ -208,10 +211,7 @@ def _votes(p0, p1, p2, assign, omega, views, hist, trust, out_g, out_v, out_w, d
     n2 = assign.shape[3]
     strides = (n1 * n2, n2, 1)
     n_vox = assign.shape[1] * n1 * n2
-    flat_assign = assign.reshape(-1)
-    flat_omega = omega.reshape(-1)
     weighted = trust.voxels.shape[0] > 0
-    flat_windows = trust.windows.reshape(-1)
     own = np.float64(trust.voxels[p0, p1, p2]) if weighted else 0.0
     here = p0 * strides[0] + p1 * strides[1] + p2
     count = 0
@@ -384,6 +384,9 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
     exp_priors = np.ones(ex_flat.shape[0], dtype=np.float64)
     # the highest objective alone (no annealed draw): ranked by products, no logarithms
     ranked = (likelihood == ML_H2B or likelihood == ML_H2A) and temperature == 0.0
+    flat_assign = assign.reshape(-1)
+    flat_omega = omega.reshape(-1)
+    flat_windows = trust.windows.reshape(-1)
     sites = np.empty(3, dtype=np.int64)
     for axis in range(3):
         sites[axis] = first_site(rule.origin, rule.extent, axis, views.grid)
@@ -422,8 +425,8 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                 p0 = flat // (n1 * n2)
                 p1 = (flat // n2) % n1
                 p2 = flat % n2
-                count = _votes(p0, p1, p2, assign, omega, views, hist, trust, vg, vv, vw, div, mul, vdiv, sites,
-                               view_starts)
+                count = _votes(p0, p1, p2, assign, flat_assign, flat_omega, views, hist, trust, flat_windows, vg, vv,
+                               vw, div, mul, vdiv, sites, view_starts)
                 for v in range(n_views):
                     new_src[t, v] = src[v, p0, p1, p2]
                 if count == 0:

@@ -217,7 +217,10 @@ def write_zarr(method: SynthesisMethod, per_view, config, out, *, block: int, re
                 overwrite=overwrite)
     indices = block_indices(config.size, block)
     finished = finished_blocks(out)
-    todo = [i for i in indices if i not in finished]
+    # the largest blocks first, so that the last ones, which a worker may make while the others
+    # have nothing left, are the smallest (the order changes no voxel)
+    todo = sorted((i for i in indices if i not in finished),
+                  key=lambda i: -int(np.prod(block_box(i, block, config.size)[1])))
     done = len(indices) - len(todo)
     written = len(todo)
     seconds = 0.0
