@@ -1046,3 +1046,11 @@ def naive_central_texels(texels):
     dist = ((texels - centre) ** 2).sum(axis=-1)
     pick = np.argmin(dist, axis=0)
     return np.take_along_axis(texels, pick[None, :, None], axis=0)[0]
+
+
+def naive_sort_within_batches(order, bounds):
+    """Every batch ``order[bounds[b]:bounds[b + 1]]`` sorted."""
+    out = np.array(order)
+    for b in range(len(bounds) - 1):
+        out[bounds[b]:bounds[b + 1]] = np.sort(out[bounds[b]:bounds[b + 1]])
+    return out

@@ -22,7 +22,7 @@ from npmrf3d.resources import ResourceError
 from npmrf3d.studies.catalog import load_exemplar
 
 from .cli_checks import refused_naming
-from .naive import naive_global_flat, naive_group_by_batch, naive_voxel_batches
+from .naive import naive_global_flat, naive_group_by_batch, naive_sort_within_batches, naive_voxel_batches
 
 #: A cone that is a true part of its level at the two finer levels: window 3 (reach 2), one
 #: iteration per level, blocks of 16 in a 48 x 32 x 32 volume; a pilot smaller than the volume
@@ -167,6 +167,17 @@ def test_grouping_by_batch_matches_its_twin():
         want_order, want_bounds = naive_group_by_batch(ids, batches)
         np.testing.assert_array_equal(order, want_order)
         np.testing.assert_array_equal(bounds, want_bounds)
+
+
+def test_sorting_within_batches_matches_its_twin():
+    """Batches of a permutation of every index, and of a part of them (ICM's visits)."""
+    rng = np.random.default_rng(5)
+    for n, kept, batches in ((1000, 1000, 8), (500, 321, 3), (7, 7, 7), (10, 0, 1)):
+        order = rng.permutation(n)[:kept].astype(np.int64)
+        bounds = np.linspace(0, kept, batches + 1).astype(np.int64)
+        want = naive_sort_within_batches(order, bounds)
+        _k.sort_within_batches(order, bounds, n)
+        np.testing.assert_array_equal(order, want)
 
 
 def test_voxel_batches_match_their_twin():

@@ -294,6 +294,24 @@ def group_by_batch(ids, batches, order, bounds):
         fill[b] += 1
 
 
+@jit
+def sort_within_batches(order, bounds, n):
+    """Each batch ``order[bounds[b]:bounds[b + 1]]`` of distinct indices ``0 .. n - 1`` sorted in
+    place (ascending), by marking every index with its batch and reading the marks in index
+    order: one pass over ``n`` instead of a sort per batch."""
+    mark = np.full(n, -1, dtype=np.int32)
+    batches = bounds.shape[0] - 1
+    for b in range(batches):
+        for i in range(bounds[b], bounds[b + 1]):
+            mark[order[i]] = b
+    fill = bounds[:batches].copy()
+    for i in range(n):
+        b = mark[i]
+        if b >= 0:
+            order[fill[b]] = i
+            fill[b] += 1
+
+
 @jit_parallel
 def central_texels(texels, out):
     """Every voxel's most central texel among the views' (:func:`npmrf3d.model.kcoherence_engine.initial_colours`):

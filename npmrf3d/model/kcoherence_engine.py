@@ -514,10 +514,10 @@ class KCoherenceLevels(Levels):
             if local and replay is None:
                 record.targets[it] = target
             salt = int(rng.integers(0, 2**31)) if temperature > 0.0 else 0
-            for b in range(0 if local else len(bounds) - 1):  # hashed batches come in memory order
+            if not local:  # hashed batches come in memory order
                 # within a batch the histograms are frozen and every voxel depends only on them
                 # and the votes, so visiting a batch in memory order gives the same volume faster
-                order[bounds[b]:bounds[b + 1]].sort()
+                _search.sort_within_batches(order, bounds, n_vox)
             rule = _solver.SolverRule(medoid, config.balance_views, likelihood, h2c, decision.outlier,
                                       temperature, salt, CANDIDATE_SAMPLERS[decision.sampler], origin, extent,
                                       colour_ids, kernel)
