@@ -26,7 +26,7 @@ Parts (each ``--parts`` name):
 Prints a table and writes ``figures/blocks/blocks.json``.
 
 Usage: ``python benchmarks/bench_blocks.py [--parts equal,scaling,resume,seams,estimate,quality]
-[--size 128] [--block 64] [--estimate 512] [--big-block 128] [--whole-voxels N] [--out figures/blocks]``
+[--size 128] [--block 64] [--estimate 512] [--big-block 192] [--whole-voxels N] [--out figures/blocks]``
 """
 
 from __future__ import annotations
@@ -50,7 +50,9 @@ from npmrf3d import data
 from npmrf3d._kernels._jit import use_threads
 from npmrf3d.analysis.metrics import autocorrelation_error, histogram_kl, sliced_wasserstein
 from npmrf3d.methods import METHODS
+from npmrf3d.io.zarr_blocks import block_box, block_indices
 from npmrf3d.methods.blocks import block_plan, make_block, synthesize_blocks, write_zarr
+from npmrf3d.model.regions import plan_region
 from npmrf3d.plotting import save_figure
 
 PARTS = ("equal", "scaling", "resume", "seams", "estimate", "quality")
@@ -158,8 +160,8 @@ def part_resume(size: int, block: int, out: Path, exemplar_path: str | None) -> 
 def part_estimate(image, size: int, block: int) -> dict:
     """The first block of ``size``^3 (which also makes the levels that run whole and the pilot)
     and the next one, made here with 2 threads; the whole volume's time on these 2 cores
-    estimated as the first block plus the others at the second's time, and any size's from the
-    cones' voxels at the second block's rate."""
+    estimated as the first block plus every other at the second's time per voxel of its cone
+    (the last blocks along an axis are shorter)."""
     cfg = config(size)
     use_threads(2)
     plan = block_plan(METHOD, views(image), cfg, block=block)
@@ -170,10 +172,14 @@ def part_estimate(image, size: int, block: int) -> dict:
             t0 = time.perf_counter()
             make_block(METHOD, views(image), cfg, origin, (block,) * 3, Path(tmp) / "start.npz")
             seconds.append(time.perf_counter() - t0)
-    cone = sum(int(np.prod(f.shape)) for f in plan.cone.frames if f is not None)
+    aprons = METHOD.aprons(cfg, views(image))
+    cones = [sum(int(np.prod(f.shape)) for f in plan_region(cfg.size, cfg.levels, aprons,
+                                                          *block_box(i, block, cfg.size)).frames if f is not None)
+             for i in block_indices(cfg.size, block)]
+    cone = cones[1] if len(cones) > 1 else cones[0]
     row = {"size": size, "block": block, "blocks": plan.blocks, "first_block_seconds": seconds[0],
            "block_seconds": seconds[1], "cone_voxels": cone, "us_per_cone_voxel": 1e6 * seconds[1] / cone,
-           "estimated_seconds": seconds[0] + (plan.blocks - 1) * seconds[1], "plan": plan.describe()}
+           "estimated_seconds": seconds[0] + seconds[1] * sum(cones[1:]) / cone, "plan": plan.describe()}
     print(f"estimate: {size}^3 in {plan.blocks} blocks of {block}: the first block {seconds[0]:.0f} s (the "
           f"levels made whole and the pilot), the next {seconds[1]:.1f} s ({row['us_per_cone_voxel']:.1f} us per "
           f"cone voxel); the volume about {row['estimated_seconds'] / 60:.0f} min on these 2 cores")
@@ -270,7 +276,7 @@ def main(argv=None) -> int:
     parser.add_argument("--parts", default=",".join(PARTS))
     parser.add_argument("--size", type=int, default=128)
     parser.add_argument("--block", type=int, default=64)
-    parser.add_argument("--big-block", type=int, default=128)
+    parser.add_argument("--big-block", type=int, default=192)
     parser.add_argument("--estimate", type=int, default=512, help="side of the volume the estimate part times")
     parser.add_argument("--quality-size", type=int, default=128)
     parser.add_argument("--quality-exemplars", default="etr_sand01,etr_rock06,etr_pebbles04",

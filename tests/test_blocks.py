@@ -262,7 +262,9 @@ def test_synth_into_zarr_equals_the_blockwise_run_and_resumes(tmp_path, capsys):
     out = tmp_path / "v.zarr"
     argv = [*SYNTH, "--out", str(out), "--blockwise", "--whole-voxels", "1", "--block", "16", "--workers", "1"]
     assert main(argv) == 0
-    assert "8 blocks written, 0 already done" in capsys.readouterr().out
+    said = capsys.readouterr().out
+    assert "8 blocks written, 0 already done; a worker's peak memory" in said
+    assert 0 < zarr.open_array(out, mode="r").attrs["npmrf3d_worker_peak_bytes"] < 4 * 2**30
     assert main([*SYNTH, "--blockwise", "--whole-voxels", "1", "--out", str(tmp_path / "whole"), "--quiet"]) == 0
     expected = np.load(tmp_path / "whole" / "volume.npy")
     array = zarr.open_array(out, mode="r")
