@@ -161,6 +161,22 @@ def objective(lik, likelihood, prior):
 
 
 @jit
+def objective_product(lik, likelihood, exp_prior):
+    """:func:`objective` as a product, for ranking without logarithms: ML_H2b's
+    ``prod_v L_v * exp(prior)`` (the exponential of its log-score) or ML_H2a's
+    ``min_v L_v * exp(prior)`` (its very value); ``exp_prior`` is ``exp(prior)`` (1: none)."""
+    if likelihood == ML_H2B:
+        product = exp_prior
+        for v in range(lik.shape[0]):
+            product *= lik[v]
+        return product
+    least = np.inf
+    for v in range(lik.shape[0]):
+        least = min(least, lik[v])
+    return least * exp_prior
+
+
+@jit
 def highest_objective(products, n_try, liks, likelihood, prior_of, first):
     """The first of the ``n_try`` candidates with the highest :func:`objective` (its estimates
     ``liks[a]`` (V,), its prior ``prior_of[a]``, 0 without), ranked by ``products[a]`` -- the
@@ -272,11 +288,12 @@ def mean_of_winners(colour, winners, tops, vg, ex_flat):
 
 
 @jit
-def winner_sources(winners, tops, vg, vv, count, ex_flat, ex_off, new_src_t):
+def winner_sources(winners, tops, vg, vv, view_starts, ex_flat, ex_off, new_src_t):
     """ML_H1b's sources: each proposing view's source becomes its own winner -- the winning
-    texel (candidate ``a`` is vote ``tops[a]`` of the ``count`` votes: texels ``vg``, views
-    ``vv``) when it is that view's vote, else that view's voted texel nearest to the winner's
-    colour (first on ties). ``new_src_t`` (V,) is written for the proposing views only."""
+    texel (candidate ``a`` is vote ``tops[a]`` of the votes: texels ``vg``, views ``vv``, view
+    ``v``'s ``view_starts[v] .. view_starts[v + 1] - 1``) when it is that view's vote, else that
+    view's voted texel nearest to the winner's colour (first on ties, :func:`nearest_in`).
+    ``new_src_t`` (V,) is written for the proposing views only."""
     for v in range(winners.shape[0]):
         if winners[v] < 0:
             continue
@@ -284,35 +301,16 @@ def winner_sources(winners, tops, vg, vv, count, ex_flat, ex_off, new_src_t):
         if vv[tops[winners[v]]] == v:
             new_src_t[v] = g - ex_off[v]
             continue
-        near = nearest_vote(v, g, vg, vv, count, ex_flat)
+        near = nearest_in(view_starts[v], view_starts[v + 1], g, vg, ex_flat)
         if near >= 0:
             new_src_t[v] = vg[near] - ex_off[v]
 
 
 @jit
-def nearest_vote(v, g, vg, vv, count, ex_flat):
-    """The vote of view ``v`` whose texel is nearest in colour to texel ``g`` (first on
-    ties), -1 when the view has none."""
-    near = -1
-    near_d = np.inf
-    for q in range(count):
-        if vv[q] != v:
-            continue
-        dd = 0.0
-        for ch in range(ex_flat.shape[1]):
-            diff = ex_flat[vg[q], ch] - ex_flat[g, ch]
-            dd += diff * diff
-        if dd < near_d:
-            near_d = dd
-            near = q
-    return near
-
-
-@jit
 def nearest_in(lo, hi, g, vg, ex_flat):
-    """:func:`nearest_vote` over the votes ``lo .. hi - 1`` (one view's stretch when the
-    votes are sorted by view): the one whose texel is nearest in colour to texel ``g`` (first
-    on ties), -1 for an empty stretch."""
+    """Of the votes ``lo .. hi - 1`` (one view's stretch: the solver enumerates the votes view
+    by view), the one whose texel is nearest in colour to texel ``g`` (first on ties), -1 for
+    an empty stretch."""
     near = -1
     near_d = np.inf
     for q in range(lo, hi):

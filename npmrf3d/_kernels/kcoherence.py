@@ -103,7 +103,7 @@ class SearchRule(NamedTuple):
 
 
 @jit
-def _lattice_span(lo, hi, first, grid, count):
+def lattice_span(lo, hi, first, grid, count):
     """The lattice indices ``i`` (of ``count`` sites ``first + i * grid``) whose site lies in
     ``lo <= site < hi``: ``(i_lo, i_hi)``, empty when ``i_lo >= i_hi``."""
     i_lo = 0 if lo <= first else (lo - first + grid - 1) // grid
@@ -276,6 +276,18 @@ def voxel_batches(shape, origin, extent, salt, batches, out):
 
 
 @jit
+def _place_by_batch(ids, starts, order):
+    """Every index ``i`` with ``ids[i] >= 0`` into ``order``, batch ``ids[i]``'s from
+    ``starts[ids[i]]`` on, in index order within a batch."""
+    fill = starts.copy()
+    for i in range(ids.shape[0]):
+        b = ids[i]
+        if b >= 0:
+            order[fill[b]] = i
+            fill[b] += 1
+
+
+@jit
 def group_by_batch(ids, batches, order, bounds):
     """The flat indices of ``ids`` (int8, every voxel's batch ``0 .. batches - 1``) grouped by
     batch, in index order within a batch, into ``order``, and each batch's first position in it
@@ -287,29 +299,19 @@ def group_by_batch(ids, batches, order, bounds):
         bounds[ids[i] + 1] += 1
     for b in range(batches):
         bounds[b + 1] += bounds[b]
-    fill = bounds[:batches].copy()
-    for i in range(ids.shape[0]):
-        b = ids[i]
-        order[fill[b]] = i
-        fill[b] += 1
+    _place_by_batch(ids, bounds[:batches], order)
 
 
 @jit
 def sort_within_batches(order, bounds, n):
     """Each batch ``order[bounds[b]:bounds[b + 1]]`` of distinct indices ``0 .. n - 1`` sorted in
-    place (ascending), by marking every index with its batch and reading the marks in index
-    order: one pass over ``n`` instead of a sort per batch."""
+    place (ascending), by marking every index with its batch and placing the marked ones in index
+    order (:func:`_place_by_batch`): one pass over ``n`` instead of a sort per batch."""
     mark = np.full(n, -1, dtype=np.int32)
-    batches = bounds.shape[0] - 1
-    for b in range(batches):
+    for b in range(bounds.shape[0] - 1):
         for i in range(bounds[b], bounds[b + 1]):
             mark[order[i]] = b
-    fill = bounds[:batches].copy()
-    for i in range(n):
-        b = mark[i]
-        if b >= 0:
-            order[fill[b]] = i
-            fill[b] += 1
+    _place_by_batch(mark, bounds[:-1], order)
 
 
 @jit_parallel
@@ -534,8 +536,8 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
     sc = first_site(rule.origin, rule.extent, ca, grid)
     gr = (nr - sr + grid - 1) // grid
     gc = (nc - sc + grid - 1) // grid
-    ar_lo, ar_hi = _lattice_span(rule.box_lo[ra], rule.box_hi[ra], sr, grid, gr)
-    ac_lo, ac_hi = _lattice_span(rule.box_lo[ca], rule.box_hi[ca], sc, grid, gc)
+    ar_lo, ar_hi = lattice_span(rule.box_lo[ra], rule.box_hi[ra], sr, grid, gr)
+    ac_lo, ac_hi = lattice_span(rule.box_lo[ca], rule.box_hi[ca], sc, grid, gc)
     n_lo, n_hi = rule.box_lo[na], rule.box_hi[na]
     for b in range(batches):
         nb = (nn - b + batches - 1) // batches

@@ -468,16 +468,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                             if val_prior > 0.0:
                                 prior = priors[ga]
                             if ranked:
-                                product = exp_priors[ga]
-                                if likelihood == ML_H2B:
-                                    for v in range(n_views):
-                                        product *= lik[v]
-                                else:
-                                    least = np.inf
-                                    for v in range(n_views):
-                                        least = min(least, lik[v])
-                                    product = least * product
-                                products[a] = product
+                                products[a] = _decide.objective_product(lik, likelihood, exp_priors[ga])
                                 prior_of[a] = prior
                                 if not tabled:
                                     for v in range(n_views):
@@ -517,7 +508,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                             _decide.mean_of_winners(colour, winners, tops, vg, ex_flat)
                             flags[t] = _decide.write_colour(volume, p0, p1, p2, colour, hist_args, old_bins[t],
                                                             new_bins[t])
-                            _decide.winner_sources(winners, tops, vg, vv, count, ex_flat, ex_off, new_src[t])
+                            _decide.winner_sources(winners, tops, vg, vv, view_starts, ex_flat, ex_off, new_src[t])
                             continue
                         best = tops[_decide.least_confident(table, winners)]
                     elif likelihood and temperature > 0.0 and sampler == METROPOLIS:

@@ -473,9 +473,14 @@ class KCoherenceLevels(Levels):
                 ra, ca = VIEW_AXES[v]
                 na = 3 - ra - ca
                 energy = np.zeros(shape[na], dtype=np.float64)
-                n_sites = shape[na] * math.prod(
-                    len(range(_search.first_site(origin, extent, axis, config.grid), shape[axis], config.grid))
-                    for axis in (ra, ca))
+                # the sites this pass searches (a block's pass: those of its box; phi, the index
+                # histogram's share, then matters to nothing: a block has no index histogram)
+                n_sites = int(box_hi[na] - box_lo[na])
+                for axis in (ra, ca):
+                    first = _search.first_site(origin, extent, axis, config.grid)
+                    lo, hi = _search.lattice_span(box_lo[axis], box_hi[axis], first, config.grid,
+                                                   len(range(first, shape[axis], config.grid)))
+                    n_sites *= max(0, hi - lo)
                 phi = n_sites / m.centres
                 rule = _search.SearchRule(config.grid, min(config.batches, shape[na]), phi, index_weight,
                                           config.r, floor, config.random_candidates, int(rng.integers(0, 2**31)),
@@ -490,10 +495,7 @@ class KCoherenceLevels(Levels):
                         r=config.r, floor=floor)
                     energy_sum += change
                     global_count += n_global
-                sites += int(box_hi[na] - box_lo[na]) * math.prod(
-                    sum(1 for u in range(_search.first_site(origin, extent, axis, config.grid), shape[axis],
-                                         config.grid) if box_lo[axis] <= u < box_hi[axis])
-                    for axis in (ra, ca)) if shrinking else n_sites
+                sites += n_sites
             global_counts.append(global_count)
             t_search += time.perf_counter() - ts
             ts = time.perf_counter()
