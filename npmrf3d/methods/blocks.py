@@ -29,7 +29,7 @@ from collections.abc import Callable, Mapping
 import numpy as np
 
 from .. import _validation as check
-from .._cluster import ClusterStart, dask_client
+from .._cluster import ClusterStart
 from .._kernels._jit import use_threads
 from ..config import SynthesisMethod
 from ..io.zarr_blocks import (
@@ -228,37 +228,35 @@ def write_zarr(method: SynthesisMethod, per_view, config, out, *, block: int, re
     if progress is not None:
         progress(done, len(indices))
     first = bool(todo) and not (out / START).exists()
-    # the cluster starts while the first block is made here (its workers' start-up overlaps it)
-    starting = ClusterStart(scheduler, workers) if first and len(todo) > 1 else contextlib.nullcontext()
-    with starting:
+    on_cluster = todo[1:] if first else todo
+    cluster_seconds = 0.0
+    # the cluster starts in the background: its workers' start-up overlaps the first block
+    with ClusterStart(scheduler, workers) if on_cluster else contextlib.nullcontext() as cluster:
         if first:
-            # the first block makes the shared coarse levels here, before the others need them
-            took, _ = _task(method.name, per_view, config, os.fspath(out), todo[0], block, max(threads, workers))
+            # the first block makes the shared coarse levels here, with every core the cluster
+            # would use, before the others need them
+            took, _ = _task(method.name, per_view, config, os.fspath(out), todo[0], block, workers * threads)
             seconds += took
-            todo = todo[1:]
             done += 1
             if progress is not None:
                 progress(done, len(indices))
-        cluster_seconds, cluster_blocks = 0.0, len(todo)
-        if todo:
+        if on_cluster:
             t_cluster = time.perf_counter()
-            connect = (contextlib.nullcontext(starting.client()) if isinstance(starting, ClusterStart)
-                       else dask_client(scheduler, workers))
-            with connect as client:
-                from distributed import as_completed
+            client = cluster.client()
+            from distributed import as_completed
 
-                futures = [client.submit(_task, method.name, per_view, config, os.fspath(out), i, block, threads,
-                                         pure=False) for i in todo]
-                for future in as_completed(futures):
-                    took, peak = future.result()
-                    seconds += took
-                    worker_peak = max(worker_peak, peak)
-                    done += 1
-                    if progress is not None:
-                        progress(done, len(indices))
+            futures = [client.submit(_task, method.name, per_view, config, os.fspath(out), i, block, threads,
+                                     pure=False) for i in on_cluster]
+            for future in as_completed(futures):
+                took, peak = future.result()
+                seconds += took
+                worker_peak = max(worker_peak, peak)
+                done += 1
+                if progress is not None:
+                    progress(done, len(indices))
             cluster_seconds = time.perf_counter() - t_cluster
     return {"blocks": len(indices), "skipped": len(indices) - written, "written": written,
-            "seconds": seconds, "cluster_seconds": cluster_seconds, "cluster_blocks": cluster_blocks,
+            "seconds": seconds, "cluster_seconds": cluster_seconds, "cluster_blocks": len(on_cluster),
             "worker_peak_bytes": worker_peak, "plan": plan.describe(),
             "block_bytes": plan.memory.bytes,
             "block_memory": format_bytes(plan.memory.bytes)}

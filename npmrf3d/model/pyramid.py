@@ -290,7 +290,7 @@ def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressC
         if checkpoint is not None or method.aprons() is None:
             raise ValueError("a region runs without a checkpoint, for a method with aprons only")
         checkpoint = region.start
-    resumed = None if after is not None else (_load_start if region is not None else _load)(checkpoint, method, rng)
+    resumed = None if after is not None else _load(checkpoint, method, rng, shared=region is not None)
     if after is not None:
         done_level, state = after
         first_level = done_level - 1
@@ -334,20 +334,31 @@ def run_pyramid(method: Levels, rng: np.random.Generator, *, progress: ProgressC
     return PyramidRun(state, history, timings, stats)
 
 
-#: The last block start read in this process (:func:`_load_start`): its file's identity and
+def _load(path, method: Levels, rng: np.random.Generator, *, shared: bool = False):
+    """State after the last finished level, or None when there is nothing to resume
+    (:func:`_read`, or :func:`_read_shared` for a block run's start, then the method's state of
+    its arrays)."""
+    read = (_read_shared if shared else _read)(path, method, rng)
+    if read is None:
+        return None
+    arrays, *rest = read
+    return (method.from_arrays(arrays), *rest)
+
+
+#: The last block start read in this process (:func:`_read_shared`): its file's identity and
 #: what :func:`_read` made of it.
 _START: dict = {}
 
 
-def _load_start(path, method: Levels, rng: np.random.Generator):
-    """:func:`_load` of a block run's start (the levels that run whole, shared by all blocks),
-    read once per process: a worker's later blocks take it from memory as long as the file is
-    the same (path, size, modification time) and so is the run. The arrays are read-only, the
+def _read_shared(path, method: Levels, rng: np.random.Generator):
+    """:func:`_read` of a block run's start (the levels that run whole, shared by all blocks),
+    once per process: a worker's later blocks take it from memory as long as the file is the
+    same (path, size, modification time) and so is the run. The arrays are read-only, the
     lists and dicts copied."""
     try:
         stat = Path(path).stat()
     except (OSError, TypeError):
-        return _load(path, method, rng)
+        return _read(path, method, rng)
     key = (str(Path(path).resolve()), stat.st_size, stat.st_mtime_ns, method.key)
     if key not in _START:
         read = _read(path, method, rng)
@@ -359,18 +370,7 @@ def _load_start(path, method: Levels, rng: np.random.Generator):
         _START.clear()
         _START[key] = read
     arrays, level, rng_state, history, timings, stats = _START[key]
-    return (method.from_arrays(arrays), level, copy.deepcopy(rng_state), copy.deepcopy(history), dict(timings),
-            copy.deepcopy(stats))
-
-
-def _load(path, method: Levels, rng: np.random.Generator):
-    """State after the last finished level, or None when there is nothing to resume
-    (:func:`_read`, then the method's state of its arrays)."""
-    read = _read(path, method, rng)
-    if read is None:
-        return None
-    arrays, *rest = read
-    return (method.from_arrays(arrays), *rest)
+    return arrays, level, copy.deepcopy(rng_state), copy.deepcopy(history), dict(timings), copy.deepcopy(stats)
 
 
 def _read(path, method: Levels, rng: np.random.Generator):
