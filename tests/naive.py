@@ -1012,11 +1012,14 @@ def naive_global_flat(p, shape, origin, extent):
     return (g[0] * extent[1] + g[1]) * extent[2] + g[2]
 
 
-def naive_voxel_batches(shape, origin, extent, salt, batches):
-    """Every voxel's batch of a block-local pass: a hash of its grid position and the salt."""
-    out = np.empty(shape, dtype=np.int8)
+def naive_voxel_batches(shape, origin, extent, salt, batches, lo=(0, 0, 0), hi=None):
+    """Every voxel's batch of a block-local pass: a hash of its grid position and the salt; -1
+    outside the box ``lo <= p < hi``."""
+    hi = shape if hi is None else hi
+    out = np.full(shape, -1, dtype=np.int16)
     for p in np.ndindex(*shape):
-        out[p] = naive_mix(naive_mix(naive_global_flat(p, shape, origin, extent)) + salt) % batches
+        if all(a <= q < b for a, q, b in zip(lo, p, hi)):
+            out[p] = naive_mix(naive_mix(naive_global_flat(p, shape, origin, extent)) + salt) % batches
     return out
 
 
@@ -1033,10 +1036,11 @@ def naive_top_votes(vg, vv, vw, most):
 
 
 def naive_group_by_batch(ids, batches):
-    """Voxel indices grouped by batch (a stable sort of their batch ids) and each batch's first
-    position."""
-    order = np.argsort(ids, kind="stable")
-    bounds = np.concatenate([[0], np.cumsum(np.bincount(ids, minlength=batches))])
+    """Indices of the voxels with a batch (``ids >= 0``) grouped by batch (a stable sort of their
+    batch ids) and each batch's first position."""
+    kept = np.flatnonzero(ids >= 0)
+    order = kept[np.argsort(ids[kept], kind="stable")]
+    bounds = np.concatenate([[0], np.cumsum(np.bincount(ids[kept], minlength=batches))])
     return order, bounds
 
 

@@ -127,10 +127,12 @@ def test_candidate_set_by_hand():
 
 @pytest.mark.kernels
 def test_upsample_sources_matches_twin(rng):
-    src = rng.integers(0, 6 * 7, size=(3, 4, 2)).astype(np.int32)
+    """Even finer exemplars, and odd ones (the last row and column clipped)."""
+    src = rng.integers(0, 6 * 7, size=(3, 4, 5)).astype(np.int32)
     for view in VIEW_AXES:
-        got = coh.upsample_sources(src, view, 7, (12, 14))
-        np.testing.assert_array_equal(got, naive_upsample_sources(src, view, 7, (12, 14)))
+        for fine in ((12, 14), (11, 13)):
+            got = coh.upsample_sources(src, view, 7, fine)
+            np.testing.assert_array_equal(got, naive_upsample_sources(src, view, 7, fine))
 
 
 def test_histogram_factor_is_the_papers_reweighting():

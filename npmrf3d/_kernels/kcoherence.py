@@ -264,54 +264,87 @@ def value_bins(values, lo, scale, bins, out):
 
 
 @jit_parallel
-def voxel_batches(shape, origin, extent, salt, batches, out):
+def voxel_batches(shape, origin, extent, salt, batches, lo, hi, out):
     """The batch ``mix(mix(g) + salt) % batches`` of every voxel of a region (``origin``,
-    ``extent``: :func:`global_flat`; ``g`` its flat index in the level's whole grid) into ``out``
-    (``shape``, int8): a voxel's batch depends on its grid position and ``salt < 2**31`` only, so a
-    region made alone cuts its voxels as the whole grid does."""
+    ``extent``: :func:`global_flat`; ``g`` its flat index in the level's whole grid) inside the
+    box ``lo <= p < hi`` into ``out`` (``shape``, int16), -1 outside it: a voxel's batch depends on
+    its grid position and ``salt < 2**31`` only, so a region made alone cuts its voxels as the
+    whole grid does."""
     for p0 in prange(shape[0]):
         for p1 in range(shape[1]):
             for p2 in range(shape[2]):
-                out[p0, p1, p2] = mix(mix(global_flat(p0, p1, p2, shape, origin, extent)) + salt) % batches
+                inside = lo[0] <= p0 < hi[0] and lo[1] <= p1 < hi[1] and lo[2] <= p2 < hi[2]
+                out[p0, p1, p2] = mix(mix(global_flat(p0, p1, p2, shape, origin, extent)) + salt) % batches \
+                    if inside else -1
 
 
-@jit
-def _place_by_batch(ids, starts, order):
-    """Every index ``i`` with ``ids[i] >= 0`` into ``order``, batch ``ids[i]``'s from
-    ``starts[ids[i]]`` on, in index order within a batch."""
-    fill = starts.copy()
-    for i in range(ids.shape[0]):
-        b = ids[i]
-        if b >= 0:
-            order[fill[b]] = i
-            fill[b] += 1
+@jit_parallel
+def upsample_sources(src, ra, ca, coarse_width, fine_height, fine_width, out):
+    """Child ``2 * x + o`` of every coarse voxel ``x`` gets the source ``2 * parent + offset``
+    (:func:`npmrf3d.model.kcoherence.upsample_sources`): row ``2 * r + o[ra]`` and column ``2 * c +
+    o[ca]`` of the finer exemplar (clipped into it), for ``src`` (N1, N2, N3) flat coarse sources
+    and ``out`` (2 N1, 2 N2, 2 N3) int32."""
+    for p0 in prange(src.shape[0]):
+        for p1 in range(src.shape[1]):
+            for p2 in range(src.shape[2]):
+                r = 2 * (src[p0, p1, p2] // coarse_width)
+                c = 2 * (src[p0, p1, p2] % coarse_width)
+                for o0 in range(2):
+                    for o1 in range(2):
+                        for o2 in range(2):
+                            o = (o0, o1, o2)
+                            row = min(r + o[ra], fine_height - 1)
+                            col = min(c + o[ca], fine_width - 1)
+                            out[2 * p0 + o0, 2 * p1 + o1, 2 * p2 + o2] = row * fine_width + col
 
 
-@jit
+#: Parts of the voxels that :func:`group_by_batch` counts and places in parallel (a fixed number,
+#: so the work is the same on any number of threads; the result does not depend on it).
+GROUP_PARTS = 64
+
+
+@jit_parallel
 def group_by_batch(ids, batches, order, bounds):
-    """The flat indices of ``ids`` (int8, every voxel's batch ``0 .. batches - 1``) grouped by
-    batch, in index order within a batch, into ``order``, and each batch's first position in it
-    into ``bounds`` (``batches + 1`` entries): a counting sort, the order a stable sort of
-    ``ids`` gives."""
-    for b in range(batches + 1):
-        bounds[b] = 0
-    for i in range(ids.shape[0]):
-        bounds[ids[i] + 1] += 1
+    """The flat indices ``i`` of ``ids`` (int16, each voxel's batch ``0 .. batches - 1``, or -1
+    for none) grouped by batch, in index order within a batch, into ``order``, and each batch's
+    first position in it into ``bounds`` (``batches + 1`` entries): a counting sort, the order a
+    stable sort of the non-negative ``ids`` gives. The indices are cut into
+    :data:`GROUP_PARTS` parts, counted and placed each on its own, a part's share of a batch
+    after the earlier parts'."""
+    n = ids.shape[0]
+    size = (n + GROUP_PARTS - 1) // GROUP_PARTS
+    counts = np.zeros((GROUP_PARTS, batches), dtype=np.int64)
+    for part in prange(GROUP_PARTS):
+        for i in range(part * size, min(n, (part + 1) * size)):
+            if ids[i] >= 0:
+                counts[part, ids[i]] += 1
+    starts = np.empty((GROUP_PARTS, batches), dtype=np.int64)
+    bounds[0] = 0
     for b in range(batches):
-        bounds[b + 1] += bounds[b]
-    _place_by_batch(ids, bounds[:batches], order)
+        run = bounds[b]
+        for part in range(GROUP_PARTS):
+            starts[part, b] = run
+            run += counts[part, b]
+        bounds[b + 1] = run
+    for part in prange(GROUP_PARTS):
+        fill = starts[part]
+        for i in range(part * size, min(n, (part + 1) * size)):
+            b = ids[i]
+            if b >= 0:
+                order[fill[b]] = i
+                fill[b] += 1
 
 
 @jit
 def sort_within_batches(order, bounds, n):
     """Each batch ``order[bounds[b]:bounds[b + 1]]`` of distinct indices ``0 .. n - 1`` sorted in
-    place (ascending), by marking every index with its batch and placing the marked ones in index
-    order (:func:`_place_by_batch`): one pass over ``n`` instead of a sort per batch."""
-    mark = np.full(n, -1, dtype=np.int32)
+    place (ascending), by marking every index with its batch and grouping the marked ones by
+    batch (:func:`group_by_batch`): one pass over ``n`` instead of a sort per batch."""
+    mark = np.full(n, -1, dtype=np.int16)
     for b in range(bounds.shape[0] - 1):
         for i in range(bounds[b], bounds[b + 1]):
             mark[order[i]] = b
-    _place_by_batch(mark, bounds[:-1], order)
+    group_by_batch(mark, bounds.shape[0] - 1, order, bounds.copy())
 
 
 @jit_parallel

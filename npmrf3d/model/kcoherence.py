@@ -311,14 +311,9 @@ def upsample_sources(src: np.ndarray, view: str, coarse_width: int, fine_shape: 
     exemplar (only needed when its side is odd... never for box-averaged levels).
     """
     ra, ca = VIEW_AXES[view]
-    sr = (src // coarse_width).astype(np.int64)
-    sc = (src % coarse_width).astype(np.int64)
-    shape = tuple(2 * n for n in src.shape)
-    out = np.empty(shape, dtype=np.int32)
-    for o in np.ndindex(2, 2, 2):
-        r = np.minimum(2 * sr + o[ra], fine_shape[0] - 1)
-        c = np.minimum(2 * sc + o[ca], fine_shape[1] - 1)
-        out[o[0]::2, o[1]::2, o[2]::2] = r * fine_shape[1] + c
+    out = np.empty(tuple(2 * n for n in src.shape), dtype=np.int32)
+    _k.upsample_sources(np.ascontiguousarray(src, dtype=np.int32), ra, ca, int(coarse_width), int(fine_shape[0]),
+                        int(fine_shape[1]), out)
     return out
 
 

@@ -218,12 +218,12 @@ def block_aprons(config, icm: IcmSchedule | None = None) -> tuple[int, ...] | No
                  for level in range(config.levels))
 
 
-def active_box(frame, window: int, iteration: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def active_box(frame, window: int, iteration: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The part of a block's region that pass ``iteration`` (1 for the first) of a level must get
     exact (:func:`block_aprons`): the region shrunk by ``iteration`` reaches of one pass along
-    every axis it does not wrap whole. Returns the sites to search, ``box_lo <= index < box_hi``
-    per axis (the voxels' box grown by one reach: every site whose votes the voxels take), and
-    the voxels to decide as a flat mask of the region.
+    every axis it does not wrap whole. Returns the sites to search, ``search_lo <= index <
+    search_hi`` per axis (the voxels' box grown by one reach: every site whose votes the voxels
+    take), and the voxels to decide, ``lo <= index < hi``.
 
     The region starts exact (up-sampled from the coarser level's exact core), and a voxel after
     one pass depends on voxels at most a reach away, so pass ``t`` is exact on the region shrunk
@@ -231,19 +231,30 @@ def active_box(frame, window: int, iteration: int) -> tuple[np.ndarray, np.ndarr
     region is the block grown by the level's apron, iterations times the reach).
 
     >>> from npmrf3d.model.regions import Frame
-    >>> lo, hi, inside = active_box(Frame((0, 0, 0), (40, 64, 40), (128, 64, 128)), 7, 2)
-    >>> lo.tolist(), hi.tolist(), int(inside.sum()) == 16 * 64 * 16
-    ([6, 0, 6], [34, 64, 34], True)
+    >>> box = active_box(Frame((0, 0, 0), (40, 64, 40), (128, 64, 128)), 7, 2)
+    >>> [b.tolist() for b in box]
+    [[6, 0, 6], [34, 64, 34], [12, 0, 12], [28, 64, 28]]
     """
     reach = window - 1 + (window < 3)
     shape = np.array(frame.shape, dtype=np.int64)
     whole = np.array([n == e for n, e in zip(frame.shape, frame.extent)])
     shrink = np.where(whole, 0, np.minimum(iteration * reach, shape // 2))
     lo, hi = shrink, shape - shrink
-    inside = np.zeros(frame.shape, dtype=bool)
-    inside[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] = True
     grow = np.where(whole, 0, reach)
-    return np.maximum(lo - grow, 0), np.minimum(hi + grow, shape), inside.ravel()
+    return np.maximum(lo - grow, 0), np.minimum(hi + grow, shape), lo, hi
+
+
+def crop_box(array: np.ndarray, index, first: int = 0) -> np.ndarray:
+    """``array[np.ix_(*index)]`` on the axes ``first, first + 1, first + 2`` (contiguous), each
+    axis whose indices are a run ``i, i + 1, ...`` cut by a slice instead of gathered."""
+    out = array
+    for axis, idx in enumerate(index, start=first):
+        idx = np.asarray(idx)
+        if idx.size and int(idx[-1]) - int(idx[0]) == idx.size - 1 and np.all(np.diff(idx) == 1):
+            out = out[(slice(None),) * axis + (slice(int(idx[0]), int(idx[-1]) + 1),)]
+        else:
+            out = np.take(out, idx, axis=axis)
+    return np.ascontiguousarray(out)
 
 
 class KCoherenceLevels(Levels):
@@ -345,23 +356,21 @@ class KCoherenceLevels(Levels):
                  config.value_bins) for level in range(self.lowest_whole - 1, -1, -1)]
 
     def crop(self, state, index):
-        ix = np.ix_(*index)
-        return CoherentState(np.ascontiguousarray(state.volume[ix]),
-                             np.ascontiguousarray(state.sources[(slice(None), *ix)]), state.widths,
-                             np.ascontiguousarray(state.temps[ix]), np.ascontiguousarray(state.inherited[ix]))
+        return CoherentState(crop_box(state.volume, index), crop_box(state.sources, index, first=1), state.widths,
+                             crop_box(state.temps, index), crop_box(state.inherited, index))
 
     def _grid(self):
         """The current frame's origin and extent as the kernels take them."""
         return np.array(self.frame.origin, dtype=np.int64), np.array(self.frame.extent, dtype=np.int64)
 
     @staticmethod
-    def _hashed_batches(shape, origin, extent, salt, batches):
-        """A block-local pass's voxel order and batch bounds: the voxels of each batch
-        (:func:`npmrf3d._kernels.kcoherence.voxel_batches`, a hash of their grid positions) in
-        memory order, batch after batch."""
-        ids = np.empty(shape, dtype=np.int8)
-        _search.voxel_batches(np.array(shape, dtype=np.int64), origin, extent, salt, batches, ids)
-        order = np.empty(ids.size, dtype=np.int64)
+    def _hashed_batches(shape, origin, extent, salt, batches, lo, hi):
+        """A block-local pass's voxel order and batch bounds: the voxels of the box ``lo <= p <
+        hi`` of each batch (:func:`npmrf3d._kernels.kcoherence.voxel_batches`, a hash of their
+        grid positions) in memory order, batch after batch."""
+        ids = np.empty(shape, dtype=np.int16)
+        _search.voxel_batches(np.array(shape, dtype=np.int64), origin, extent, salt, batches, lo, hi, ids)
+        order = np.empty(int(np.prod(hi - lo)), dtype=np.int64)
         bounds = np.empty(batches + 1, dtype=np.int64)
         _search.group_by_batch(ids.ravel(), batches, order, bounds)
         return order, bounds
@@ -427,7 +436,9 @@ class KCoherenceLevels(Levels):
         if local and replay is None:
             layout = {lev: shape_of for lev, *shape_of in self._pilot_layout()}
             record = self.recording[level] = PilotHistograms.empty(*layout[level])
-        pos_hist = np.concatenate([position_histogram(src[vi], m.pixels) for vi, m in enumerate(vmodels)])
+        # a block reads the pilot's position histograms before each batch
+        pos_hist = np.zeros(sum(m.pixels for m in vmodels)) if replay is not None else np.concatenate(
+            [position_histogram(src[vi], m.pixels) for vi, m in enumerate(vmodels)])
         theta = np.array([grid_voxels / m.pixels for m in vmodels])
         histograms = _solver.SolverHistograms(
             pos_hist, hist_off, theta, config.position_weight, config.position_boost, values.ex_bins,
@@ -463,8 +474,8 @@ class KCoherenceLevels(Levels):
         while it < n_iter if icm is None else icm.warm(it):
             ts = time.perf_counter()
             trust = _search.NO_TRUST if icm is None else icm.search_trust()
-            box_lo, box_hi, inside = active_box(self.frame, window, it + 1) if shrinking else (
-                np.zeros(3, dtype=np.int64), np.array(shape, dtype=np.int64), None)
+            box_lo, box_hi, decide_lo, decide_hi = active_box(self.frame, window, it + 1) if shrinking else (
+                np.zeros(3, dtype=np.int64), np.array(shape, dtype=np.int64)) * 2
             energy_sum = 0.0
             sites = 0
             global_count = 0
@@ -500,7 +511,8 @@ class KCoherenceLevels(Levels):
             t_search += time.perf_counter() - ts
             ts = time.perf_counter()
             if local:
-                order, bounds = self._hashed_batches(shape, origin, extent, int(rng.integers(0, 2**31)), batches)
+                order, bounds = self._hashed_batches(shape, origin, extent, int(rng.integers(0, 2**31)), batches,
+                                                    decide_lo, decide_hi)
             else:
                 order = rng.permutation(n_vox).astype(np.int64)
             if icm is not None:
@@ -539,8 +551,6 @@ class KCoherenceLevels(Levels):
                         histograms.positions[:] = replay.positions[it, b] * grid_voxels
                         histograms.values[:] = replay.values[it, b]
                     part = order[bounds[b]:bounds[b + 1]]
-                    if inside is not None:
-                        part = part[inside[part]]
                     decided += len(part)
                     n_changed += int(_solver.solve(volume, src, assign, omega, packed, histograms, votes_trust,
                                                    rule, part, np.array([0, len(part)], dtype=np.int64),
@@ -557,7 +567,9 @@ class KCoherenceLevels(Levels):
             else:
                 icm.cool()
                 on_step(it, level_history[-1], icm.expected() if icm.warm(it) else it)
-        used = [float((position_histogram(src[vi], m.pixels) > 0).mean()) for vi, m in enumerate(vmodels)]
+        # a block's share of the exemplar says nothing of the volume's: not counted
+        used = [None if replay is not None else float((position_histogram(src[vi], m.pixels) > 0).mean())
+                for vi, m in enumerate(vmodels)]
         stats = {
             "shape": list(shape), "window": window, "grid": config.grid, "iterations": it,
             "candidates_per_site": 9 * (1 + config.k) + config.random_candidates, "sites_per_iteration": sites,
