@@ -11,10 +11,11 @@ Parts (each ``--parts`` name):
 * ``equal``: ``--size`` (default 128) at once and as blocks of ``--block`` (default 64), the
   blocks made one after the other in this process at 1 and at 2 numba threads: equal or not,
   and the seconds of each (the blocks' share over the whole is the cones' overlap).
-* ``scaling``: the same volume into Zarr on a local cluster of 1, then 2 workers: the wall
-  time of the blocks made on the cluster (the first block, which also makes the shared coarsest
-  level, runs before the cluster starts and is left out) and its speed-up, peak resident
-  memory of a worker; ``scaling_workers.png``.
+* ``scaling``: the same volume into Zarr with 1 worker (every block made in this process, one
+  numba thread), then on a local cluster of 2 workers of one thread: the wall time of the
+  blocks after the first (the first, which also makes the shared coarse levels, runs while the
+  cluster starts and is left out) and its speed-up, peak resident memory of a worker;
+  ``scaling_workers.png``.
 * ``resume``: the Zarr command run as a subprocess, interrupted (SIGINT) once a third of the
   blocks are done, then run again: equal to the uninterrupted volume or not.
 * ``seams``: slices of the ``equal`` volume that cross block borders (the planes through the
@@ -111,16 +112,16 @@ def part_scaling(image, size: int, block: int, out: Path, figures: Path) -> dict
     rows = {}
     for workers in (1, 2):
         summary = _zarr(image, size, block, workers, out / f"scaling_{workers}.zarr")
-        rows[workers] = {"cluster_seconds": summary["cluster_seconds"], "blocks": summary["cluster_blocks"],
+        rows[workers] = {"rest_seconds": summary["rest_seconds"], "blocks": summary["rest_blocks"],
                          "worker_peak_bytes": summary["worker_peak_bytes"], "wall_seconds": summary["wall_seconds"]}
-    speedup = rows[1]["cluster_seconds"] / rows[2]["cluster_seconds"]
-    print(f"scaling: {rows[1]['blocks']} blocks of {block} ({size}^3) on the cluster after the first: 1 worker "
-          f"{rows[1]['cluster_seconds']:.1f} s, 2 workers {rows[2]['cluster_seconds']:.1f} s, speed-up {speedup:.2f}; "
+    speedup = rows[1]["rest_seconds"] / rows[2]["rest_seconds"]
+    print(f"scaling: {rows[1]['blocks']} blocks of {block} ({size}^3) after the first: 1 worker "
+          f"{rows[1]['rest_seconds']:.1f} s, 2 workers {rows[2]['rest_seconds']:.1f} s, speed-up {speedup:.2f}; "
           f"worker peak {rows[2]['worker_peak_bytes'] / 2**30:.2f} GiB")
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(4.5, 3.2))
-    seconds = [rows[w]["cluster_seconds"] for w in (1, 2)]
+    seconds = [rows[w]["rest_seconds"] for w in (1, 2)]
     ax.bar(["1 worker", "2 workers"], seconds, color=["tab:gray", "tab:blue"])
     ax.axhline(seconds[0] / 2, color="k", lw=0.8, ls="--", label="ideal for 2 workers")
     ax.set_ylabel("seconds")

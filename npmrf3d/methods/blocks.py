@@ -185,7 +185,7 @@ def write_zarr(method: SynthesisMethod, per_view, config, out, *, block: int, re
         The run's record (JSON values), kept in the array's attributes.
     workers, threads : int
         A local cluster of ``workers`` processes with ``threads`` numba threads each (ignored
-        with ``scheduler``).
+        with ``scheduler``); one worker makes every block in this process.
     scheduler : str, optional
         Address of a running Dask scheduler (``tcp://HOST:8786``); every worker must see ``out``.
     memory_per_worker : int, optional
@@ -197,12 +197,12 @@ def write_zarr(method: SynthesisMethod, per_view, config, out, *, block: int, re
     Returns
     -------
     dict
-        ``blocks``, ``skipped`` (already done), ``written``, ``seconds`` (of the blocks made here,
-        summed over workers), ``cluster_seconds`` and ``cluster_blocks`` (the wall time of the
-        blocks made on the cluster, with what is left of its start once the first block is made
-        here, and their number), ``worker_peak_bytes`` (the largest peak resident memory a worker
-        reported; 0 when every block was made here), ``plan`` (:meth:`BlockPlan.describe`) and
-        the estimate of one block (``block_bytes``, ``block_memory``).
+        ``blocks``, ``skipped`` (already done), ``written``, ``seconds`` (of the blocks made,
+        summed over workers), ``rest_seconds`` and ``rest_blocks`` (the wall time of the blocks
+        after the first, with what is left of the cluster's start, and their number),
+        ``worker_peak_bytes`` (the largest peak resident memory of a process that made blocks:
+        this one with one local worker), ``plan`` (:meth:`BlockPlan.describe`) and the estimate
+        of one block (``block_bytes``, ``block_memory``).
     """
     plan = block_plan(method, per_view, config, block=block)
     if memory_per_worker is None:
@@ -228,35 +228,42 @@ def write_zarr(method: SynthesisMethod, per_view, config, out, *, block: int, re
     if progress is not None:
         progress(done, len(indices))
     first = bool(todo) and not (out / START).exists()
-    on_cluster = todo[1:] if first else todo
-    cluster_seconds = 0.0
+    # one local worker: every block is made here, one after another (a worker process would only
+    # add its start and Dask's bookkeeping); else the first, which makes the shared coarse levels,
+    # is made here with every core the cluster would use, before the others need them
+    here = todo if scheduler is None and workers == 1 else todo[:1] if first else []
+    on_cluster = todo[len(here):]
+
+    def made(took: float, peak: int) -> None:
+        nonlocal seconds, worker_peak, done
+        seconds += took
+        worker_peak = max(worker_peak, peak)
+        done += 1
+        if progress is not None:
+            progress(done, len(indices))
+
+    def make_here(index) -> None:
+        made(*_task(method.name, per_view, config, os.fspath(out), index, block, workers * threads))
+
     # the cluster starts in the background: its workers' start-up overlaps the first block
     with ClusterStart(scheduler, workers) if on_cluster else contextlib.nullcontext() as cluster:
-        if first:
-            # the first block makes the shared coarse levels here, with every core the cluster
-            # would use, before the others need them
-            took, _ = _task(method.name, per_view, config, os.fspath(out), todo[0], block, workers * threads)
-            seconds += took
-            done += 1
-            if progress is not None:
-                progress(done, len(indices))
+        if here:
+            make_here(here[0])
+        t_rest = time.perf_counter()
+        for index in here[1:]:
+            make_here(index)
         if on_cluster:
-            t_cluster = time.perf_counter()
             client = cluster.client()
             from distributed import as_completed
 
             futures = [client.submit(_task, method.name, per_view, config, os.fspath(out), i, block, threads,
                                      pure=False) for i in on_cluster]
             for future in as_completed(futures):
-                took, peak = future.result()
-                seconds += took
-                worker_peak = max(worker_peak, peak)
-                done += 1
-                if progress is not None:
-                    progress(done, len(indices))
-            cluster_seconds = time.perf_counter() - t_cluster
+                made(*future.result())
+        rest_seconds = time.perf_counter() - t_rest
     return {"blocks": len(indices), "skipped": len(indices) - written, "written": written,
-            "seconds": seconds, "cluster_seconds": cluster_seconds, "cluster_blocks": len(on_cluster),
+            "seconds": seconds, "rest_seconds": rest_seconds,
+            "rest_blocks": len(on_cluster) + max(0, len(here) - 1),
             "worker_peak_bytes": worker_peak, "plan": plan.describe(),
             "block_bytes": plan.memory.bytes,
             "block_memory": format_bytes(plan.memory.bytes)}
