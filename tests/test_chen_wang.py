@@ -156,12 +156,14 @@ def _search_case(rng, view, window, channels, grid):
 
 @pytest.mark.kernels
 @pytest.mark.parametrize("view", VIEWS3)
-@pytest.mark.parametrize("window,channels,grid,batches,n_random,box", [
-    (3, 1, 1, 1, 0, None), (4, 3, 2, 3, 4, None), (4, 1, 1, 2, 0, None),
-    (3, 1, 2, 2, 0, ((1, 2, 0), (7, 5, 3))), (3, 1, 1, 1, 2, ((3, 0, 1), (5, 6, 4)))])
-def test_search_view_matches_twin(rng, view, window, channels, grid, batches, n_random, box):
+@pytest.mark.parametrize("window,channels,grid,batches,n_random,box,index_weight", [
+    (3, 1, 1, 1, 0, None, 2.0), (4, 3, 2, 3, 4, None, 2.0), (4, 1, 1, 2, 0, None, 2.0),
+    (3, 1, 2, 2, 0, ((1, 2, 0), (7, 5, 3)), 2.0), (3, 1, 1, 1, 2, ((3, 0, 1), (5, 6, 4)), 2.0),
+    (4, 3, 2, 3, 4, None, 0.0), (3, 1, 2, 2, 0, ((1, 2, 0), (7, 5, 3)), 0.0)])
+def test_search_view_matches_twin(rng, view, window, channels, grid, batches, n_random, box, index_weight):
     """Every site, or only the sites of a box (a block's pass: the others keep their assignment
-    and weight)."""
+    and weight); without an index weight the histogram need not follow the assignments
+    (``follow=False``: one parallel loop, the histogram left as it was)."""
     ex, m, vol, src, assign = _search_case(rng, view, window, channels, grid)
     ra, ca = VIEW_AXES[view]
     na = 3 - ra - ca
@@ -175,13 +177,14 @@ def test_search_view_matches_twin(rng, view, window, channels, grid, batches, n_
     n_sites = int((prev >= 0).sum())
     phi = n_sites / m.centres
     want_assign, want_omega, want_energy, want_hist = naive_search_view(
-        vol, src, view, m, grid=grid, batches=batches, index_hist=hist, phi=phi, index_weight=2.0,
+        vol, src, view, m, grid=grid, batches=batches, index_hist=hist, phi=phi, index_weight=index_weight,
         r=0.8, floor=1e-3, assign_v=prev, n_random=n_random, salt=123456789, box=box)
     got_assign = prev.copy()
     got_hist = hist.copy()
     omega = np.zeros(vol.shape[:3], dtype=np.float32)
     energy = np.zeros(vol.shape[na])
-    rule = _k.SearchRule(grid, batches, phi, 2.0, 0.8, 1e-3, n_random, 123456789)
+    rule = _k.SearchRule(grid, batches, phi, index_weight, 0.8, 1e-3, n_random, 123456789,
+                         follow=index_weight > 0.0)
     if box is not None:
         rule = rule._replace(box_lo=np.array(box[0], dtype=np.int64), box_hi=np.array(box[1], dtype=np.int64))
     _k.search_view(vol, src, ra, ca, coh.search_exemplar(m), rule, got_hist, got_assign,
@@ -189,7 +192,7 @@ def test_search_view_matches_twin(rng, view, window, channels, grid, batches, n_
     np.testing.assert_array_equal(got_assign, want_assign)
     np.testing.assert_allclose(omega, want_omega, rtol=1e-4)
     np.testing.assert_allclose(energy, want_energy, rtol=1e-6)
-    np.testing.assert_array_equal(got_hist, want_hist)
+    np.testing.assert_array_equal(got_hist, want_hist if index_weight > 0.0 else hist)
 
 
 @pytest.mark.kernels
@@ -354,7 +357,8 @@ def _packed(axes, texels, offsets, widths, window, anchor, grid):
                           np.asarray(widths, dtype=np.int64), int(window), int(anchor), int(grid))
 
 
-def _histograms(positions, offsets, theta, weight, boost, texels, values=None, value_weight=0.0, value_prior=0.0):
+def _histograms(positions, offsets, theta, weight, boost, texels, values=None, value_weight=0.0, value_prior=0.0,
+                follow=True):
     """The solver's histograms; without ``values`` (a :class:`ValueHistogram`) histogram matching is off."""
     offsets, theta = np.asarray(offsets, dtype=np.int64), np.asarray(theta, dtype=np.float64)
     if values is None:
@@ -363,7 +367,7 @@ def _histograms(positions, offsets, theta, weight, boost, texels, values=None, v
         return _s.SolverHistograms(positions, offsets, theta, weight, boost, np.zeros(texels.shape, np.int64),
                                    zeros, zeros, 0.0, 0.0, np.zeros(channels), np.zeros(channels), 1.0)
     return _s.SolverHistograms(positions, offsets, theta, weight, boost, values.ex_bins, values.hist,
-                               values.target, value_weight, value_prior, values.lo, values.scale, values.unit)
+                               values.target, value_weight, value_prior, values.lo, values.scale, values.unit, follow)
 
 
 @pytest.mark.parametrize("views", [("front",), ("front", "top"), VIEWS3])
@@ -392,6 +396,17 @@ def test_solve_candidate_heuristics_and_metropolis_match_twin(rng, views, likeli
     """ML_H1a, ML_H1b (ICM) and the Metropolis step over the candidates, against the twin."""
     _check_solve_against_twin(rng, views, 6, balance, 2.0, likelihood, value_weight, temperature, grid, channels,
                               sampler)
+
+
+@pytest.mark.kernels
+@pytest.mark.parametrize("likelihood,sampler,temperature", [
+    (0, HEAT_BATH, 0.0), (ML_H2B, HEAT_BATH, 0.0), (ML_H2A, HEAT_BATH, 0.7), (ML_H1B, HEAT_BATH, 0.0),
+    (ML_H2B, METROPOLIS, 0.3)])
+def test_solve_with_histograms_set_by_the_caller_matches_twin(rng, likelihood, sampler, temperature):
+    """``follow=False`` (a block reading its pilot's histograms): one batch decides as the twin
+    does, every voxel's sources are written, and the histograms are left as they were."""
+    _check_solve_against_twin(rng, VIEWS3, 6, False, 2.0, likelihood, 4.0, temperature, 2, 3, sampler,
+                              follow=False)
 
 
 @pytest.mark.kernels
@@ -489,7 +504,7 @@ def test_solve_with_kernel_table_matches_twin(rng, views, likelihood, temperatur
 
 
 def _check_solve_against_twin(rng, views, medoid, balance, boost, likelihood, value_weight, temperature, grid,
-                              channels, sampler=HEAT_BATH, tabled=False):
+                              channels, sampler=HEAT_BATH, tabled=False, follow=True):
     window = 4
     exemplars, models, assign, omega, src, volume = _solve_case(rng, views, window, channels, grid,
                                                                 shared=len(views) != 2)
@@ -500,8 +515,10 @@ def _check_solve_against_twin(rng, views, medoid, balance, boost, likelihood, va
     packed, ex_off, hist_off = pack_exemplars(models)
     n = volume.shape[0] * volume.shape[1] * volume.shape[2]
     order = rng.permutation(n).astype(np.int64)
-    bounds = np.array([0, 50, 120, n], dtype=np.int64)
+    # histograms that do not follow the sources: one batch (between batches they would differ)
+    bounds = np.array([0, 50, 120, n] if follow else [0, n], dtype=np.int64)
     pos_hist = [np.bincount(src[vi].ravel(), minlength=110).astype(np.float64) for vi in range(len(views))]
+    before = np.concatenate(pos_hist), vh.hist.copy()
     theta = np.full(len(views), n / 110.0)
     want_vol, want_src, want_hist, want_changed = naive_solve(
         volume, src, assign, omega, views, exemplars, window=window, grid=grid, order=order,
@@ -513,17 +530,22 @@ def _check_solve_against_twin(rng, views, medoid, balance, boost, likelihood, va
     changed = _s.solve(got_vol, got_src, assign, omega,
                        _packed([VIEW_AXES[v] for v in views], packed, ex_off, [10] * len(views), window,
                                coh.anchor(window), grid),
-                       _histograms(got_hist, hist_off, theta, 3.0, boost, packed, vh, value_weight, values["prior"]),
+                       _histograms(got_hist, hist_off, theta, 3.0, boost, packed, vh, value_weight, values["prior"],
+                                   follow),
                        _s.NO_TRUST, _s.SolverRule(medoid, balance, likelihood, 0.05, 0.01, temperature, 12345, sampler,
                                                   np.zeros(3, dtype=np.int64), np.zeros(3, dtype=np.int64),
                                                   *(kernel_table(packed, 0.05) if tabled else
                                                     (np.zeros(0, dtype=np.int64), np.zeros((0, 0))))),
                        order, bounds, 7)
     np.testing.assert_array_equal(got_vol, want_vol)
-    np.testing.assert_allclose(vh.hist, np.array(values["hist"]), atol=1e-12)
     np.testing.assert_array_equal(got_src, want_src)
-    np.testing.assert_array_equal(got_hist, np.concatenate(want_hist))
     assert changed == want_changed
+    if follow:
+        np.testing.assert_allclose(vh.hist, np.array(values["hist"]), atol=1e-12)
+        np.testing.assert_array_equal(got_hist, np.concatenate(want_hist))
+    else:  # left as they were
+        np.testing.assert_array_equal(got_hist, before[0])
+        np.testing.assert_array_equal(vh.hist, before[1])
 
 
 def test_solve_copies_only_voted_exemplar_texels(rng):

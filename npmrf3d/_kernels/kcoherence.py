@@ -86,6 +86,10 @@ class SearchRule(NamedTuple):
     box_lo, box_hi : (3,) int64 each, only the sites with ``box_lo <= index < box_hi`` along
         every axis are searched (their assignments and weights kept elsewhere; the default: every
         site). A block's pass needs only the sites that vote for the voxels it decides.
+    follow : bool, the index histogram follows the new assignments after each batch (False:
+        nothing reads it -- ``index_weight`` 0 and no global search, as in a block -- so every
+        site is searched in one parallel loop, its assignment written as it is found, and the
+        histogram is left as it was; the same assignments)
     """
 
     grid: int
@@ -100,6 +104,7 @@ class SearchRule(NamedTuple):
     extent: np.ndarray = np.zeros(3, dtype=np.int64)
     box_lo: np.ndarray = np.zeros(3, dtype=np.int64)
     box_hi: np.ndarray = np.full(3, np.iinfo(np.int64).max, dtype=np.int64)
+    follow: bool = True
 
 
 @jit
@@ -572,10 +577,12 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
     ar_lo, ar_hi = lattice_span(rule.box_lo[ra], rule.box_hi[ra], sr, grid, gr)
     ac_lo, ac_hi = lattice_span(rule.box_lo[ca], rule.box_hi[ca], sc, grid, gc)
     n_lo, n_hi = rule.box_lo[na], rule.box_hi[na]
-    for b in range(batches):
-        nb = (nn - b + batches - 1) // batches
+    follow = rule.follow
+    rounds = batches if follow else 1
+    for b in range(rounds):
+        nb = (nn - b + rounds - 1) // rounds
         for t in prange(nb):
-            n = b + t * batches
+            n = b + t * rounds
             if n < n_lo or n >= n_hi:
                 continue
             vec = np.empty(d, dtype=np.float64)
@@ -621,11 +628,16 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
                     dist = np.sqrt(best_d2)
                     acc += dist ** r
                     omega_v[p0, p1, p2] = max(dist, floor) ** (r - 2.0)
-                    fresh_v[p0, p1, p2] = best
+                    if follow:
+                        fresh_v[p0, p1, p2] = best
+                    else:
+                        assign_v[p0, p1, p2] = best
             energy[n] = acc
+        if not follow:
+            continue
         # sequential, fixed order: move the batch's sites from their old centres to the new ones
         for t in range(nb):
-            n = b + t * batches
+            n = b + t * rounds
             if n < n_lo or n >= n_hi:
                 continue
             for ar in range(ar_lo, ar_hi):

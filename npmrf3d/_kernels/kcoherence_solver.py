@@ -65,6 +65,9 @@ class SolverHistograms(NamedTuple):
     value_weight, value_prior : float, strengths of the vote weighting and of the prior
     value_lo, value_scale : (C,) float64, the binning (:func:`value_bin`)
     value_unit : float, voxels per even bin
+    follow : bool, the histograms follow the new sources after each batch (False: the caller
+        sets them before each batch, as a block reading its pilot's does, and each voxel's
+        sources are written as it is decided)
     """
 
     positions: np.ndarray
@@ -80,6 +83,7 @@ class SolverHistograms(NamedTuple):
     value_lo: np.ndarray
     value_scale: np.ndarray
     value_unit: float
+    follow: bool = True
 
 
 class SolverRule(NamedTuple):
@@ -574,6 +578,14 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                     near = _decide.nearest_in(view_starts[v], view_starts[v + 1], g, vg, ex_flat)
                     if near >= 0:
                         new_src[t, v] = vg[near] - ex_off[v]
+        if not hist.follow:
+            # no histogram to move: every voxel's own sources, in parallel (a voxel reads only its own)
+            for t in prange(m):
+                flat = order[start + t]
+                for v in range(n_views):
+                    src[v, flat // (n1 * n2), (flat // n2) % n1, flat % n2] = new_src[t, v]
+            changed += flags.sum()
+            continue
         # sequential, fixed order: histograms follow the new sources
         for t in range(m):
             flat = order[start + t]

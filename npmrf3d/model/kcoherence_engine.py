@@ -443,7 +443,7 @@ class KCoherenceLevels(Levels):
         histograms = _solver.SolverHistograms(
             pos_hist, hist_off, theta, config.position_weight, config.position_boost, values.ex_bins,
             values.hist, values.target, config.value_weight, config.value_prior, values.lo, values.scale,
-            values.unit)
+            values.unit, follow=replay is None)
         exemplars = [coh.search_exemplar(m) for m in vmodels]
         assign = np.full((n_views, *shape), -1, dtype=np.int32)
         fresh = np.empty(shape, dtype=np.int32)
@@ -495,7 +495,8 @@ class KCoherenceLevels(Levels):
                 phi = n_sites / m.centres
                 rule = _search.SearchRule(config.grid, min(config.batches, shape[na]), phi, index_weight,
                                           config.r, floor, config.random_candidates, int(rng.integers(0, 2**31)),
-                                          origin, extent, box_lo, box_hi)
+                                          origin, extent, box_lo, box_hi,
+                                          follow=index_weight > 0.0 or config.global_share > 0.0)
                 _search.search_view(volume, src[vi], ra, ca, exemplars[vi], rule, index_hist[vi], assign[vi],
                                     fresh, omega[vi], energy, trust)
                 energy_sum += float(energy.sum())
