@@ -47,7 +47,10 @@ def _value_range(*arrays: np.ndarray) -> tuple[float, float]:
 
 
 def _limits(vmin: float | None, vmax: float | None, *arrays: np.ndarray) -> tuple[float, float]:
-    """``vmin`` and ``vmax``, each defaulting to the finite minimum or maximum of ``arrays``."""
+    """``vmin`` and ``vmax``, each defaulting to the finite minimum or maximum of ``arrays``
+    (read only when one is missing: a float64 copy of a large volume is not small)."""
+    if vmin is not None and vmax is not None:
+        return vmin, vmax
     lo, hi = _value_range(*arrays)
     return (lo if vmin is None else vmin), (hi if vmax is None else vmax)
 

@@ -38,11 +38,13 @@ __all__ = ["DEFAULT_BLOCK", "add_block_options", "blockwise_requested", "run_zar
 
 #: Side of the blocks (and Zarr chunks) when none is asked for: large against the default's
 #: aprons (18 voxels a side at the finest level), so the cones repeat little work (512^3: 1.7x
-#: the pyramid's voxels in cones against 2.0x with blocks of 128, 15.4 min against about 17),
-#: and 1.4 GiB at most per worker (measured at 512^3 with 2 threads).
+#: the pyramid's voxels in cones against 2.0x with blocks of 128), and 1.45 GiB at most per
+#: worker (measured at 512^3 with 2 threads).
 DEFAULT_BLOCK = 192
-#: Local workers when none is asked for.
-DEFAULT_WORKERS = 2
+#: Local workers when none is asked for: one, the command itself with every core as numba
+#: threads (512^3 on 2 cores: 14.1 min); a block made in a Dask worker process takes 2-4 s more
+#: (a 192^3 block of 512^3: 40.5-43 s against 38.2-39.6 s in the command's process).
+DEFAULT_WORKERS = 1
 
 
 def add_block_options(group: argparse._ArgumentGroup) -> None:
@@ -64,8 +66,9 @@ def add_block_options(group: argparse._ArgumentGroup) -> None:
              "holds one block's dependency cone (--dry-run shows its memory)")
     group.add_argument(
         "--workers", type=positive_int, default=DEFAULT_WORKERS, metavar="N",
-        help="--out VOL.zarr --blockwise: processes of the local Dask cluster, the machine's cores "
-             "shared among them as numba threads (at least one each)")
+        help="--out VOL.zarr --blockwise: processes of a local Dask cluster, the machine's cores "
+             "shared among them as numba threads (at least one each); 1: no cluster, the command makes "
+             "every block itself with every core (default: %(default)s)")
     group.add_argument(
         "--scheduler", default=None, metavar="ADDRESS",
         help="--out VOL.zarr --blockwise: a running Dask scheduler (tcp://HOST:8786) whose workers "
