@@ -42,7 +42,7 @@ __all__ = ["DEFAULT_BLOCK", "add_block_options", "blockwise_requested", "run_zar
 #: worker (measured at 512^3 with 2 threads).
 DEFAULT_BLOCK = 192
 #: Local workers when none is asked for: one, the command itself with every core as numba
-#: threads (512^3 on 2 cores: 14.1 min); a block made in a Dask worker process takes 2-4 s more
+#: threads (512^3 on 2 cores: 13.6 min); a block made in a Dask worker process takes 2-4 s more
 #: (a 192^3 block of 512^3: 40.5-43 s against 38.2-39.6 s in the command's process).
 DEFAULT_WORKERS = 1
 
