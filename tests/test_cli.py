@@ -463,6 +463,8 @@ def test_segmented_preset_says_which_pyramid_runs_and_which_it_kept(tmp_path, ca
 def test_only_dropped_interrupts_are_kept_quiet():
     from types import SimpleNamespace
 
+    import llvmlite.binding.ffi as ffi
+
     from npmrf3d.cli import _interrupt
     seen = []
     previous = _interrupt.install()
@@ -471,11 +473,14 @@ def test_only_dropped_interrupts_are_kept_quiet():
             _interrupt.interrupt()
         except KeyboardInterrupt:
             pass
-        for exc_type in (KeyboardInterrupt, ValueError):
-            _interrupt._quiet_dropped_interrupts(SimpleNamespace(exc_type=exc_type), fallback=seen.append)
+        # a dropped interrupt, and the compiler's finalizer failing on an object the interrupt
+        # left half-built (freed with the interrupt's traceback, before the run's end): quiet
+        for exc_type, obj in ((KeyboardInterrupt, None), (ValueError, None), (AttributeError, ffi.ObjectRef.__del__),
+                              (AttributeError, test_synth_help_lists_every_option_with_its_default)):
+            _interrupt._quiet_dropped_interrupts(SimpleNamespace(exc_type=exc_type, object=obj), fallback=seen.append)
     finally:
         _interrupt.restore(previous)
-    assert [u.exc_type for u in seen] == [ValueError]
+    assert [(u.exc_type, u.object) for u in seen] == [(ValueError, None), (AttributeError, test_synth_help_lists_every_option_with_its_default)]
     assert not _interrupt.pending()
 
 

@@ -12,12 +12,14 @@ exception through :func:`sys.unraisablehook` ("Exception ignored in ..." and a t
 stderr); while the latch is set, :func:`install`'s hook keeps those quiet, since the interrupt
 is not lost (the one line of the interruption follows). An interrupt that lands inside the
 compiler can also leave one of llvmlite's objects half-built, whose finalizer then fails when
-the process exits ("Exception ignored in: ObjectRef.__del__ ... AttributeError"); once a run
-was interrupted, :func:`restore` leaves a hook that keeps those quiet too, and only those.
+the process exits ("Exception ignored in: ObjectRef.__del__ ... AttributeError"); while the
+latch is set the hook keeps those quiet too, and once a run was interrupted, :func:`restore`
+collects the garbage and leaves a hook that keeps those quiet, and only those.
 """
 
 from __future__ import annotations
 
+import gc
 import signal
 import sys
 import threading
@@ -50,9 +52,11 @@ def check() -> None:
 
 
 def _quiet_dropped_interrupts(unraisable, *, fallback=None):
-    """``sys.unraisablehook``: say nothing of a dropped ``KeyboardInterrupt`` while the latch is
-    set (it will be raised again); pass everything else to ``fallback``."""
-    if _latched.is_set() and issubclass(unraisable.exc_type, KeyboardInterrupt):
+    """``sys.unraisablehook``: while the latch is set, say nothing of a dropped
+    ``KeyboardInterrupt`` (it will be raised again) nor of the compiler's failing finalizers
+    (an object the interrupt left half-built, freed with the interrupt's traceback before
+    :func:`restore` runs); pass everything else to ``fallback``."""
+    if _latched.is_set() and (issubclass(unraisable.exc_type, KeyboardInterrupt) or _from_compiler(unraisable)):
         return
     (fallback or sys.__unraisablehook__)(unraisable)
 
@@ -97,3 +101,5 @@ def restore(previous: dict | None) -> None:
                               lambda unraisable: _quiet_compiler_finalizers(unraisable, fallback=hook))
     for s, handler in previous.items():
         signal.signal(s, handler)
+    if interrupted:  # half-built objects in cycles are freed now, under the quiet hook, not at exit
+        gc.collect()
