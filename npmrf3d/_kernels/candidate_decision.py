@@ -149,15 +149,12 @@ def candidate_likelihoods(kernel, rows, n_try, uid, vv, vw, count, vsum, outlier
 def objective(lik, likelihood, prior):
     """The score of the rules with an objective from the views' estimates ``lik``: ML_H2b's
     ``sum_v log L_v + prior``, or ML_H2a's ``min_v L_v * exp(prior)`` (``prior`` 0: none)."""
-    score = 0.0 if likelihood == ML_H2B else np.inf
+    if likelihood != ML_H2B:
+        return objective_product(lik, likelihood, 1.0 if prior == 0.0 else np.exp(prior))
+    score = 0.0
     for v in range(lik.shape[0]):
-        if likelihood == ML_H2B:
-            score += np.log(lik[v])
-        else:
-            score = min(score, lik[v])
-    if prior != 0.0:
-        score = score + prior if likelihood == ML_H2B else score * np.exp(prior)
-    return score
+        score += np.log(lik[v])
+    return score + prior if prior != 0.0 else score
 
 
 @jit

@@ -250,7 +250,7 @@ def crop_box(array: np.ndarray, index, first: int = 0) -> np.ndarray:
     out = array
     for axis, idx in enumerate(index, start=first):
         idx = np.asarray(idx)
-        if idx.size and int(idx[-1]) - int(idx[0]) == idx.size - 1 and np.all(np.diff(idx) == 1):
+        if idx.size and np.all(np.diff(idx) == 1):
             out = out[(slice(None),) * axis + (slice(int(idx[0]), int(idx[-1]) + 1),)]
         else:
             out = np.take(out, idx, axis=axis)
@@ -474,8 +474,11 @@ class KCoherenceLevels(Levels):
         while it < n_iter if icm is None else icm.warm(it):
             ts = time.perf_counter()
             trust = _search.NO_TRUST if icm is None else icm.search_trust()
-            box_lo, box_hi, decide_lo, decide_hi = active_box(self.frame, window, it + 1) if shrinking else (
-                np.zeros(3, dtype=np.int64), np.array(shape, dtype=np.int64)) * 2
+            if shrinking:
+                box_lo, box_hi, decide_lo, decide_hi = active_box(self.frame, window, it + 1)
+            else:  # every site searched, every voxel decided
+                box_lo = decide_lo = np.zeros(3, dtype=np.int64)
+                box_hi = decide_hi = np.array(shape, dtype=np.int64)
             energy_sum = 0.0
             sites = 0
             global_count = 0
