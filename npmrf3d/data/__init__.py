@@ -21,8 +21,18 @@ name                shape          content (scikit-image source)
 ``wood``            128 x 128 x 3  wooden table grain (``coffee``)
 ==================  =============  ==============================================
 
-8-bit grey or RGB PNGs; origin, licence and the exact recipe of each are in ``SOURCES.md``.
-Load one with ``npmrf3d.io.read_array(npmrf3d.data.path(name))``.
+8-bit grey or RGB PNGs. One 3D exemplar, for the methods that take a volume
+(``npmrf3d volume bundled:fibres48``):
+
+==================  =============  ==============================================
+name                shape          content (source)
+==================  =============  ==============================================
+``fibres48``        48 x 48 x 48   short fibres in a polymer matrix, micro-CT
+                                   (the centre of quanfima's 128^3 scan, MIT)
+==================  =============  ==============================================
+
+an 8-bit grey ``.npy`` volume. Origin, licence and the exact recipe of each are in
+``SOURCES.md``. Load one with ``npmrf3d.io.read_array(npmrf3d.data.path(name))``.
 """
 
 from __future__ import annotations
@@ -34,12 +44,13 @@ import pathlib
 
 from ..errors import ParameterError
 
-__all__ = ["DEFAULT_EXEMPLAR", "available", "path"]
+__all__ = ["DEFAULT_EXEMPLAR", "available", "path", "volumes"]
 
 #: Name of the exemplar used when none is given.
 DEFAULT_EXEMPLAR = "gravel64"
 
 _SUFFIX = ".png"
+_VOLUME_SUFFIX = ".npy"
 # Keeps files extracted from a zipped install alive until the interpreter exits.
 _EXTRACTED = contextlib.ExitStack()
 atexit.register(_EXTRACTED.close)
@@ -53,35 +64,47 @@ def available() -> list[str]:
     list of str
         E.g. ``["brick", "grass", "gravel", "gravel64"]``.
     """
+    return _names(_SUFFIX)
+
+
+def volumes() -> list[str]:
+    """Names of the bundled 3D exemplars (volumes), sorted: ``["fibres48"]``."""
+    return _names(_VOLUME_SUFFIX)
+
+
+def _names(suffix: str) -> list[str]:
     return sorted(
-        entry.name.removesuffix(_SUFFIX)
+        entry.name.removesuffix(suffix)
         for entry in importlib.resources.files(__name__).iterdir()
-        if entry.name.endswith(_SUFFIX)
+        if entry.name.endswith(suffix)
     )
 
 
 def path(name: str) -> pathlib.Path:
-    """File of a bundled exemplar.
+    """File of a bundled exemplar, an image or a volume.
 
     Parameters
     ----------
     name : str
-        One of :func:`available`.
+        One of :func:`available` or :func:`volumes`.
 
     Returns
     -------
     pathlib.Path
-        Path of the PNG file (extracted to a temporary file if the package is zipped).
+        Path of the PNG (image) or ``.npy`` (volume) file (extracted to a temporary file if the
+        package is zipped).
 
     Raises
     ------
     ParameterError
         If ``name`` is not a bundled exemplar.
     """
-    names = available()
-    if name not in names:
+    names, solids = available(), volumes()
+    if name not in names and name not in solids:
         raise ParameterError(
-            f"exemplar name must be one of {', '.join(names)}; got {name!r}"
+            f"exemplar name must be one of {', '.join(names)} (images) or "
+            f"{', '.join(solids)} (volumes); got {name!r}"
         )
-    resource = importlib.resources.files(__name__).joinpath(name + _SUFFIX)
+    suffix = _SUFFIX if name in names else _VOLUME_SUFFIX
+    resource = importlib.resources.files(__name__).joinpath(name + suffix)
     return _EXTRACTED.enter_context(importlib.resources.as_file(resource))
