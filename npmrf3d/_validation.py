@@ -7,6 +7,8 @@ message names the parameter, the rule and the value received.
 from __future__ import annotations
 
 import math
+import numbers
+import os
 from collections.abc import Iterable
 
 import numpy as np
@@ -14,6 +16,10 @@ import numpy as np
 from .errors import ParameterError
 
 WINDOW_MIN, WINDOW_MAX = 3, 15
+#: An 8- or 16-bit image whose values all lie in ``0..LABEL_MAX`` is a label map (a
+#: segmentation, a phase image): its values are kept, not scaled to [0, 1]. As an intensity
+#: image it would be all but black (at most 6% of the 8-bit range).
+LABEL_MAX = 15
 
 
 def fail(message: str):
@@ -48,11 +54,11 @@ def integer(parameter: str, value, *, low: int | None = None, high: int | None =
 
 def real(parameter: str, value, *, low: float | None = None, high: float | None = None,
          low_open: bool = False, high_open: bool = False) -> float:
-    """A finite float in [low, high] (open ends where asked)."""
-    try:
-        value = float(value)
-    except (TypeError, ValueError):
+    """A finite float in [low, high] (open ends where asked): a Python or numpy integer or
+    float; a bool or a string is refused, as :func:`integer` refuses them."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
         fail(f"{parameter} must be a number; got {value!r}")
+    value = float(value)
     bad = not math.isfinite(value)
     if low is not None:
         bad |= value <= low if low_open else value < low
@@ -92,9 +98,7 @@ def window(value) -> int:
 
 def exemplar_array(array, *, name: str = "exemplar") -> np.ndarray:
     """Validate and convert an exemplar to float32 ``(H, W, C)``."""
-    a = np.asarray(array)
-    if a.dtype == object or not (np.issubdtype(a.dtype, np.number) or a.dtype == bool):
-        fail(f"{name} must hold numbers; got dtype {a.dtype}")
+    a = _numbers(array, name)
     if a.ndim not in (2, 3):
         fail(f"{name} must be a 2D image (H, W) or (H, W, C); got an array of shape {a.shape}")
     if a.size == 0:
@@ -107,29 +111,59 @@ def exemplar_array(array, *, name: str = "exemplar") -> np.ndarray:
 def volume_array(array, *, name: str = "exemplar") -> np.ndarray:
     """Validate and convert a volume exemplar ``(D, H, W, C)`` to float32, scaled as
     :func:`exemplar_array` scales images."""
-    a = np.asarray(array)
-    if a.dtype == object or not (np.issubdtype(a.dtype, np.number) or a.dtype == bool):
-        fail(f"{name} must hold numbers; got dtype {a.dtype}")
+    a = _numbers(array, name)
     if a.ndim != 4 or a.size == 0:
         fail(f"{name} must be a non-empty volume (D, H, W, C); got an array of shape {a.shape}")
     return _scaled(a, name)
 
 
+def unmasked(array, name: str):
+    """``array``, or a masked array's data when nothing is masked; a masked array with masked
+    values is refused (every value is used, so its mask would be silently ignored)."""
+    if isinstance(array, np.ma.MaskedArray):
+        masked = int(np.count_nonzero(np.ma.getmaskarray(array)))
+        if masked:
+            fail(f"{name} is a masked array with {masked} masked values, and every value is "
+                 f"used: crop it to a region without them or fill them first")
+        return array.data
+    return array
+
+
+def _numbers(array, name: str) -> np.ndarray:
+    """``array`` (not masked: :func:`unmasked`) as an ndarray of numbers."""
+    a = np.asarray(unmasked(array, name))
+    if a.dtype == object or not (np.issubdtype(a.dtype, np.number) or a.dtype == bool):
+        fail(f"{name} must hold numbers; got dtype {a.dtype}")
+    return a
+
+
+def value_scale(a: np.ndarray) -> float:
+    """What integer data is divided by to become an exemplar's values: 255 for 8-bit and 65535
+    for 16-bit images (to [0, 1]), 1 for a label map among them (every value at most
+    :data:`LABEL_MAX`) and for every other dtype.
+
+    >>> value_scale(np.array([0, 200], np.uint8)), value_scale(np.array([0, 1], np.uint8))
+    (255.0, 1.0)
+    """
+    full = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}.get(a.dtype)
+    if full is None or (a.size and int(a.max()) <= LABEL_MAX):
+        return 1.0
+    return full
+
+
 def _scaled(a: np.ndarray, name: str) -> np.ndarray:
-    """float32 copy: uint8 / 255, uint16 / 65535, bool 0/1, other numbers unchanged; no NaN/Inf."""
-    if a.dtype == bool:
-        out = a.astype(np.float32)
-    elif a.dtype == np.uint8:
-        out = a.astype(np.float32) / 255.0
-    elif a.dtype == np.uint16:
-        out = a.astype(np.float32) / 65535.0
-    elif np.issubdtype(a.dtype, np.complexfloating):
+    """float32 copy, divided by :func:`value_scale` (uint8 / 255, uint16 / 65535, but a label
+    map's values kept; bool 0/1, other numbers unchanged); no NaN/Inf."""
+    if np.issubdtype(a.dtype, np.complexfloating):
         fail(f"{name} must be real-valued; got dtype {a.dtype}")
-    else:
-        out = a.astype(np.float32)
+    scale = value_scale(a)
+    out = a.astype(np.float32)
+    if scale != 1.0:
+        out = out / np.float32(scale)
     bad = ~np.isfinite(out)
     if bad.any():
-        fail(f"{name} contains {int(bad.sum())} NaN or Inf values; clean or mask them first")
+        fail(f"{name} contains {int(bad.sum())} NaN or Inf values; replace them (e.g. by the "
+             f"nearest valid pixel) or crop them away first")
     return np.ascontiguousarray(out)
 
 
@@ -193,6 +227,24 @@ def rng(value) -> np.random.Generator:
             fail(f"seed must be a non-negative integer; got {value}")
         return np.random.default_rng(value)
     fail(f"rng must be None, an integer seed or a numpy Generator; got {value!r}")
+
+
+def progress(value):
+    """None or a callable (called as the run goes)."""
+    if value is not None and not callable(value):
+        fail(f"progress must be a callable or None; got {value!r}")
+    return value
+
+
+def checkpoint(value):
+    """None or a file path (a ``str`` or an :class:`os.PathLike`; bytes are refused)."""
+    if value is None:
+        return None
+    if not isinstance(value, (str, os.PathLike)) or isinstance(os.fspath(value), bytes):
+        fail(f"checkpoint must be a file path (str or pathlib.Path) or None; got {value!r}")
+    if not str(value).strip():
+        fail("checkpoint must name a file; got an empty string")
+    return value
 
 
 def triple(parameter: str, value, *, low: int | None = None) -> tuple[int, int, int]:

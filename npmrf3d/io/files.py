@@ -23,12 +23,16 @@ Conventions
 from __future__ import annotations
 
 import dataclasses
+import errno
 import importlib.metadata
 import json
 import os
 import pathlib
 import platform
+import re
 import secrets
+import shutil
+import stat
 import sys
 from collections.abc import Callable, Mapping
 from typing import Any
@@ -43,12 +47,14 @@ __all__ = [
     "TIFF_EXTENSIONS",
     "as_volume",
     "atomic_write",
+    "check_regular_target",
     "package_versions",
     "read_array",
     "read_stack",
     "read_volume",
     "to_jsonable",
     "write_json",
+    "write_npy",
     "write_volume_tiff",
 ]
 
@@ -114,7 +120,8 @@ def read_array(path: str | os.PathLike[str], *, what: str = "input file") -> np.
     ----------
     path : str or os.PathLike
         A ``.png``, ``.jpg``/``.jpeg``, ``.bmp`` or ``.gif`` image (read with imageio's
-        Pillow plugin; only the first frame of an animated GIF), a ``.tif``/``.tiff`` file
+        Pillow plugin; only the first frame of an animated GIF; a CMYK or YCbCr image in RGB,
+        as Pillow's ``convert("RGB")`` gives it), a ``.tif``/``.tiff`` file
         (tifffile, first series) or a ``.npy`` array (``allow_pickle=False``).
     what : str, optional
         How the file is named in error messages, e.g. ``"exemplar file"``.
@@ -134,9 +141,7 @@ def read_array(path: str | os.PathLike[str], *, what: str = "input file") -> np.
     suffix = _suffix(path, _READABLE_EXTENSIONS, what)
     try:
         if suffix in IMAGE_EXTENSIONS:
-            import imageio.v3 as iio
-
-            return iio.imread(path, plugin="pillow", index=0)
+            return _read_image(path)
         if suffix in TIFF_EXTENSIONS:
             import tifffile
 
@@ -145,6 +150,28 @@ def read_array(path: str | os.PathLike[str], *, what: str = "input file") -> np.
     except Exception as exc:  # any decoder failure is a user-facing unreadable file
         cause = exc.__cause__ if exc.__cause__ is not None else exc
         raise ParameterError(f"{what} '{path}' cannot be read: {_reason(cause)}") from exc
+
+
+#: Pillow modes read as RGB, converted as Pillow's ``convert("RGB")`` converts them (a CMYK
+#: JPEG, as image viewers show it), not kept as their raw channels.
+_READ_AS_RGB = ("CMYK", "YCbCr", "RGBX")
+
+
+def _pillow_mode(path: pathlib.Path) -> str:
+    """The Pillow mode of an image file (``L``, ``RGB``, ``CMYK``, ...; the header only)."""
+    from PIL import Image
+
+    with Image.open(path) as image:
+        return image.mode
+
+
+def _read_image(path: pathlib.Path) -> np.ndarray:
+    """The first frame of an image file, by imageio's Pillow plugin, in RGB for the modes of
+    :data:`_READ_AS_RGB`."""
+    import imageio.v3 as iio
+
+    mode = "RGB" if _pillow_mode(path) in _READ_AS_RGB else None
+    return iio.imread(path, plugin="pillow", index=0, mode=mode)
 
 
 def read_stack(path: str | os.PathLike[str], *, what: str = "input file") -> tuple[np.ndarray, dict]:
@@ -184,14 +211,10 @@ def _has_alpha(path: pathlib.Path, array: np.ndarray) -> bool:
     palette or grey image with a transparent colour, which imageio reads as RGBA)."""
     if array.ndim != 3 or array.shape[2] not in (2, 4):
         return False
-    from PIL import Image
-
     try:
-        with Image.open(path) as image:
-            mode = image.mode
+        return _pillow_mode(path) not in _READ_AS_RGB
     except Exception:  # read once already; without its mode, channels are taken as they are
         return False
-    return mode not in ("CMYK", "RGBX")
 
 
 def _imagej_spacing(tif) -> tuple[float, float, float] | None:
@@ -314,7 +337,9 @@ def atomic_write(
     Parameters
     ----------
     path : str or os.PathLike
-        Final file name. Its folder must exist.
+        Final file name. Its folder must exist. A symbolic link is written through (the file it
+        points to is replaced, the link stays); a path that is not a regular file (a folder, a
+        device, a FIFO, a socket) is refused, never replaced.
     writer : callable
         ``writer(tmp_path)`` must create the file ``tmp_path``. The temporary name is
         ``.<stem>.tmp-<random><suffix>`` so writers that look at the extension still work.
@@ -327,21 +352,79 @@ def atomic_write(
     Raises
     ------
     ParameterError
-        If the folder of ``path`` does not exist.
+        If the folder of ``path`` does not exist, or ``path`` is not a regular file.
+    OSError
+        A failed write (a full disk), naming ``path``; the temporary file is removed first.
     Exception
-        Whatever ``writer`` raises; the temporary file is removed first.
+        Whatever else ``writer`` raises; the temporary file is removed first.
     """
     path = pathlib.Path(path)
-    if not path.parent.is_dir():
-        raise ParameterError(f"output folder '{path.parent}' for '{path.name}' does not exist")
-    tmp = path.with_name(f".{path.stem}.tmp-{secrets.token_hex(4)}{path.suffix}")
+    check_regular_target(path)
+    target = pathlib.Path(os.path.realpath(path)) if path.is_symlink() else path
+    if not target.parent.is_dir():
+        raise ParameterError(f"output folder '{target.parent}' for '{path.name}' does not exist")
+    tmp = target.with_name(f".{target.stem}.tmp-{secrets.token_hex(4)}{target.suffix}")
     try:
         writer(tmp)
-        os.replace(tmp, path)
+        os.replace(tmp, target)
+    except OSError as exc:
+        failure = _write_failure(exc, path, tmp)
+        tmp.unlink(missing_ok=True)
+        if failure is exc:
+            raise
+        raise failure from exc
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
     return path
+
+
+_FILE_KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISCHR, "a character device"),
+               (stat.S_ISBLK, "a block device"), (stat.S_ISFIFO, "a FIFO"),
+               (stat.S_ISSOCK, "a socket"))
+
+
+def check_regular_target(path: str | os.PathLike[str], what: str = "output file") -> None:
+    """Refuse to write ``path`` (by a rename over it) unless it is missing or a regular file
+    (through a symbolic link: what the link points to). ParameterError, one line."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:  # missing (or a dangling link): a new file
+        return
+    if stat.S_ISREG(mode):
+        return
+    kind = next((name for test, name in _FILE_KINDS if test(mode)), "not a regular file")
+    raise ParameterError(f"{what} '{path}' is {kind}, not a regular file, and is never "
+                         f"replaced; choose another name")
+
+
+_SHORT_WRITE = re.compile(r"(\d+) requested and (\d+) written")
+
+
+def _write_failure(exc: OSError, path: pathlib.Path, tmp: pathlib.Path) -> OSError:
+    """``exc`` as an error naming ``path`` (not its temporary name). A short write, which numpy
+    and tifffile report as ``N requested and M written`` with no error number, is a full disk
+    (or quota) when the disk has no room left for the rest."""
+    if exc.filename not in (None, str(tmp), tmp):
+        return exc
+    code, reason = exc.errno, exc.strerror or _reason(exc)
+    short = _SHORT_WRITE.search(str(exc)) if code is None else None
+    if short is not None:
+        missing = int(short.group(1)) - int(short.group(2))
+        try:
+            full = shutil.disk_usage(tmp.parent).free < missing
+        except OSError:
+            full = False
+        if full:
+            code = errno.ENOSPC
+            reason = (f"{os.strerror(errno.ENOSPC)} (wrote {short.group(2)} of "
+                      f"{short.group(1)} bytes)")
+    return OSError(code, reason, str(path))
+
+
+#: ImageJ colour tables (red, green, blue) of a three-channel volume's composite display.
+_RGB_LUTS = tuple(np.stack([np.arange(256, dtype=np.uint8) * (row == c) for row in range(3)])
+                  for c in range(3))
 
 
 def write_volume_tiff(path: str | os.PathLike[str], volume: np.ndarray) -> pathlib.Path:
@@ -354,6 +437,10 @@ def write_volume_tiff(path: str | os.PathLike[str], volume: np.ndarray) -> pathl
     volume : numpy.ndarray
         Array of shape ``(N1, N2, N3, C)``; stored as float32 with ImageJ axes ``ZCYX``:
         axis i becomes Z (slices), the C channels become ImageJ channels, j is Y and k is X.
+        Three channels are a colour volume: a composite hyperstack (ImageJ ``mode``
+        ``composite``) with red, green and blue colour tables and one display range for all
+        three (0 to 1 for values within it, else the volume's range), so that Fiji shows colour;
+        the values are stored unchanged (:func:`read_volume` gives them back).
 
     Returns
     -------
@@ -362,11 +449,24 @@ def write_volume_tiff(path: str | os.PathLike[str], volume: np.ndarray) -> pathl
     """
     import tifffile
 
-    zcyx = np.ascontiguousarray(as_volume(volume).transpose(0, 3, 1, 2))
+    volume = as_volume(volume)
+    zcyx = np.ascontiguousarray(volume.transpose(0, 3, 1, 2))
+    metadata: dict[str, Any] = {"axes": "ZCYX"}
+    if volume.shape[3] == 3:
+        finite = volume[np.isfinite(volume)]
+        lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
+        lo, hi = (0.0, 1.0) if 0.0 <= lo and hi <= 1.0 else (lo, max(hi, lo + 1.0))
+        metadata.update(mode="composite", LUTs=list(_RGB_LUTS), Ranges=(lo, hi) * 3)
     return atomic_write(
         path,
-        lambda tmp: tifffile.imwrite(tmp, zcyx, imagej=True, metadata={"axes": "ZCYX"}),
+        lambda tmp: tifffile.imwrite(tmp, zcyx, imagej=True, metadata=metadata),
     )
+
+
+def write_npy(path: str | os.PathLike[str], array: np.ndarray) -> pathlib.Path:
+    """Write ``array`` as a ``.npy`` file (no pickled objects), atomically; a full disk is an
+    OSError naming ``path`` (:func:`atomic_write`)."""
+    return atomic_write(path, lambda tmp: np.save(tmp, array, allow_pickle=False))
 
 
 def to_jsonable(obj: Any) -> Any:

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..plotting import preview_figure, save_figure
-from .files import as_volume, json_text, package_versions, to_jsonable, write_volume_tiff
+from .files import as_volume, json_text, package_versions, to_jsonable, write_npy, write_volume_tiff
 
 __all__ = ["OutputLock", "RUN_DERIVED", "RUN_FILES", "check_replaceable", "clean_stale_staging",
            "config_dict", "run_record", "write_run"]
@@ -346,7 +346,7 @@ def write_run(
             mode = (stat.S_IMODE(target.stat().st_mode) if previous and overwrite
                     else 0o777 & ~_umask())
             os.chmod(staging, mode)
-            np.save(staging / "volume.npy", volume, allow_pickle=False)
+            write_npy(staging / "volume.npy", volume)
             write_volume_tiff(staging / "volume.tif", volume)
             save_figure(preview_figure(volume, exemplars, title=title), staging / "preview.png")
             (staging / "run.json").write_text(text, encoding="utf-8")

@@ -43,13 +43,18 @@ def option_names(method: SynthesisMethod) -> tuple[str, ...]:
 def prepare(method: SynthesisMethod, exemplar, exemplars: Mapping | None, *, size, rng,
             options: Mapping[str, Any],
             load: Callable[..., dict] | None = None,
-            memory: bool = True) -> tuple[Any, np.random.Generator, dict]:
+            memory: bool = True, progress=None,
+            checkpoint=None) -> tuple[Any, np.random.Generator, dict]:
     """``(config, generator, per_view)`` of a call of ``method``'s public function.
 
     ``load(exemplar, exemplars, config)`` reads the exemplars (default: one 2D exemplar per
     constrained view, checked against the method's ``fit``). ``memory=False`` leaves out the
-    memory check (a run that will go to another machine).
+    memory check (a run that will go to another machine). ``progress`` and ``checkpoint``, the
+    public function's own, are checked before anything else (a callable or None; a path or
+    None), so that a wrong one is refused up front rather than failing in the run.
     """
+    check.progress(progress)
+    check.checkpoint(checkpoint)
     check_thread_setting()  # a NUMBA_NUM_THREADS of 0 is refused, not silently replaced
     known = option_names(method)
     unknown = sorted(set(options) - set(known))

@@ -1,10 +1,11 @@
 """The exemplar model: loading, channels, label sets, decimation and patches.
 
 An exemplar is a float32 ``(H, W, C)`` array: 8-bit images are scaled to ``[0, 1]``, 16-bit to
-``[0, 1]``, float data keeps its units. Synthesis works on the exemplar's *label image*: every
-pixel replaced by its label (its own value, a re-quantised grey level, or the nearest palette
-colour), so each patch centre is a label and the label histogram identity of docs/model.md,
-section 2 holds exactly.
+``[0, 1]``, float data keeps its units, and so does a label map (an 8- or 16-bit image whose
+values are all at most :data:`npmrf3d._validation.LABEL_MAX`: a 0/1 mask stays 0/1). Synthesis
+works on the exemplar's *label image*: every pixel replaced by its label (its own value, a
+re-quantised grey level, or the nearest palette colour), so each patch centre is a label and the
+label histogram identity of docs/model.md, section 2 holds exactly.
 
 Coarse levels (docs/model.md, section 7) use **all** ``2^l x 2^l`` decimation phases of the
 exemplar as samples: the level-``l`` exemplar is the set of images ``Y[a::2^l, b::2^l]``, and
@@ -69,8 +70,10 @@ def load_exemplar(source=None, *, name: str = "exemplar", exemplar_kind: str = "
     Returns
     -------
     (H, W, C) float32 ndarray
-        uint8 data divided by 255, uint16 by 65535, bool as 0/1, floats unchanged. An image
-        file's alpha channel is no data channel: fully opaque, it is dropped (an
+        uint8 data divided by 255, uint16 by 65535 (but a label map, every value at most
+        :data:`npmrf3d._validation.LABEL_MAX`, keeps its values), bool as 0/1, floats
+        unchanged; a CMYK JPEG is read as RGB. A masked array with masked values is refused.
+        An image file's alpha channel is no data channel: fully opaque, it is dropped (an
         :class:`~npmrf3d.errors.InputNote` says so); with transparent pixels the file is refused.
 
     Examples
@@ -80,6 +83,9 @@ def load_exemplar(source=None, *, name: str = "exemplar", exemplar_kind: str = "
     """
     if source is None:
         source = data.path(data.DEFAULT_EXEMPLAR)
+    if isinstance(source, Mapping):
+        check.fail(f"{name} is a dict ({', '.join(map(str, source)) or 'empty'}); give one "
+                   f"exemplar per view as exemplars={{view: array or path}}, not as the exemplar")
     axes = None
     if isinstance(source, (str, Path)):
         array, info = read_stack(source, what="exemplar file")
@@ -88,7 +94,7 @@ def load_exemplar(source=None, *, name: str = "exemplar", exemplar_kind: str = "
         if info.get("alpha"):
             array = _without_alpha(array, name)
     else:
-        array = np.asarray(source)
+        array = np.asarray(check.unmasked(source, name))
     if array.ndim in (3, 4) and array.dtype != object and array.size:
         kind, shaped = interpret(array, axes=axes, kind=exemplar_kind, name=name)
         if kind == "volume":
@@ -258,11 +264,19 @@ def resolve_exemplars(exemplar, exemplars: Mapping | None, views: tuple[str, ...
     Every source is a 2D image; 3D exemplars are loaded by :func:`npmrf3d.model.exemplar3d.load_volume_exemplar`
     (the ``volume-lh`` method).
     """
+    if exemplars is not None and not isinstance(exemplars, Mapping):
+        check.fail(f"exemplars must be a dict view -> array or path (e.g. {{'top': 'top.png'}}); "
+                   f"got a {type(exemplars).__name__}")
     exemplars = dict(exemplars or {})
     unknown = set(exemplars) - set(views)
     if unknown:
         check.fail(f"exemplars given for views that are not constrained: {', '.join(sorted(unknown))}; "
                    f"constrained views are {', '.join(views)}")
+    if exemplar is not None and all(v in exemplars for v in views):
+        given = f" '{exemplar}'" if isinstance(exemplar, (str, Path)) else ""
+        check.fail(f"the exemplar{given} is not used: every constrained view "
+                   f"({', '.join(views)}) has its own exemplar; give either the exemplar or "
+                   f"one per view")
     out, cache = {}, {}
     for v in views:
         source = exemplars.get(v, exemplar)

@@ -1,9 +1,10 @@
 """3D exemplars: telling a volume from an image, loading it, checking that it fits.
 
 A *volume exemplar* is a float32 ``(D, H, W, C)`` array (a micro-CT crop, a stack of slices),
-scaled as 2D exemplars are (``uint8 / 255``, ``uint16 / 65535``, ``bool`` to 0/1, floats keep
-their units). A 2D method refuses one, a 3D method refuses an image, each with a message that
-says how to state which is meant (``exemplar_kind``, on the command line ``--exemplar-kind``).
+scaled as 2D exemplars are (``uint8 / 255``, ``uint16 / 65535`` but a label map's values kept,
+``bool`` to 0/1, floats keep their units; :func:`npmrf3d._validation.value_scale`). A 2D method
+refuses one, a 3D method refuses an image, each with a message that says how to state which is
+meant (``exemplar_kind``, on the command line ``--exemplar-kind``).
 
 How an array is recognised (:func:`interpret`; ``docs/scan_input.md``)
 ------------------------------------------------------------------
@@ -196,7 +197,7 @@ def load_volume_exemplar(source, *, exemplar_kind: str = "auto", spacing=None,
         axes, file_spacing = info["axes"], info["spacing"]
         name = f"{name} '{source}'"
     else:
-        array = np.asarray(source)
+        array = np.asarray(check.unmasked(source, name))
     if spacing is not None:
         check_spacing(spacing)
     elif file_spacing is not None:

@@ -22,7 +22,7 @@ from datetime import datetime, timezone
 from typing import Any
 
 from ..errors import ParameterError
-from ..io import atomic_write
+from ..io import atomic_write, check_regular_target
 from ..methods import METHODS
 from .figures import make_figures  # noqa: F401 (re-exported: report.make_figures)
 from .table import as_float, metric_columns, read_results_checked, separations, summarise, unique
@@ -256,6 +256,7 @@ def write_report(results_dir, out=None, *, overwrite: bool = False, warn=None) -
     out = pathlib.Path(results_dir) / "report.html" if out is None else pathlib.Path(out)
     if out.is_dir():
         raise ParameterError(f"report file '{out}' is a folder; give a file name")
+    check_regular_target(out, "report file")
     if not out.absolute().parent.is_dir():
         raise ParameterError(f"folder of report file '{out}' does not exist")
     if out.exists() and not overwrite:
