@@ -24,18 +24,15 @@ from ..methods.volume_lh import METHOD
 from ..model.exemplar import exemplar_source
 from ..model.exemplar3d import load_volume_exemplar
 from ..model.fields import FIELDS, field_input
+from ._blocks import run_to_output, zarr_output
 from ._common import (
     add_run_options,
     check_checkpoint,
-    claim_output,
-    dry_run,
     output_folder,
     parse_size,
     say,
-    write_result,
 )
 from ._options import given
-from ._progress import run_method
 
 __all__ = ["FIELD_HELP", "register"]
 
@@ -194,15 +191,11 @@ def _handler(args: argparse.Namespace, argv: list[str], method) -> int:
     warning = stationarity_warning(exemplar)
     if warning is not None and not args.quiet:
         say(f"npmrf3d {args.command}: warning: {warning}", error=True)
-    if args.dry_run:
-        return dry_run(method, config, per_view)
-    check_resources(method, config, per_view,
-                    hint="lower --size (or the exemplar size); --dry-run shows the estimate")
-    with claim_output(out, args.overwrite):
-        result = run_method(args, method, config, per_view, checkpoint=checkpoint, t_start=t_start,
-                            unit="pass", symbol="E", **extra)
-        middle = {"exemplar slice": np.ascontiguousarray(exemplar[exemplar.shape[0] // 2])}
-        title = f"{method.name}, field {config.vector_field}, {config.levels} levels, seed {config.seed}"
-        write_result(out, args, argv, args.command, result, middle, {"volume": args.exemplar}, title,
-                     method=method.name)
-    return 0
+    if not args.dry_run and not zarr_output(args):  # a Zarr volume made at once checks it itself
+        check_resources(method, config, per_view,
+                        hint="lower --size (or the exemplar size); --dry-run shows the estimate")
+    middle = {"exemplar slice": np.ascontiguousarray(exemplar[exemplar.shape[0] // 2])}
+    title = f"{method.name}, field {config.vector_field}, {config.levels} levels, seed {config.seed}"
+    return run_to_output(args, argv, args.command, method, config, per_view, {"volume": args.exemplar}, title,
+                         out=out, checkpoint=checkpoint, preview=middle, t_start=t_start, unit="pass", symbol="E",
+                         **extra)

@@ -27,7 +27,7 @@ from ..plotting import preview_figure, save_figure
 from .files import as_volume, json_text, package_versions, to_jsonable, write_npy, write_volume_tiff
 
 __all__ = ["OutputLock", "RUN_DERIVED", "RUN_FILES", "check_replaceable", "clean_stale_staging",
-           "config_dict", "run_record", "write_run"]
+           "config_dict", "new_staging", "replace_folder", "run_record", "write_run"]
 
 #: The files that make up one run folder, in the order they are moved into place
 #: (``run.json`` last, so its presence marks a complete run).
@@ -337,10 +337,8 @@ def write_run(
                 "pass overwrite=True (--overwrite) or choose another --out"
             )
         target = out_dir.absolute()
-        # stage in the nearest existing ancestor, so that a failure leaves no new folders behind
         anchor = _anchor(target)
-        staging = pathlib.Path(tempfile.mkdtemp(prefix=f".{target.name}.partial-{os.getpid()}-",
-                                                dir=anchor))
+        staging = new_staging(target)
         try:
             # mkdtemp makes 0700; the folder gets the mode mkdir would give it, or keeps its own
             mode = (stat.S_IMODE(target.stat().st_mode) if previous and overwrite
@@ -373,17 +371,41 @@ def _move_into_place(staging: pathlib.Path, target: pathlib.Path, anchor: pathli
                if e.name not in RUN_FILES and e.name not in RUN_DERIVED]
     for name in carried:
         os.rename(target / name, staging / name)
-    old = pathlib.Path(tempfile.mkdtemp(prefix=f".{target.name}.old-{os.getpid()}-", dir=anchor))
     try:
-        os.rename(target, old / "run")
-        try:
-            os.rename(staging, target)
-        except OSError:
-            os.rename(old / "run", target)
-            raise
+        replace_folder(staging, target)
     except OSError:
         for name in carried:
             os.rename(staging / name, target / name)
         raise
+
+
+def new_staging(target: str | os.PathLike[str]) -> pathlib.Path:
+    """A new empty hidden folder ``.NAME.partial-PID-RANDOM`` in the nearest existing ancestor of
+    ``target`` (so that a failure leaves no new folders behind), where a complete output is made
+    before :func:`replace_folder` puts it in place; the next run into ``target`` removes it if
+    its owner died (:func:`clean_stale_staging`)."""
+    target = pathlib.Path(target).absolute()
+    return pathlib.Path(tempfile.mkdtemp(prefix=f".{target.name}.partial-{os.getpid()}-",
+                                         dir=_anchor(target)))
+
+
+def replace_folder(new: str | os.PathLike[str], target: str | os.PathLike[str]) -> None:
+    """Put the complete folder ``new`` at ``target`` (same file system): renamed into place, its
+    parents created, when ``target`` is missing or an empty folder; else the old ``target`` is
+    renamed away first (``.NAME.old-PID-RANDOM`` beside it), put back if ``new`` cannot take
+    its place, and removed once it has."""
+    new, target = pathlib.Path(new), pathlib.Path(target).absolute()
+    if not target.exists() or (target.is_dir() and not any(target.iterdir())):
+        target.parent.mkdir(parents=True, exist_ok=True)
+        os.rename(new, target)  # the complete folder appears at once (over an empty one too)
+        return
+    old = pathlib.Path(tempfile.mkdtemp(prefix=f".{target.name}.old-{os.getpid()}-", dir=target.parent))
+    try:
+        os.rename(target, old / "run")
+        try:
+            os.rename(new, target)
+        except OSError:
+            os.rename(old / "run", target)
+            raise
     finally:
         shutil.rmtree(old, ignore_errors=True)

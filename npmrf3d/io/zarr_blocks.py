@@ -5,7 +5,9 @@ block writes whole chunks of its own and two writers never touch the same file. 
 values are written, an empty marker ``.npmrf3d-done/I.J.K`` inside the array's folder says it
 is finished; a rerun of the same command makes only the blocks without a marker (a block cut
 off half-way is made again whole). The array's attributes say what made it (the run's
-identity): a folder made by another run is refused, not mixed. The array is Zarr format 2,
+identity): a folder made by another run is refused, not mixed (the refusal names what
+differs). :func:`claim_volume` holds the output's lock for a whole run and keeps an old volume
+until the one replacing it is complete. The array is Zarr format 2,
 ``(N1, N2, N3, C)`` float32, which napari opens directly (``napari vol.zarr``; C = 3 shows as
 RGB). Used by the block runner of the synthesis methods (:mod:`npmrf3d.methods.blocks`) and
 the neural generator (:mod:`npmrf3d.methods.neural.zarr_volume`).
@@ -13,7 +15,10 @@ the neural generator (:mod:`npmrf3d.methods.neural.zarr_volume`).
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
 import itertools
+import json
 import os
 import pathlib
 import shutil
@@ -22,15 +27,15 @@ import numpy as np
 import zarr
 
 from ..errors import ParameterError
+from .runs import OutputLock, glob_escape, new_staging, replace_folder
 
-__all__ = ["DONE", "block_box", "block_indices", "finished_blocks", "open_blocks", "read_attributes",
-           "write_block"]
+__all__ = ["DONE", "NEXT", "block_box", "block_indices", "claim_volume", "clamp_block", "differences",
+           "finished_blocks", "next_folder", "open_blocks", "read_attributes", "volume_attrs", "write_block"]
 
 #: The folder of finished-block markers inside the array's folder.
 DONE = ".npmrf3d-done"
 #: What each identifying attribute is, for the refusal of a folder made by another run.
-_WHAT = {"npmrf3d_size": "size", "npmrf3d_block": "block", "npmrf3d_model_sha256": "model",
-         "npmrf3d_run": "method, settings, seed or exemplar"}
+_WHAT = {"npmrf3d_size": "size", "npmrf3d_block": "block", "npmrf3d_model_sha256": "model"}
 
 
 def block_indices(size, block: int) -> list[tuple[int, int, int]]:
@@ -54,33 +59,193 @@ def block_box(index, block: int, size) -> tuple[tuple[int, int, int], tuple[int,
     return origin, tuple(min(block, int(n) - o) for o, n in zip(origin, size))
 
 
+def volume_attrs(attrs: dict, size, block: int) -> dict:
+    """The identifying attributes of a volume: ``attrs`` (the run's identity, JSON values) with
+    its size and block."""
+    return {**attrs, "npmrf3d_size": [int(n) for n in size], "npmrf3d_block": int(block)}
+
+
+def clamp_block(block: int, size) -> int:
+    """The side of the blocks of a ``size`` volume asked for as ``block``: at most the volume's
+    largest side (one block then holds it all).
+
+    >>> clamp_block(2000, (16, 16, 8)), clamp_block(8, (16, 16, 16))
+    (16, 8)
+    """
+    return max(1, min(int(block), max(int(n) for n in size)))
+
+
 def open_blocks(out, *, size, channels: int, block: int, attrs: dict, overwrite: bool = False,
                 record: dict | None = None) -> None:
     """Create the Zarr array ``out`` for a ``size`` volume of ``channels`` channels in chunks of
     ``block``, with ``attrs`` (the run's identity) and ``record`` (what is said about it); or,
     when ``out`` holds an array of this run (the same ``attrs`` items, which must be JSON
-    values), keep it to resume. Anything else at ``out`` is refused
-    (:class:`npmrf3d.ParameterError`) unless ``overwrite``."""
+    values), keep it to resume. The array appears whole (made beside ``out`` and renamed into
+    place), never without its attributes. A folder that is not a Zarr volume of npmrf3d is
+    refused (:class:`npmrf3d.ParameterError`), and so is a volume of another run unless
+    ``overwrite``, which removes it at once (:func:`claim_volume` keeps it until the new one
+    is complete)."""
     out = pathlib.Path(out)
-    attrs = {**attrs, "npmrf3d_size": [int(n) for n in size], "npmrf3d_block": int(block)}
-    if out.exists():
-        if overwrite:
-            shutil.rmtree(out) if out.is_dir() else out.unlink()
-        else:
-            existing = read_attributes(out)
-            if existing is None:
-                raise ParameterError(f"output '{out}' exists and is not a Zarr volume of npmrf3d; "
-                                     f"pass --overwrite or choose another --out")
-            differ = [_WHAT.get(k, k) for k, v in attrs.items() if existing.get(k) != v]
-            if differ:
-                raise ParameterError(f"output '{out}' holds a volume of another {' and '.join(differ)}; "
-                                     f"pass --overwrite or choose another --out")
+    attrs = volume_attrs(attrs, size, block)
+    existing = _holds(out)
+    if existing is not None:
+        if not overwrite:
+            _refuse_other(out, attrs, existing)
             return
-    array = zarr.create_array(out, shape=(*(int(n) for n in size), int(channels)),
-                              chunks=(block, block, block, int(channels)), dtype="float32",
-                              zarr_format=2, fill_value=0.0)
-    array.attrs.update({**attrs, **({} if record is None else {"npmrf3d_record": record})})
-    os.makedirs(out / DONE, exist_ok=True)
+        shutil.rmtree(out)
+    staging = new_staging(out)
+    try:
+        array = zarr.create_array(staging, shape=(*(int(n) for n in size), int(channels)),
+                                  chunks=(block, block, block, int(channels)), dtype="float32",
+                                  zarr_format=2, fill_value=0.0, overwrite=True)
+        array.attrs.update({**attrs, **({} if record is None else {"npmrf3d_record": record})})
+        os.makedirs(staging / DONE, exist_ok=True)
+        replace_folder(staging, out)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+
+
+def _holds(out: pathlib.Path) -> dict | None:
+    """The identifying attributes of the npmrf3d volume at ``out``; None when there is nothing
+    there (or an empty folder); refused when something else is."""
+    if not out.exists():
+        return None
+    if not out.is_dir():
+        raise ParameterError(f"output '{out}' exists and is not a folder; choose another --out")
+    if not any(out.iterdir()):
+        return None
+    existing = read_attributes(out)
+    if existing is None or "npmrf3d_size" not in existing:
+        raise ParameterError(f"output '{out}' exists and is not a Zarr volume of npmrf3d (it is left "
+                             f"untouched); choose another --out")
+    return existing
+
+
+def _refuse_other(out: pathlib.Path, attrs: dict, existing: dict) -> None:
+    """Refuse the volume at ``out`` when its identity differs from ``attrs``, naming what differs."""
+    differ = differences(attrs, existing)
+    if differ:
+        raise ParameterError(f"output '{out}' holds a volume of another {'; '.join(differ)}; "
+                             f"pass --overwrite or choose another --out")
+
+
+def differences(attrs: dict, existing: dict) -> list[str]:
+    """What differs between this run's identifying ``attrs`` and an ``existing`` volume's, each
+    as ``what VALUE (this run: VALUE)``; a run's settings field by field.
+
+    >>> differences({"npmrf3d_size": [8, 8, 8], "npmrf3d_block": 8}, {"npmrf3d_size": [8, 8, 8], "npmrf3d_block": 4})
+    ['block 4 (this run: 8)']
+    """
+    found = []
+    for key, value in attrs.items():
+        old = existing.get(key)
+        if old == value:
+            continue
+        if key == "npmrf3d_run":
+            found.extend(_run_differences(value, old))
+        else:
+            found.append(f"{_WHAT.get(key, key)} {_show(old)} (this run: {_show(value)})")
+    return found
+
+
+def _run_differences(new: str, old) -> list[str]:
+    """The fields of two run identities (:func:`npmrf3d.methods.blocks.run_identity`) that differ."""
+    try:
+        new, old = json.loads(new), json.loads(old)
+    except (TypeError, ValueError):
+        return ["run (made by another version of npmrf3d)"]
+    found = []
+    if new.get("method") != old.get("method"):
+        found.append(f"method {old.get('method')} (this run: {new.get('method')})")
+    else:
+        mine, theirs = new.get("config") or {}, old.get("config") or {}
+        for name in sorted(set(mine) | set(theirs)):
+            if mine.get(name) != theirs.get(name):
+                found.append(f"{name} {_show(theirs.get(name))} (this run: {_show(mine.get(name))})")
+    if new.get("exemplars") != old.get("exemplars"):
+        found.append("exemplar")
+    return found or ["run"]
+
+
+def _show(value) -> str:
+    if isinstance(value, list) and all(isinstance(v, int) for v in value):
+        return "x".join(map(str, value))
+    return str(value)
+
+
+#: The marker of the folder beside a volume where a resumable run that replaces it is made:
+#: ``.NAME.next-KEY``, the key from the output and the run's identity (:func:`next_folder`).
+NEXT = ".next-"
+
+
+def next_folder(out, attrs: dict) -> pathlib.Path:
+    """Where a resumable run of identity ``attrs`` (:func:`volume_attrs`) that replaces the
+    volume at ``out`` makes its volume: the same folder for the same command, so a rerun resumes
+    it."""
+    out = pathlib.Path(out).absolute()
+    key = hashlib.sha256(json.dumps({"out": str(out), **attrs}, sort_keys=True, default=str).encode())
+    return out.parent / f".{out.name}{NEXT}{key.hexdigest()[:16]}"
+
+
+@contextlib.contextmanager
+def claim_volume(out, *, attrs: dict, overwrite: bool = False, resume: bool = True):
+    """``with claim_volume(out, attrs=..., ...) as place:`` the folder to make the Zarr volume
+    of ``out`` in, under the exclusive :class:`npmrf3d.io.runs.OutputLock` of ``out`` (a second
+    writer is refused at once).
+
+    ``attrs`` is the run's identity with its size and block (:func:`volume_attrs`). Whatever is
+    at ``out`` is refused unless it is nothing, an empty folder or a Zarr volume of npmrf3d, and
+    a volume is refused unless ``overwrite`` or, for a ``resume``-able (block-wise) run, it is
+    this run's (the refusal names what differs). A resumable run is made in place (created, or
+    resumed); one that replaces a volume in ``NEXT`` folder beside it (:func:`next_folder`,
+    resumed by the same command); a run made at once in a staging folder. A staged volume takes
+    the place of ``out`` only once complete (the old one stays until then). On failure or
+    interruption a staging folder, or a resumable volume without a finished block, is removed,
+    so nothing is left that cannot be resumed. Once a volume is in place, the ``NEXT`` folders
+    of other runs into ``out`` (abandoned replacements) are removed.
+    """
+    out = pathlib.Path(out)
+    with OutputLock(out, what="output"):
+        existing = _holds(out)
+        if existing is not None and not overwrite:
+            _refuse_other(out, attrs, existing)
+            if not resume:
+                raise ParameterError(f"output '{out}' already holds the volume of this run; pass "
+                                     f"--overwrite to make it again or choose another --out")
+        if not resume:
+            place = new_staging(out)
+        elif existing is None or not overwrite:
+            place = out
+        else:
+            place = next_folder(out, attrs)
+        mine = place != out or existing is None  # what this run made, and may take away again
+        missing = _missing_folders(out) if place == out else []
+        was_empty = place == out and out.is_dir()
+        try:
+            yield place
+        except BaseException:
+            if mine and not (resume and finished_blocks(place)):
+                shutil.rmtree(place, ignore_errors=True)
+                if was_empty:
+                    out.mkdir(exist_ok=True)
+                for folder in missing:
+                    with contextlib.suppress(OSError):
+                        folder.rmdir()
+            raise
+        if place != out:
+            replace_folder(place, out)
+        for other in out.absolute().parent.glob(glob_escape(f".{out.name}{NEXT}") + "*"):
+            shutil.rmtree(other, ignore_errors=True)
+
+
+def _missing_folders(out: pathlib.Path) -> list[pathlib.Path]:
+    """``out`` and its ancestors that do not exist yet, deepest first."""
+    missing = []
+    folder = out.absolute()
+    while not folder.exists():
+        missing.append(folder)
+        folder = folder.parent
+    return missing
 
 
 def read_attributes(out) -> dict | None:

@@ -35,18 +35,21 @@ from ..config import SynthesisMethod
 from ..io.zarr_blocks import (
     block_box,
     block_indices,
+    claim_volume,
+    clamp_block,
     finished_blocks,
     open_blocks,
+    volume_attrs,
     write_block,
 )
 from ..io.checkpoints import exemplar_digest
 from ..model.pyramid import level_shape
 from ..model.regions import RegionPlan, plan_region
-from ..resources import Estimate, available_memory, check_memory, format_bytes
+from ..resources import Estimate, available_memory, check_memory, format_bytes, format_seconds
 from . import METHODS
 
-__all__ = ["BlockPlan", "block_plan", "blockwise_method", "make_block", "run_identity", "shared_exemplars", "synthesize_blocks",
-           "write_zarr"]
+__all__ = ["BlockPlan", "block_plan", "blockwise_method", "make_block", "run_identity", "shared_exemplars",
+           "synthesize_blocks", "write_zarr", "zarr_attrs"]
 
 
 def blockwise_method(method: SynthesisMethod, config, per_view) -> tuple[int, ...]:
@@ -80,6 +83,13 @@ def run_identity(method: SynthesisMethod, config, per_view) -> str:
                        "exemplars": {v: exemplar_digest(a) for v, a in per_view.items()}}, sort_keys=True, default=str)
 
 
+def zarr_attrs(method: SynthesisMethod, config, per_view, block: int) -> dict:
+    """The identifying attributes of ``config``'s Zarr volume in blocks of ``block`` (clamped to
+    the volume, :func:`npmrf3d.io.zarr_blocks.clamp_block`)."""
+    return volume_attrs({"npmrf3d_run": run_identity(method, config, per_view)}, config.size,
+                        clamp_block(block, config.size))
+
+
 def shared_exemplars(per_view: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
     """``per_view`` with views of equal exemplars sharing one array: the methods treat an
     exemplar shared by views once (random numbers are drawn per distinct exemplar), and a task
@@ -111,25 +121,46 @@ class BlockPlan:
     cone: RegionPlan
     memory: Estimate
     overhead: float
+    block: int
+    seconds: float | None = None
 
     def describe(self) -> str:
         frames = " < ".join("x".join(map(str, f.shape)) for f in reversed(self.cone.frames) if f is not None)
         whole = sum(f is None for f in self.cone.frames)
+        plural = "s" * (self.blocks != 1)
         if whole == len(self.cone.frames):
-            return (f"{self.blocks} blocks; every level made once, whole, by the first block, the others "
-                    f"cut from it; {self.memory.describe()}")
+            return (f"{self.blocks} block{plural} of {self.block}; every level made once, whole, by the first "
+                    f"block, the others cut from it; {self.memory.describe()}")
         shared = ("the coarsest level made once, whole; " if whole == 1 else
                   f"the coarsest {whole} levels made once, whole; " if whole else "")
-        return (f"{self.blocks} blocks; {shared}each block made from a cone of {frames} voxels, "
-                f"{self.overhead:.1f}x the voxels of the volume's own levels; one block "
+        return (f"{self.blocks} block{plural} of {self.block}; {shared}each block made from a cone of {frames} "
+                f"voxels, {self.overhead:.1f}x the voxels of the volume's own levels; one block "
                 f"{self.memory.describe()}")
+
+    def total(self, workers: int = 1, scheduler: str | None = None) -> str:
+        """What the whole run needs: its time (the work of every cone, at the estimate's rate)
+        and the memory of the workers that hold a cone at once."""
+        time = ("" if self.seconds is None else
+                f"roughly {format_seconds(self.seconds)} of work on 2 cores for the {self.blocks} "
+                f"block{'s' * (self.blocks != 1)}, ")
+        if scheduler is not None:
+            held = f"about {format_bytes(self.memory.bytes)} in each worker of the scheduler"
+        elif workers == 1:
+            held = f"at most about {format_bytes(self.memory.bytes)} (one block at a time)"
+        else:
+            held = (f"at most about {format_bytes(workers * self.memory.bytes)} ({workers} workers "
+                    f"holding a block each)")
+        return f"in all: {time}{held}"
 
 
 def block_plan(method: SynthesisMethod, per_view, config, *, block: int) -> BlockPlan:
-    """The :class:`BlockPlan` of making ``config``'s volume in blocks of side ``block``: the
-    memory of the first (largest) block's cone from the method's estimate at the cone's finest
-    region, and the voxels of all cones against the pyramid's."""
+    """The :class:`BlockPlan` of making ``config``'s volume in blocks of side ``block`` (at most
+    the volume's largest side): the memory of the first (largest) block's cone from the
+    method's estimate at the cone's finest region, the voxels of all cones against the
+    pyramid's, and the whole run's time (the method's estimate of the volume made at once,
+    times that share)."""
     size = tuple(config.size)
+    block = clamp_block(block, size)
     aprons = blockwise_method(method, config, per_view)
     levels = config.levels
     indices = block_indices(size, block)
@@ -149,7 +180,10 @@ def block_plan(method: SynthesisMethod, per_view, config, *, block: int) -> Bloc
              + [level_shape(size, level) for level, f in enumerate(cone.frames) if f is None][:1])
     memory = max((method.resources(dataclasses.replace(config, size=shape, levels=1), per_view) for shape in sizes),
                  key=lambda e: e.bytes)
-    return BlockPlan(len(indices), cone, memory, cone_voxels / pyramid)
+    # the whole run's time: the volume made at once, scaled by the cones' share of repeated voxels
+    at_once = method.resources(config, per_view).seconds
+    seconds = None if at_once is None else at_once * cone_voxels / pyramid
+    return BlockPlan(len(indices), cone, memory, cone_voxels / pyramid, block, seconds)
 
 
 #: The checkpoint of the levels that run whole, inside the Zarr folder (shared by all blocks).
@@ -178,9 +212,13 @@ def write_zarr(method: SynthesisMethod, per_view, config, out, *, block: int, re
     method, per_view, config
         A registered method with aprons, its exemplars and a configuration with ``blockwise``.
     out : path
-        The Zarr folder: created, or resumed when it holds this run's unfinished volume.
+        The Zarr folder: created, or resumed when it holds this run's unfinished volume, under
+        its lock (:func:`npmrf3d.io.zarr_blocks.claim_volume`: a second writer is refused).
     block : int
-        Side of the blocks and of the Zarr chunks.
+        Side of the blocks and of the Zarr chunks (at most the volume's largest side).
+    overwrite : bool
+        Replace a volume of another run: the new one is made beside it (resumed by the same
+        call) and takes its place only once complete.
     record : dict
         The run's record (JSON values), kept in the array's attributes.
     workers, threads : int
@@ -204,17 +242,24 @@ def write_zarr(method: SynthesisMethod, per_view, config, out, *, block: int, re
         this one with one local worker), ``plan`` (:meth:`BlockPlan.describe`) and the estimate
         of one block (``block_bytes``, ``block_memory``).
     """
+    block = clamp_block(block, config.size)
     plan = block_plan(method, per_view, config, block=block)
     if memory_per_worker is None:
         available = available_memory()
         memory_per_worker = None if available is None else available // max(1, workers if scheduler is None else 1)
     check_memory(plan.memory, available=memory_per_worker,
                  hint="use a smaller --block (each worker holds one block's cone), or fewer --workers")
-    out = pathlib.Path(out)
-    identity = run_identity(method, config, per_view)
-    open_blocks(out, size=config.size, channels=next(iter(per_view.values())).shape[-1], block=block,
-                attrs={"npmrf3d_run": identity}, record=json.loads(json.dumps(record, default=str)),
-                overwrite=overwrite)
+    attrs = zarr_attrs(method, config, per_view, block)
+    with claim_volume(out, attrs=attrs, overwrite=overwrite) as place:
+        open_blocks(place, size=config.size, channels=next(iter(per_view.values())).shape[-1], block=block,
+                    attrs={"npmrf3d_run": attrs["npmrf3d_run"]}, record=json.loads(json.dumps(record, default=str)))
+        return _write_blocks(method, per_view, config, place, block=block, workers=workers, threads=threads,
+                             scheduler=scheduler, progress=progress, plan=plan)
+
+
+def _write_blocks(method: SynthesisMethod, per_view, config, out: pathlib.Path, *, block: int, workers: int,
+                  threads: int, scheduler: str | None, progress, plan: BlockPlan) -> dict:
+    """The blocks of ``out`` (an open array of this run) that have no marker yet, made and written."""
     indices = block_indices(config.size, block)
     finished = finished_blocks(out)
     # the largest blocks first, so that the last ones, which a worker may make while the others
