@@ -9,6 +9,7 @@ without the extra.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import os
 import pathlib
 import time
@@ -19,6 +20,7 @@ from .. import _validation as check
 from .. import data
 from ..errors import ParameterError
 from ..io.files import atomic_write, write_volume_tiff
+from ..io.zarr_blocks import claim_volume, volume_attrs
 from ..methods import neural
 from ..methods.neural import _extra
 from ..methods.neural.config import (
@@ -39,6 +41,7 @@ from ._common import (
     say,
     view_sources,
 )
+from ._blocks import kept_on_interrupt
 from ._progress import CountProgress
 
 __all__ = ["register"]
@@ -133,18 +136,25 @@ def _generate(args: argparse.Namespace, argv) -> int:
         check.integer("workers", args.workers, low=1)
     except ParameterError as exc:
         raise ParameterError("--" + str(exc)) from None
-    _check_new_file(out, args.overwrite or out.suffix == ".zarr", "output")
+    zarr_out = out.suffix.lower() == ".zarr"
+    _check_new_file(out, args.overwrite or zarr_out, "output")
+    if zarr_out and any(origin):
+        raise ParameterError(f"--origin must be 0,0,0 for a Zarr volume (it holds [0, size)); got {args.origin}")
+    if zarr_out and args.seed is not None:
+        raise ParameterError("--seed does not apply to a Zarr volume, whose blocks use the model's own "
+                             "seed: drop --seed, or write .npy or .tif")
     model = neural.load_model(args.model)
     _threads(args.threads)
     t0 = time.perf_counter()
-    if out.suffix == ".zarr":
-        if any(origin):
-            raise ParameterError(f"--origin must be 0,0,0 for a Zarr volume (it holds [0, size)); got {args.origin}")
+    if zarr_out:
+        digest = hashlib.sha256(pathlib.Path(args.model).read_bytes()).hexdigest()
+        attrs = volume_attrs({"npmrf3d_model_sha256": digest}, size, args.block)
         bar = CountProgress("blocks", unit="block", enabled=not args.quiet)
         try:
-            summary = neural.write_zarr(args.model, out, size=size, block=args.block,
-                                        scheduler=args.scheduler, workers=args.workers,
-                                        overwrite=args.overwrite, progress=lambda d, n: bar(d, n, None))
+            with kept_on_interrupt(args, out, attrs), claim_volume(out, attrs=attrs, overwrite=args.overwrite) as place:
+                summary = neural.write_zarr(args.model, place, size=size, block=args.block,
+                                            scheduler=args.scheduler, workers=args.workers,
+                                            progress=lambda d, n: bar(d, n, None))
         finally:
             bar.close()
         if not args.quiet:
@@ -245,6 +255,8 @@ def register(commands, formatter_class) -> None:
                      help="Zarr: a running Dask scheduler's address, or local (default: none = a local cluster of --workers)")
     gen.add_argument("--workers", type=int, default=ZARR_WORKERS, metavar="N", help="Zarr: local worker processes")
     gen.add_argument("--threads", type=positive_int, default=None, metavar="N", help="torch threads (default: none = torch's choice)")
-    gen.add_argument("--overwrite", action="store_true", help="replace an existing output (a Zarr volume: start afresh)")
+    gen.add_argument("--overwrite", action="store_true",
+                     help="replace an existing output (a Zarr volume: made afresh beside it, and put in its place "
+                          "once complete)")
     gen.add_argument("--quiet", action="store_true", help="print nothing but errors")
     gen.set_defaults(handler=_generate)
