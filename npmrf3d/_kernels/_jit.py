@@ -12,6 +12,7 @@ speed-up in docs/performance.md).
 from __future__ import annotations
 
 import os
+import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -137,4 +138,37 @@ def single_threaded_blas() -> Iterator[None]:
     (OpenBLAS's own threads would also oversubscribe the cores).
     """
     with threadpool_limits(limits=1, user_api="blas"):
+        yield
+
+
+def _package_kernel(dispatcher) -> bool:
+    """Whether a dispatcher numba compiles is one of this package's kernels (not one of numba's
+    own helpers, compiled as part of a kernel)."""
+    module = getattr(getattr(dispatcher, "py_func", None), "__module__", None) or ""
+    return module.split(".", 1)[0] == __name__.split(".", 1)[0]
+
+
+@contextmanager
+def on_first_compile(callback: Callable[[], None]) -> Iterator[None]:
+    """Call ``callback()`` once, when the first of the package's kernels is compiled inside the
+    block: a kernel that numba's disk cache (:data:`CACHE_DIR`) does not hold yet (the first run
+    on a machine or after an upgrade, about a minute for a run of the default).
+
+    numba announces a compilation (its ``numba:compile`` event) and not a kernel loaded from
+    the cache, so a warm run calls nothing and pays nothing but one listener in a list.
+    """
+    from numba.core import event
+
+    fired = threading.Event()
+
+    class FirstCompile(event.Listener):
+        def on_start(self, ev):
+            if not fired.is_set() and _package_kernel(ev.data.get("dispatcher")):
+                fired.set()
+                callback()
+
+        def on_end(self, ev):
+            pass
+
+    with event.install_listener("numba:compile", FirstCompile()):
         yield

@@ -1,5 +1,6 @@
-"""The progress bars of the command line, on stderr: one per pyramid level, one over a
-study's runs, one over a count of steps (training steps, Zarr blocks)."""
+"""The progress lines of the command line, on stderr: one over a run's pyramid, one over a
+study's runs, one over a count of steps (training steps, Zarr blocks); and the one line said
+when the kernels compile."""
 
 from __future__ import annotations
 
@@ -12,16 +13,38 @@ from tqdm import tqdm
 
 from ..model.pyramid import level_shape
 from . import _interrupt
-from ._common import say
+from ._common import PROG, say
+
+
+def side_text(shape) -> str:
+    """``16^3`` for a cube, ``16x16x32`` otherwise."""
+    return f"{shape[0]}^3" if len(set(shape)) == 1 else "x".join(map(str, shape))
+
+
+def value_symbol(config) -> str:
+    """What a run's level value is (its ``history``), for the progress line: ``T``, the global
+    temperature, for the full support (ICM's sum of per-voxel temperatures, or the annealing
+    temperature); ``E``, the mean patch energy, for the coherent support."""
+    return "T" if getattr(config, "support", None) == "full" else "E"
 
 
 class LevelProgress:
-    """One tqdm bar per level on stderr: steps (``unit``) done, a level quantity as postfix.
+    """One line on stderr over a whole pyramid: the share of the run done, the time left, the
+    level running, its step and its value (``symbol``, e.g. ``E=`` an energy, ``T=`` a temperature).
 
     Called as ``progress(level, step, steps, value)`` with ``step = 0`` at the start of each
-    level (:func:`npmrf3d.model.pyramid.run_pyramid`): sweeps and the global temperature ``T`` for
-    synth, iterations and the energy ``E`` for NP_K.
+    level (:func:`npmrf3d.model.pyramid.run_pyramid`), levels from the coarsest (the first one
+    called, or the first one left to run after a checkpoint) to 0. Each level's share of the run
+    is its share of the voxels (a finer level holds 8x those of the one before), and within a
+    level the share of its ``steps`` done (a count its method may correct as it goes). The line
+    counts in the steps of the level running: its ``total`` is the whole run in those steps, so
+    the time left, (total - done) / (done / elapsed), is the same whatever the unit. A coarser
+    level called after a finer one starts a new pyramid (the segmented preset's second one) on
+    a new line. ``unit`` names a step (``sweep``, ``iter``, ``pass``): the line shows the level's
+    step count beside the share of the whole run.
     """
+
+    BAR_FORMAT = "{desc}: {percentage:3.0f}%|{bar}| {elapsed}<{remaining}{postfix}"
 
     def __init__(self, size: tuple[int, int, int], enabled: bool, unit: str = "sweep",
                  symbol: str = "T"):
@@ -30,25 +53,39 @@ class LevelProgress:
         self.unit = unit
         self.symbol = symbol
         self.bar = None
+        self.level = None
+        self.weights: dict[int, int] = {}  # voxels per level of the pyramid running
+        self.done = 0  # voxels of its finished levels
 
     def __call__(self, level: int, sweep: int, max_sweeps: int, temperature: float) -> None:
         _interrupt.check()  # a Ctrl-C that a callback from C swallowed ends the run here
         if not self.enabled:
             return
-        if sweep == 0 or self.bar is None:
-            self.close()
-            shape = level_shape(self.size, level)
-            side = f"{shape[0]}^3" if len(set(shape)) == 1 else "x".join(map(str, shape))
-            self.bar = tqdm(total=max_sweeps, desc=f"level {level} ({side})", unit=self.unit,
-                            file=sys.stderr, leave=True, dynamic_ncols=True)
+        steps = max(int(max_sweeps), 1)
+        step = min(max(int(sweep), 0), steps)
+        desc = (f"{side_text(self.size)} volume: level {level} ({side_text(level_shape(self.size, level))}), "
+                f"{self.unit} {step}/{steps}")
+        if self.bar is None or level > self.level:
+            self._start(level, desc)
+        elif level < self.level:  # the previous level finished
+            self.done += self.weights[self.level]
+        self.level = level
+        self.bar.set_description_str(desc, refresh=False)
         if not math.isnan(temperature):  # nan: no value yet at the start of a level
             self.bar.set_postfix({self.symbol: f"{temperature:.4g}"}, refresh=False)
-        if max_sweeps != self.bar.total:  # the method corrected its expected step count
-            self.bar.total = max_sweeps
-        if sweep > self.bar.n:
-            self.bar.update(sweep - self.bar.n)
-        else:
-            self.bar.refresh()
+        scale = steps / self.weights[level]  # steps per voxel of this level
+        self.bar.total = sum(self.weights.values()) * scale
+        self.bar.n = self.done * scale + step
+        self.bar.refresh()
+
+    def _start(self, level: int, desc: str) -> None:
+        """A new line for a pyramid whose coarsest level (left to run) is ``level``."""
+        self.close()
+        self.weights = {k: math.prod(level_shape(self.size, k)) for k in range(level, -1, -1)}
+        self.done = 0
+        # smoothing 0: the time left is from the average rate since the start, not the last step
+        self.bar = tqdm(total=1, desc=desc, file=sys.stderr, leave=True, dynamic_ncols=True,
+                        smoothing=0, bar_format=self.BAR_FORMAT, unit=self.unit)
 
     def note(self, text: str) -> None:
         """One line on stderr between levels (a method's optional hook: the segmented preset
@@ -58,12 +95,27 @@ class LevelProgress:
         if self.enabled:
             say(text, error=True)
 
+    def finish(self) -> None:
+        """The run is done: the line ends full (a level may stop before the steps it expected)."""
+        if self.bar is not None:
+            self.bar.n = self.bar.total
+        self.close()
+
     def close(self) -> None:
         if self.bar is not None:
-            self.bar.total = self.bar.n
             self.bar.refresh()
             self.bar.close()
             self.bar = None
+
+
+def compile_notice(enabled: bool):
+    """What to call when the kernels start compiling (:func:`npmrf3d._kernels._jit.on_first_compile`):
+    one line on stderr, printed above a progress line if one is drawn; None when ``enabled`` is
+    false (``--quiet``)."""
+    if not enabled:
+        return None
+    return lambda: tqdm.write(f"{PROG}: compiling the kernels once (about a minute the first "
+                              f"time; later runs load them from the cache)", file=sys.stderr)
 
 
 class RunsProgress:
@@ -116,12 +168,15 @@ class CountProgress:
 
 
 def run_method(args: argparse.Namespace, method, config, per_view: dict, *, checkpoint=None,
-               t_start: float | None = None, unit: str = "sweep", symbol: str = "T", **inputs):
-    """``method.run`` seeded by ``config.seed`` with a bar per level (none with ``--quiet``)."""
+               t_start: float | None = None, unit: str = "sweep", symbol: str | None = None, **inputs):
+    """``method.run`` seeded by ``config.seed`` with one progress line over the run (none with
+    ``--quiet``); ``symbol`` names the level value (None: :func:`value_symbol` of ``config``)."""
+    symbol = value_symbol(config) if symbol is None else symbol
     progress = LevelProgress(config.size, enabled=not args.quiet, unit=unit, symbol=symbol)
     try:
         result = method.run(per_view, config, np.random.default_rng(config.seed), progress=progress,
                             checkpoint=checkpoint, t_start=t_start, **inputs)
+        progress.finish()
     finally:
         progress.close()
     _interrupt.check()  # an interrupt swallowed after the last progress tick: write nothing

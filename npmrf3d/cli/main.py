@@ -15,14 +15,17 @@ Sub-commands are the modules of :data:`COMMANDS`, a static list: each has
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 import warnings
 
 from .. import __version__
+from .._kernels._jit import on_first_compile
 from ..errors import InputNote
 from . import (
     _interrupt,
+    _streams,
     baseline,
     coherent,
     info,
@@ -35,6 +38,7 @@ from . import (
 from ..io.zarr_blocks import finished_blocks
 from ._blocks import zarr_output
 from ._common import PROG, HelpFormatter, Parser, error, guarded, say
+from ._progress import compile_notice
 from ._options import environment_problem, given_options, option_strings
 
 __all__ = ["COMMANDS", "build_parser", "main"]
@@ -97,39 +101,72 @@ def _print_notes(*, quiet: bool) -> None:
     warnings.showwarning = note
 
 
+#: Commands whose whole purpose is to print: their output lost is their failure (exit 1).
+PRINTING = ("info",)
+
+
+def _prints_only(args) -> bool:
+    """Whether the command's output is all it does (``info``, ``--help``, ``--version``,
+    ``--dry-run``), so that output lost is the command failed."""
+    return args is None or args.command in PRINTING or bool(getattr(args, "dry_run", False))
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Run the command line; return the exit code (0 ok, 2 user error, 130 interrupted)."""
+    """Run the command line; return the exit code (0 ok, 1 the output of a command that only
+    prints was lost, 2 user error, 130 interrupted).
+
+    Standard output or error closed or full never stops a command's work
+    (:func:`npmrf3d.cli._streams.guard_streams`): a run still writes its folder and exits 0."""
+    with _streams.guard_streams() as streams:
+        args, code = _main(argv)
+        reason = _streams.lost_reason(streams["stdout"])
+        if code == 0 and reason is not None and _prints_only(args):
+            if reason:  # a reader that hung up ('npmrf3d info | head') is not reported
+                say(f"{PROG}: error: cannot write to standard output: {reason}", error=True)
+            return 1
+        return code
+
+
+def _main(argv: list[str] | None) -> tuple[argparse.Namespace | None, int]:
+    """(the parsed arguments or None, the exit code): the body of :func:`main`."""
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help, --version and usage errors (argparse printed them)
-        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+        return None, exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
     problem = environment_problem()
     if problem is not None:
-        return error(problem)
+        return args, error(problem)
     args.given = given_options(build_parser(), argv)  # what the user wrote, not the defaults
     option_names = {**{name: "--" + name.replace("_", "-") for name in OPTION_NAMES},
                     **neural.OPTION_NAMES, **option_strings(parser, args)}
+    quiet = bool(getattr(args, "quiet", False))
     # Ctrl-C and SIGTERM end a run alike (one line, exit 130), latched so that none is lost
     previous = _interrupt.install()
     try:
-        with warnings.catch_warnings():
-            _print_notes(quiet=bool(getattr(args, "quiet", False)))
-            return guarded(args.handler, args, argv, option_names)
+        with warnings.catch_warnings(), _compile_notice(quiet):
+            _print_notes(quiet=quiet)
+            return args, guarded(args.handler, args, argv, option_names)
     except KeyboardInterrupt:
         say(f"{PROG}: {interrupted_message(args)}", error=True)
-        return 130
-    except BrokenPipeError:  # e.g. 'npmrf3d info | head': stop quietly, as other tools do
+        return args, 130
+    except BrokenPipeError:  # a write around the guarded streams: stop quietly, as other tools do
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
-        return 1
+        return args, 1
     except Exception:
         # a Ctrl-C that landed inside numba's compiler leaves it half-done, and the next call
         # fails ("no compiled object yet"): that failure is the interrupt's, not a bug
         if _interrupt.pending():
             say(f"{PROG}: {interrupted_message(args)}", error=True)
-            return 130
+            return args, 130
         raise
     finally:
         _interrupt.restore(previous)
+
+
+def _compile_notice(quiet: bool):
+    """One line on stderr when the kernels compile (a cold cache), none with ``--quiet``."""
+    notice = compile_notice(enabled=not quiet)
+    return contextlib.nullcontext() if notice is None else on_first_compile(notice)

@@ -25,6 +25,7 @@ from ._common import (
     say,
 )
 from ._progress import RunsProgress
+from ._streams import guard_streams
 from .synth import OPTION_NAMES
 
 __all__ = ["register", "study_main"]
@@ -171,8 +172,9 @@ def study_main(name: str, argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
-    try:
-        return guarded(lambda a, _: _run(a, name), args, argv, OPTION_NAMES)
-    except KeyboardInterrupt:
-        say(f"{PROG}: interrupted", error=True)
-        return 130
+    with guard_streams():  # stdout or stderr closed or full: the study still runs
+        try:
+            return guarded(lambda a, _: _run(a, name), args, argv, OPTION_NAMES)
+        except KeyboardInterrupt:
+            say(f"{PROG}: interrupted", error=True)
+            return 130
