@@ -5,7 +5,13 @@ Prints a table (one row per view plus the mean, one column per metric of
 the output folder, each atomically and only after every number was computed, so a user error
 leaves no file behind. See ``docs/metrics.md`` for the definitions.
 
-A run folder it reads or writes (one holding a run's files) is locked for the whole command
+Besides ``.npy`` and TIFF files it reads a Zarr volume folder (``--out VOL.zarr`` of the
+commands that make volumes), refusing one whose blocks are not all made. Each metric is also
+reported as a ratio to the structureless control, beside the floor
+(:mod:`npmrf3d.analysis.metrics.references`).
+
+A run folder it reads or writes (one holding a run's files), or a Zarr volume it reads, is
+locked for the whole command
 (:class:`npmrf3d.io.runs.OutputLock`, the lock every run takes on its ``--out``): a run that
 is writing or ``--overwrite``-replacing the folder makes the command refuse at once, and no run
 can replace the folder while the metrics of its volume are computed and written.
@@ -22,6 +28,7 @@ from datetime import datetime, timezone
 from typing import Any
 
 import numpy as np
+import zarr
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
@@ -29,8 +36,10 @@ from .. import _validation as check
 from .. import io
 from ..analysis import metrics
 from ..analysis.metrics import METRICS
+from ..analysis.metrics.references import RATIO_METRICS, against_controls, floor
 from ..errors import ParameterError
 from ..io.runs import RUN_FILES, OutputLock
+from ..io.zarr_blocks import block_indices, finished_blocks
 from ..model.exemplar import BUNDLED_PREFIX, exemplar_source, load_exemplar
 from ..model.neighbourhood import VIEWS
 from ..plotting import save_figure
@@ -52,12 +61,17 @@ def register(commands: argparse._SubParsersAction, formatter_class: type) -> Non
         description=(
             "Compare each constrained view's exemplar with all the volume's slices orthogonal\n"
             "to that view (pooled) and print one row per view plus the mean. Lower is better;\n"
-            "0 = indistinguishable by that measure. Definitions and settings: docs/metrics.md.\n"
+            "0 = indistinguishable by that measure. Each metric is also given as a ratio to a\n"
+            "structureless control (the exemplar's pixels drawn independently, in the volume's\n"
+            "shape: 1 = no structure), beside the floor (the exemplar's right half measured\n"
+            "against its left half: another crop of the same texture, about what a perfect volume\n"
+            "scores). Definitions and settings: docs/metrics.md.\n"
             f"Writes {' and '.join(OUT_FILES)} into the output folder.\n\n"
             "Integer images are scaled as synth does (uint8 / 255, uint16 / 65535), so a\n"
             "float volume written by synth compares with the 8-bit exemplar it came from.\n\n"
             "examples:\n"
             "  npmrf3d metrics bundled:gravel64 npmrf3d-out/volume.npy\n"
+            "  npmrf3d metrics bundled:gravel64 big.zarr\n"
             "  npmrf3d metrics wood.png wood/volume.tif --views front,top --out wood/metrics"
         ),
         formatter_class=formatter_class,
@@ -69,7 +83,8 @@ def register(commands: argparse._SubParsersAction, formatter_class: type) -> Non
     )
     parser.add_argument(
         "volume", metavar="VOLUME",
-        help="the volume: a .npy array (N1,N2,N3) or (N1,N2,N3,C), or a .tif written by synth",
+        help="the volume: a .npy array (N1,N2,N3) or (N1,N2,N3,C), a .tif written by synth, or a "
+             "Zarr volume (a .zarr folder) made with --out VOL.zarr",
     )
     parser.add_argument(
         "--views", default=",".join(VIEWS), metavar="V[,V...]",
@@ -109,17 +124,45 @@ def _stored_dtype(path: pathlib.Path) -> np.dtype | None:
         return None
 
 
+def _zarr_volume(path: pathlib.Path) -> np.ndarray:
+    """The float32 (N1, N2, N3, C) array of a Zarr volume folder; a volume whose blocks are not
+    all made, or a folder that is no Zarr volume, is refused in one line."""
+    try:
+        array = zarr.open_array(path, mode="r")
+    except Exception:  # zarr raises several types for a folder that is not an array
+        inside = [name for name in ("volume.npy", "volume.tif") if (path / name).is_file()]
+        hint = (f"; its volume is '{path / inside[0]}'" if inside else
+                "; give a .npy or .tif volume file, or a Zarr volume folder made with --out VOL.zarr")
+        raise ParameterError(f"volume '{path}' is a folder and not a Zarr volume{hint}") from None
+    size, block = array.attrs.get("npmrf3d_size"), array.attrs.get("npmrf3d_block")
+    if size is not None and block is not None:
+        total = len(block_indices(size, int(block)))
+        done = len(finished_blocks(path))
+        if done < total:
+            raise ParameterError(f"Zarr volume '{path}' is not complete ({done} of {total} blocks "
+                                 "made); run the command that makes it again to finish it")
+    if array.ndim not in (3, 4):
+        raise ParameterError(f"Zarr volume '{path}' must hold an array of shape (N1, N2, N3) or "
+                             f"(N1, N2, N3, C); got shape {array.shape}")
+    data = np.asarray(array[...])
+    return io.as_volume(data if data.ndim == 4 else data[..., np.newaxis], name=f"Zarr volume '{path}'")
+
+
 def _read_volume(text: str) -> tuple[np.ndarray, str]:
     """The volume as float (N1, N2, N3, C), integers scaled like exemplars; and its stored dtype."""
     if not text.strip():
         raise ParameterError("volume file name is empty")
     path = pathlib.Path(text)
-    volume = io.read_volume(path)
+    if path.is_dir():
+        volume = _zarr_volume(path)
+        dtype = np.dtype(np.float32)
+    else:
+        volume = io.read_volume(path)
+        dtype = _stored_dtype(path)
     bad = int((~np.isfinite(volume)).sum())
     if bad:
         raise ParameterError(f"volume file '{path}' contains {bad} NaN or Inf values; "
                              "clean or mask them first")
-    dtype = _stored_dtype(path)
     if dtype == np.uint8:
         volume = volume / np.float32(255.0)
     elif dtype == np.uint16:
@@ -151,14 +194,43 @@ def _read_exemplars(args: argparse.Namespace, views: tuple[str, ...]
 # --------------------------------------------------------------------------- outputs
 
 
-def _table(result: dict[str, Any]) -> str:
-    rows = [*result["per_view"].items(), ("mean", result["mean"])]
+def _row(name: str, values: dict[str, float], names, width: int) -> str:
+    return f"{name:<{width}}  " + "  ".join(
+        f"{values[m]:>{max(len(m), 10)}.4g}" if m in values else f"{'-':>{max(len(m), 10)}}"
+        for m in names)
+
+
+def _table(result: dict[str, Any], references: dict[str, Any]) -> str:
+    """The raw metrics per view, their mean, the control's and the floor's; then the ratios to
+    the control, one row per metric; then what the control and the floor are."""
+    floor = references["floor"]
+    rows = [*result["per_view"].items(), ("mean", result["mean"]),
+            ("control", references["control"]["mean"])]
+    if floor is not None:
+        rows.append(("floor", floor["raw"]))
     width = max(len(name) for name, _ in rows)
     head = f"{'view':<{width}}  " + "  ".join(f"{m:>{max(len(m), 10)}}" for m in METRICS)
-    lines = [head]
-    for name, values in rows:
-        lines.append(f"{name:<{width}}  "
-                     + "  ".join(f"{values[m]:>{max(len(m), 10)}.4g}" for m in METRICS))
+    lines = [head, *(_row(name, values, METRICS, width) for name, values in rows), ""]
+    ratio = references["ratio"]
+    columns = {**ratio["per_view"], "mean": ratio["mean"]}
+    if floor is not None:
+        columns["floor"] = floor["ratio"]
+    title = "ratio to the control"
+    width = max(len(title), *(len(m) for m in METRICS))
+    lines.append(f"{title:<{width}}  " + "  ".join(f"{c:>7}" for c in columns))
+    for m in RATIO_METRICS:
+        lines.append(f"{m:<{width}}  " + "  ".join(f"{v[m]:>7.3f}" for v in columns.values()))
+    lines.append(f"{'histogram_kl':<{width}}  raw only (the control has the exemplar's histogram)")
+    lines.append("")
+    lines.append("control: the exemplar's pixels drawn independently, in the volume's shape "
+                 "(1 = no structure; lower is better)")
+    if floor is None:
+        lines.append("floor: none (the exemplar is too small to split in two halves of at least "
+                     f"{metrics.MIN_SIDE} pixels)")
+    else:
+        h, w = floor["half_shape"]
+        lines.append(f"floor: another crop of the same texture, {floor['exemplar']} right half "
+                     f"against its left half ({h}x{w} pixels each; about what a perfect volume scores)")
     return "\n".join(lines)
 
 
@@ -198,6 +270,19 @@ def _figure(histograms: dict[str, dict[str, Any]], result: dict[str, Any], title
         ax.legend(fontsize="x-small")
     fig.suptitle(title)
     return fig
+
+
+def _references(result: dict[str, Any], shape, exemplars: dict[str, np.ndarray],
+                sources: dict[str, str]) -> dict[str, Any]:
+    """The control and the ratios to it (:func:`~npmrf3d.analysis.metrics.references.against_controls`),
+    and the floor of the first view's exemplar (None if it is too small to split)."""
+    out = against_controls(result, shape, exemplars)
+    view = next(iter(exemplars))
+    out["floor"] = floor(exemplars[view])
+    if out["floor"] is not None:
+        out["floor"]["exemplar"] = (f"the {view} view's exemplar's" if len(set(sources.values())) > 1
+                                    else "the exemplar's")
+    return out
 
 
 def _write(out: pathlib.Path, fig, record: dict[str, Any]) -> None:
@@ -240,10 +325,11 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
     out = pathlib.Path(args.out) if args.out is not None else pathlib.Path(args.volume).parent
     check_out(out, args.overwrite, files=OUT_FILES, what="metrics")
     with contextlib.ExitStack() as locks:
+        advice = "wait for that run to finish, then run npmrf3d metrics again"
         for folder in _run_folders(pathlib.Path(args.volume).parent, out):
-            locks.enter_context(OutputLock(
-                folder, what="run folder",
-                advice="wait for that run to finish, then run npmrf3d metrics again"))
+            locks.enter_context(OutputLock(folder, what="run folder", advice=advice))
+        if pathlib.Path(args.volume).is_dir():  # a Zarr volume: its run holds the same lock
+            locks.enter_context(OutputLock(args.volume, what="Zarr volume", advice=advice))
         check_out(out, args.overwrite, files=OUT_FILES, what="metrics")  # again, under the lock
         return _measure(args, argv, views, out)
 
@@ -253,6 +339,7 @@ def _measure(args: argparse.Namespace, argv: list[str], views: tuple[str, ...], 
     volume, stored = _read_volume(args.volume)
     exemplars, sources = _read_exemplars(args, views)
     result = metrics.evaluate(volume, exemplars, views=views)
+    references = _references(result, volume.shape, exemplars, sources)
     histograms = {view: metrics.view_histograms(volume, exemplars[view], view) for view in views}
     title = f"{pathlib.Path(args.volume).name} versus {', '.join(sorted(set(sources.values())))}"
     fig = _figure(histograms, result, title)
@@ -270,6 +357,9 @@ def _measure(args: argparse.Namespace, argv: list[str], views: tuple[str, ...], 
         "metrics": list(metrics.METRICS),
         "per_view": result["per_view"],
         "mean": result["mean"],
+        "control": references["control"],
+        "ratio": references["ratio"],
+        "floor": references["floor"],
         "settings": result["settings"],
         "details": result["details"],
         "versions": io.package_versions(),
@@ -280,6 +370,6 @@ def _measure(args: argparse.Namespace, argv: list[str], views: tuple[str, ...], 
     except OSError as exc:
         raise ParameterError(
             f"cannot write into output folder '{out}': {exc.strerror or exc}") from exc
-    say(_table(result))
+    say(_table(result, references))
     say(f"wrote {out}{os.sep}: {', '.join(OUT_FILES)}")
     return 0

@@ -22,7 +22,7 @@ import numpy as np
 from .. import io
 from .._kernels import _jit
 from ..analysis import metrics
-from ..analysis.metrics import largest_value_share
+from ..analysis.metrics import largest_value_share, references
 from ..errors import ParameterError
 from ..io.runs import run_record, write_run
 from ..methods import METHODS
@@ -43,15 +43,12 @@ def evaluate_metrics(volume: np.ndarray, exemplars: dict[str, np.ndarray],
 
 def structureless(exemplar: np.ndarray, size: int, rng) -> np.ndarray:
     """The structureless control: ``size^3`` voxels drawn independently from the exemplar's
-    pixels (same histogram, no spatial structure).
+    pixels (same histogram, no spatial structure; :func:`npmrf3d.analysis.metrics.references.structureless`).
 
     >>> structureless(np.ones((4, 4, 1), np.float32), 2, 0).shape
     (2, 2, 2, 1)
     """
-    generator = np.random.default_rng(rng)
-    flat = np.asarray(exemplar, dtype=np.float32).reshape(-1, exemplar.shape[-1])
-    picks = generator.integers(0, len(flat), size=size ** 3)
-    return flat[picks].reshape(size, size, size, flat.shape[1])
+    return references.structureless(exemplar, (size,) * 3, rng)
 
 
 def _synthesise(spec: RunSpec, exemplar: np.ndarray, real: np.ndarray | None,
