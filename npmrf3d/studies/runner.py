@@ -25,6 +25,9 @@ Behaviour
   before the first run and before any folder is created (:mod:`.inputs`).
 * **Same results everywhere**: every run is seeded by its own seed only and numba kernels do
   not depend on the thread count, so Dask and serial execution write identical volumes.
+* **One study per folder**: the study folder is locked while the study runs
+  (:func:`claim_study_dir`); a second study into it, from this or another process, is refused
+  at once, and its runs and table are not mixed in.
 * **Resumable**: a run whose folder holds ``run.json`` and ``metrics.json`` is finished and is
   skipped (its row is read back from disk); a failed run is tried again.
 * **Failures**: an exception in a run writes ``error.json`` (message and traceback) into its
@@ -33,6 +36,7 @@ Behaviour
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
 import pathlib
@@ -43,6 +47,7 @@ from datetime import datetime, timezone
 from .. import io
 from .._cluster import check_scheduler, dashboard_link, dask_client, plan_workers, probe_scheduler
 from ..errors import ParameterError
+from ..io.runs import OutputLock
 from . import groundtruth
 from .execute import execute_run, record_failure
 from .figures import make_figures
@@ -247,11 +252,42 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
     del real
     if scheduler not in (None, "local", "serial"):
         probe_scheduler(scheduler)
+    with claim_study_dir(study_dir):
+        return _run_grid(study, study_dir, specs, left_out, mode=mode, scheduler=scheduler,
+                         workers=workers, threads=threads, progress=progress, echo=echo,
+                         t_start=t_start, options={
+                             "seeds": seeds, "exemplars": exemplars, "sizes": sizes,
+                             "levels": levels, "volume": reference, "slice_axis": slice_axis,
+                             "slice_index": slice_index, "slices": slices})
+
+
+@contextlib.contextmanager
+def claim_study_dir(study_dir: pathlib.Path):
+    """The study folder created and held for the block: a second study into the same folder
+    (whose runs, ``results.csv`` and ``study.json`` would mix with these) is refused at once
+    with a :class:`ParameterError`, as a second run into a run folder is
+    (:class:`npmrf3d.io.runs.OutputLock`). The results root is created first, so that every
+    claimant takes the same lock file in it."""
     try:
-        study_dir.mkdir(parents=True, exist_ok=True)
+        study_dir.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise ParameterError(f"study folder '{study_dir}' cannot be created: "
                              f"{exc.strerror or exc}") from None
+    with OutputLock(study_dir, what="study folder",
+                    advice="wait for that study to finish or choose another --out"):
+        try:
+            study_dir.mkdir(exist_ok=True)
+        except OSError as exc:
+            raise ParameterError(f"study folder '{study_dir}' cannot be created: "
+                                 f"{exc.strerror or exc}") from None
+        yield study_dir
+
+
+def _run_grid(study: Study, study_dir: pathlib.Path, specs: list[RunSpec], left_out: list[dict], *,
+              mode: str, scheduler, workers, threads, progress, echo, t_start: float,
+              options: dict) -> StudyOutcome:
+    """Run the grid's unfinished runs and write ``results.csv``, the figures and ``study.json``:
+    the body of :func:`run_study`, in the claimed study folder."""
     started = datetime.now(timezone.utc).isoformat(timespec="seconds")
 
     rows: dict[str, dict] = {}
@@ -287,9 +323,7 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
     io.write_json(study_dir / "study.json", {
         "study": study.to_dict(),
         "mode": mode,
-        "options": {"seeds": seeds, "exemplars": exemplars, "sizes": sizes, "levels": levels,
-                    "volume": reference, "slice_axis": slice_axis, "slice_index": slice_index,
-                    "slices": slices},
+        "options": options,
         "runs": [s.to_dict() for s in specs],
         "left_out": left_out,
         **info,
