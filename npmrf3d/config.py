@@ -10,18 +10,31 @@ Urs et al. 2014 word for word, the ablation baseline; ``tuned``, chosen by measu
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 import numpy as np
 
 from .model.relax import RELAXATIONS, AnnealOptions, IcmOptions
+from .model.relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
+from .options import option
 
 #: Side of the cube made when no size is given (API and command line, every method).
 DEFAULT_SIZE = 64
 
 __all__ = ["COHERENT_RULE", "DEFAULT_SIZE", "DecisionRule", "PRESETS", "SUPPORTS", "SynthesisConfig",
            "SynthesisMethod", "SynthesisResult", "VARIANTS"]
+
+
+#: How ``--help`` states the default of a decision-rule option: the support's rule decides.
+_PRESET_VALUE = "--preset's"
+
+
+def _registry(name: str):
+    """A registry of the model by name, read when first needed (the model imports this module's
+    neighbours)."""
+    from .model import heuristics, pyramid
+    return tuple(getattr(heuristics, name, None) or getattr(pyramid, name))
 
 
 @dataclass(frozen=True)
@@ -49,13 +62,20 @@ class DecisionRule:
         views (a robust product of experts; 0 = off, the paper).
     """
 
-    bandwidth: float = 1.0
-    centre_bandwidth: float = 1.0
-    adaptive: float = 0.0
-    decision: str = "argmax"
-    tau: float = 1.0
-    histogram_weight: float = 0.0
-    outlier: float = 0.0
+    bandwidth: float = option(1.0, "support full: neighbour bandwidth / h_opt", kind="real",
+                              low=0.0, low_open=True, decided=_PRESET_VALUE, metavar="B")
+    centre_bandwidth: float = option(1.0, "centre-value bandwidth / h_opt (or / sigma)", kind="real", low=0.0,
+                                     low_open=True, decided=_PRESET_VALUE, metavar="B")
+    adaptive: float = option(0.0, "support full: 2h^2 = A * best distance", kind="real", low=0.0,
+                             decided=_PRESET_VALUE, metavar="A")
+    decision: str = option("argmax", "support full: argmax, or sample exp(score/tau)", kind="choice", choices=lambda: _registry("DECISIONS"),
+                           decided=_PRESET_VALUE)
+    tau: float = option(1.0, "support full: temperature of sample", kind="real", low=0.0,
+                        low_open=True, decided=_PRESET_VALUE, metavar="T")
+    histogram_weight: float = option(0.0, "support full: over-used label penalty",
+                                     kind="real", low=0.0, decided=_PRESET_VALUE, metavar="W")
+    outlier: float = option(0.0, "uniform share in each view's estimate", kind="real", low=0.0, high=1.0, high_open=True,
+                            decided=_PRESET_VALUE, metavar="A")
 
 
 #: The estimator supports: which exemplar neighbourhoods a view's Parzen sum runs over
@@ -102,44 +122,67 @@ class SynthesisConfig:
     chosen relaxation's own options.
     """
 
-    size: tuple[int, int, int]
-    window: int = 7
-    levels: int = 3
-    heuristic: str = "ML_H2b"
-    relaxation: str = "icm"
-    views: tuple[str, ...] = ("front", "right", "top")
-    upsample: str = "1/8"
-    inherit: str = "resynth"
-    xi: float = IcmOptions.xi
-    stop: float = IcmOptions.stop
-    max_sweeps: int = IcmOptions.max_sweeps
-    sampler: str = AnnealOptions.sampler
-    schedule: str = AnnealOptions.schedule
-    t0: float = AnnealOptions.t0
-    t_end: float = AnnealOptions.t_end
-    proposals: int = AnnealOptions.proposals
-    proposal: str = AnnealOptions.proposal
-    support: str = "coherent"
-    preset: str = "tuned"
-    segmented: str = "auto"
-    rule: DecisionRule = field(default_factory=DecisionRule)
-    grey_levels: int | None = None
-    palette: int | None = None
-    toroidal_exemplar: bool = False
-    temperatures: bool = False
-    blockwise: bool = False
+    size: tuple[int, int, int] = option(help="output size", kind="own")
+    window: int = option(7, "side of each view's square neighbourhood, odd, 3 to 15", kind="int", metavar="W", group="volume and pyramid")
+    levels: int = option(3, "pyramid levels (scales), 1 to 8", kind="int", low=1, high=8,
+                         metavar="L", group="volume and pyramid")
+    heuristic: str = option("ML_H2b", "how the views' estimates combine: ML_H2b product, ML_H2a minimum, "
+                            "ML_H1a/ML_H1b per-view argmax", kind="choice", choices=lambda: _registry("HEURISTICS"))
+    relaxation: str = option("icm", "icm, or anneal (simulated annealing)", kind="choice", choices=lambda: tuple(RELAXATIONS))
+    views: tuple[str, ...] = option(("front", "right", "top"), "constrained views", kind="own")
+    upsample: str = option("1/8", "a voxel starts 1 or all 8 of its children", kind="choice",
+                           choices=lambda: _registry("UPSAMPLING"), group="volume and pyramid",
+                           decided="8/8; support full with icm: 1/8")
+    inherit: str = option("resynth", "inherited voxels may change (resynth) or stay (fixed)", kind="choice", choices=lambda: _registry("INHERIT"),
+                          group="volume and pyramid")
+    xi: float = option(IcmOptions.xi, "icm: cooling step, < 0", kind="real",
+                       high=0.0, high_open=True, decided="-1; support full: -3")
+    stop: float = option(IcmOptions.stop, "icm: a level stops when its temperature fell by F", kind="real", low=0.0, high=1.0, low_open=True, metavar="F")
+    max_sweeps: int = option(IcmOptions.max_sweeps, "icm: most sweeps per level", kind="int", low=1)
+    sampler: str = option(AnnealOptions.sampler, "anneal: heat-bath or metropolis (the paper)", kind="choice",
+                          choices=lambda: SAMPLERS, decided="metropolis; support full: heat-bath")
+    schedule: str = option(AnnealOptions.schedule, "anneal: temperature from --t0 to --t-end",
+                           kind="choice", choices=lambda: SCHEDULES)
+    t0: float = option(AnnealOptions.t0, "anneal: a level's first temperature", kind="real", low=0.0,
+                       low_open=True, metavar="T")
+    t_end: float = option(AnnealOptions.t_end, "anneal: a level's last temperature, <= t0", kind="real", low=0.0, metavar="T")
+    proposals: int = option(AnnealOptions.proposals, "anneal: sweeps per level",
+                            kind="int", low=1, metavar="P")
+    proposal: str = option(AnnealOptions.proposal, "anneal, metropolis, support full: proposals from the exemplar or the labels", kind="choice",
+                           choices=lambda: PROPOSALS)
+    support: str = option("coherent", "estimates over coherent candidates or every patch (full)", kind="choice", choices=lambda: SUPPORTS,
+                          decided="coherent")
+    preset: str = option("tuned", "support full: the decision rule", kind="choice", choices=lambda: tuple(PRESETS),
+                         decided="tuned")
+    segmented: str = option("auto", "support coherent: the preset for segmented exemplars", kind="choice",
+                            choices=lambda: SEGMENTED_MODES)
+    rule: DecisionRule = option(help="decision rule", kind="nested", default_factory=DecisionRule)
+    grey_levels: int | None = option(None, "re-quantise each channel to K levels",
+                                     kind="int", low=2, high=65536, optional=True, metavar="K",
+                                     group="views and exemplars", decided="keep the values")
+    palette: int | None = option(None, "at most K colours (k-means)",
+                                 kind="int", low=2, high=65536, optional=True, metavar="K",
+                                 group="views and exemplars", decided="keep every colour")
+    toroidal_exemplar: bool = option(False, "support full: exemplar patches wrap around",
+                                     kind="flag", group="views and exemplars")
+    temperatures: bool = option(False, "icm with per-voxel temperatures (Urs et al. 2014)",
+                                kind="flag", decided="with support full")
+    blockwise: bool = option(False, "the block-local sampler (docs/blocks.md)", kind="flag", group="blocks")
     # blockwise: levels of at most this many voxels run whole, once for all blocks (256^3: the
     # cones of blocks of 128 at 512^3 would repeat its 256^3 level 8.8 times over)
-    whole_voxels: int = 2 ** 24
+    whole_voxels: int = option(2 ** 24, "--blockwise: levels of at most N voxels run whole, once",
+                               kind="int", low=1, group="blocks")
     # the coherent sampler's phase control (docs/materials.md, "Phase control in the default"):
     # on scan slices the minority phase keeps its share and the two-point correlation shape
     # comes nearer the scans' crops; photographs' quality unchanged (docs/quality.md)
-    phase_weight: float = 16.0
+    phase_weight: float = option(16.0, "support coherent: phase control (0 = off)", kind="real", low=0.0,
+                                 metavar="W", decided="16; support full: 0")
     # support coherent: neighbourhoods searched and voting every `grid` voxels along both plane axes;
     # None: the run's own (methods.npmrf_options.coherent_grid: 2 on photographs where every level's
     # side is even, docs/quality.md "Sparse sites"; else every site)
-    grid: int | None = None
-    seed: int | None = None
+    grid: int | None = option(None, "support coherent: sites every G voxels", kind="int", low=1, optional=True, metavar="G",
+                              group="volume and pyramid", decided="2 on even sides, else 1")
+    seed: int | None = option(None, "random seed", kind="own")
 
     def to_dict(self) -> dict:
         """Plain JSON-able dictionary (tuples become lists)."""

@@ -106,10 +106,23 @@ ERRORS = [
     # options the configuration leaves without effect
     (["synth", "seg.png", *TINY, "--window", "3", "--segmented", "yes"],
      ["--window 3", "--segmented yes", "window 5"], []),
-    (["coherent", "seg.png", *TINY, "--coherence-bias", "3"], ["--coherence-bias", "--global-share 0"], []),
+    (["coherent", "seg.png", *TINY, "--coherence-bias", "3"], ["--coherence-bias", "--global-share is above 0"], []),
     (["coherent", "seg.png", *TINY, "--coherence-bias", "3", "--global-share", "0"],
-     ["--coherence-bias", "--global-share 0"], []),
-    (["chen-wang", "seg.png", *TINY, "--coherence-bias", "0.5"], ["--coherence-bias", "--global-share 0"], []),
+     ["--coherence-bias", "--global-share is above 0"], []),
+    (["chen-wang", "seg.png", *TINY, "--coherence-bias", "0.5"], ["--coherence-bias", "--global-share is above 0"], []),
+    # every option an annealing, ICM or block-local run alone reads, refused without it
+    *[([command, "seg.png", *TINY, *option], [option[0], needs], [])
+      for command in ("coherent",)
+      for option, needs in ((["--sampler", "metropolis"], "--t0 is above 0"), (["--t-end", "0.5"], "--t0 is above 0"),
+                            (["--schedule", "linear"], "--t0 is above 0"), (["--xi", "-2"], "--icm is set"),
+                            (["--stop", "0.5"], "--icm is set"), (["--max-sweeps", "3"], "--icm is set"),
+                            (["--inherit", "fixed"], "--icm is set"), (["--upsample", "1/8"], "--icm is set"),
+                            (["--iterations", "2", "--icm"], "--icm is not set"))],
+    *[([command, "seg.png", *TINY, *option], [option[0], needs], [])
+      for command in ("coherent", "chen-wang")
+      for option, needs in ((["--pilot", "32"], "--blockwise is set"),
+                            (["--whole-voxels", "4096"], "--blockwise"),
+                            (["--phase-weight", "4", "--value-prior", "0"], "--value-prior is above 0"))],
     (["kopf", "seg.png", *KTINY, "--histogram-bins", "7", "--histogram-weight", "0"],
      ["--histogram-bins", "--histogram-weight 0"], []),
     (["baseline", "kopf", "seg.png", *KTINY, "--histogram-bins", "7", "--histogram-weight", "0"],

@@ -116,12 +116,19 @@ def guarded(handler, args, argv, option_names=()) -> int:
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
     """Shows every default and keeps the hand-formatted description and examples.
 
-    A help string that already says ``(default: ...)`` in words keeps it as written.
+    A help string that already says ``(default: ...)`` in words keeps it as written; a flag
+    (off unless given) shows none. Option names get 28 columns, so that most help starts beside
+    its option.
     """
+
+    def __init__(self, prog, indent_increment=2, max_help_position=28, width=None):
+        super().__init__(prog, indent_increment, max_help_position, width)
 
     def _get_help_string(self, action):
         text = action.help or ""
-        return text if "(default:" in text else super()._get_help_string(action)
+        if "(default:" in text or (action.default is False and not action.nargs):  # a flag: off
+            return text
+        return super()._get_help_string(action)
 
 
 def default(config_class: type, name: str):

@@ -1,11 +1,12 @@
-"""A sub-command built from a registered method's frozen configuration.
+"""Every method's sub-command, built from its frozen configuration.
 
-Every field of the method's config class becomes an option (``window`` -> ``--window``) whose
-default, type and ``--help`` default are read from the field itself, so the API, the
-configuration and the command line cannot disagree; values go through the method's own
-``make_config``, which validates them. Integers, reals, booleans (a flag that sets ``True``),
-names and per-level tuples (``8,6,4``) are supported; ``size`` takes ``N`` or ``N1,N2,N3``.
-Used for ``npmrf3d baseline chen-wang`` and ``npmrf3d coherent``.
+Each option field of the method's configuration (:func:`npmrf3d.options.option`) becomes an
+option (``window`` -> ``--window``) whose type, limits, choices, help text, section and default
+are read from the field itself, so the API, the configuration, ``--help`` and the docs cannot
+disagree; values go through the method's own ``make_config``, which validates them and refuses an
+option the run would not read. Integers, reals, names, flags and per-level lists (``8,6,4``) are
+supported; ``size`` takes ``N`` or ``N1,N2,N3``; a field whose default the run decides
+(``decided``) defaults to ``None`` here and ``--help`` says what decides it.
 """
 
 from __future__ import annotations
@@ -15,24 +16,25 @@ import dataclasses
 import time
 
 from .. import data
+from ..config import DEFAULT_SIZE
 from ..io.runs import RUN_FILES
 from ..model.exemplar import BUNDLED_PREFIX
 from ..model.neighbourhood import VIEWS
+from ..options import default_text, field_default, flag_name, options_of
 from ._common import (
     add_exemplar_kind,
     add_run_options,
-    claim_output,
-    dry_run,
+    choices,
     parse_size,
     prepare_run,
-    write_result,
 )
-from ._progress import run_method
+from ._blocks import add_block_options, blockwise_requested, run_to_output, zarr_output
 
-__all__ = ["add_method_parser"]
+__all__ = ["add_method_parser", "config_options", "method_options"]
 
-#: Fields every such command handles itself (not as plain options).
-_OWN = ("size", "views", "seed")
+#: The order of the sections of ``--help``; a field's ``group`` names one.
+SECTIONS = ("volume and pyramid", "method", "relaxation", "views and exemplars", "blocks")
+_METAVARS = {"int": "N", "real": "X", "levels": "N[,N..]", "text": "NAME"}
 
 
 def _parse_tuple(text: str) -> int | tuple[int, ...]:
@@ -45,79 +47,98 @@ def _parse_tuple(text: str) -> int | tuple[int, ...]:
     return numbers[0] if len(numbers) == 1 else numbers
 
 
-def _option(name: str) -> str:
-    return "--" + name.replace("_", "-")
+def method_options(config_class) -> dict:
+    """{name: (field, option)} of every option of ``config_class`` the command line takes: its
+    fields, with a nested configuration's fields (the decision rule) in its place."""
+    out = {}
+    for name, (f, opt) in options_of(config_class).items():
+        if opt.kind == "nested":
+            out.update(options_of(type(field_default(f))))
+        elif opt.kind != "own":
+            out[name] = (f, opt)
+    return out
+
+
+def _add_option(group, name: str, f: dataclasses.Field, opt) -> None:
+    default = None if opt.decided is not None else field_default(f)
+    text, metavar = opt.help, opt.metavar or _METAVARS.get(opt.kind)
+    if opt.kind == "choice" and not opt.metavar:
+        metavar = choices(opt.names()) if len(choices(opt.names())) <= 14 else "NAME"
+        if not all(n in text for n in opt.names()):
+            text += f": {', '.join(opt.names())}"
+    text += f" (default: {opt.decided})" if opt.decided is not None else ""
+    if opt.kind == "flag":
+        group.add_argument(flag_name(name), action="store_true", default=default, help=text)
+        return
+    kind = {"int": int, "real": float, "levels": _parse_tuple}.get(opt.kind)
+    if opt.kind == "levels" and default is not None:
+        default = default_text(f, opt)
+    group.add_argument(flag_name(name), type=kind, default=default, metavar=metavar, help=text)
+
+
+def config_options(args: argparse.Namespace, config_class) -> dict:
+    """The values of ``config_class``'s options on the command line ``args``, for ``make_config``;
+    a per-level default is passed as the field's own object, so that it adapts to ``--levels``."""
+    values = {}
+    for name, (f, opt) in method_options(config_class).items():
+        value = getattr(args, name)
+        if opt.kind == "levels" and value == _parse_tuple(default_text(f, opt)):
+            value = field_default(f)
+        values[name] = value
+    return values
 
 
 def add_method_parser(commands, name: str, method, *, help: str, description: str,
-                      out: str, field_help: dict[str, str], formatter_class,
-                      refuse=None) -> argparse.ArgumentParser:
-    """Add sub-command ``name`` that runs ``method`` (a :class:`npmrf3d.config.SynthesisMethod`);
-    ``field_help`` explains each configuration field (every field must have an entry);
-    ``refuse(args, config, per_view)``, when given, raises a
-    :class:`~npmrf3d.errors.ParameterError` for options written on the command line that the
-    configuration or the exemplars leave without effect (before any work, also with
-    ``--dry-run``)."""
-    parser = commands.add_parser(name, help=help, description=description, formatter_class=formatter_class)
+                      out: str, formatter_class, refuse=None, handler=None, aliases=(),
+                      extra=None) -> argparse.ArgumentParser:
+    """Add sub-command ``name`` (and ``aliases``) that runs ``method`` (a
+    :class:`npmrf3d.config.SynthesisMethod`) with its configuration's options.
+
+    ``refuse(args, config, per_view)``, when given, raises a :class:`~npmrf3d.errors.ParameterError`
+    for what only the exemplars can tell (before any work, also with ``--dry-run``);
+    ``handler(args, argv)`` replaces the run below; ``extra(parser, sections)`` adds the command's
+    own options (a later option of the same name replaces a field's)."""
+    parser = commands.add_parser(name, aliases=list(aliases), help=help, description=description,
+                                 formatter_class=formatter_class, conflict_handler="resolve",
+                                 usage="%(prog)s [EXEMPLAR] [options]")
     parser.add_argument(
         "exemplar", nargs="?", default=f"{BUNDLED_PREFIX}{data.DEFAULT_EXEMPLAR}", metavar="EXEMPLAR",
-        help="2D exemplar image (.png, .jpg, .bmp, .gif, .tif or .npy) used for every view; omitted = "
-             f"the bundled default exemplar, or '{BUNDLED_PREFIX}NAME' for a bundled one",
+        help=f"2D image or .npy for every view, or {BUNDLED_PREFIX}NAME (default: %(default)s)",
     )
-    fields = {f.name: f for f in dataclasses.fields(method.config_class)}
-    size = fields["size"].default
-    parser.add_argument("--size", default=",".join(map(str, size)),
-                        metavar="N", help="output size in voxels: N for an N^3 cube or N1,N2,N3; each "
-                                          "divisible by 2**(levels-1)")
-    group = parser.add_argument_group("method")
-    for fname, f in fields.items():
-        if fname in _OWN:
-            continue
-        text = field_help[fname]
-        value = f.default
-        if isinstance(value, bool):
-            group.add_argument(_option(fname), action="store_true", default=value, help=text)
-        elif isinstance(value, tuple):
-            group.add_argument(_option(fname), type=_parse_tuple, default=",".join(map(str, value)),
-                               metavar="N[,N...]", help=text)
-        elif isinstance(value, int):
-            group.add_argument(_option(fname), type=int, default=value, metavar="N", help=text)
-        elif isinstance(value, float):
-            group.add_argument(_option(fname), type=float, default=value, metavar="X", help=text)
-        else:
-            group.add_argument(_option(fname), default=value, metavar="NAME", help=text)
-    views = parser.add_argument_group("views and exemplars")
-    views.add_argument("--views", default=",".join(fields["views"].default), metavar="V[,V...]",
-                       help=f"comma-separated constrained views, 1 to 3 distinct names of {', '.join(VIEWS)}")
+    sections = {title: parser.add_argument_group(title) for title in SECTIONS}
+    sections["volume and pyramid"].add_argument(
+        "--size", default=str(DEFAULT_SIZE), metavar="N",
+        help="output side N, or N1,N2,N3")
+    for fname, (f, opt) in method_options(method.config_class).items():
+        _add_option(sections[opt.group], fname, f, opt)
+    views = sections["views and exemplars"]
+    views.add_argument("--views", default=",".join(options_of(method.config_class)["views"][0].default),
+                       metavar="V[,V..]", help=f"constrained views, of {', '.join(VIEWS)}")
     for view in VIEWS:
         views.add_argument(f"--exemplar-{view}", default=None, metavar="PATH",
-                           help=f"a different exemplar file (or {BUNDLED_PREFIX}NAME) for the {view} "
-                                f"view (default: none = EXEMPLAR)")
+                           help=f"the {view} view's (default: EXEMPLAR)")
     add_exemplar_kind(views)
+    if extra is not None:
+        extra(parser, sections)
     add_run_options(parser, out=out)
+    if "blockwise" in method_options(method.config_class):
+        add_block_options(sections["blocks"], sampler=False)
 
-    def handler(args: argparse.Namespace, argv: list[str]) -> int:
+    def run_command(args: argparse.Namespace, argv: list[str]) -> int:
         t_start = time.perf_counter()
-        options = {f: getattr(args, f) for f in fields if f not in _OWN}
-        for fname, value in options.items():
-            if value == fields[fname].default:
-                # the field's own object: per-level defaults then adapt to --levels (make_config)
-                options[fname] = fields[fname].default
+        options = config_options(args, method.config_class)
+        if hasattr(args, "block"):
+            blockwise_requested(args)
         # messages name library parameters; npmrf3d.cli.main turns them into these options
         config = method.make_config(size=parse_size(args.size), views=args.views, seed=args.seed, **options)
-        out_dir, checkpoint, per_view, sources = prepare_run(args, method, config)
+        out_dir, checkpoint, per_view, sources = prepare_run(args, method, config, whole=not zarr_output(args))
         if refuse is not None:
             refuse(args, config, per_view)
-        if args.dry_run:
-            return dry_run(method, config, per_view)
-        with claim_output(out_dir, args.overwrite):
-            result = run_method(args, method, config, per_view, checkpoint=checkpoint,
-                                t_start=t_start, unit="iter", symbol="E")
-            title = f"{method.description.split(':')[0]}, {config.levels} levels, seed {config.seed}"
-            write_result(out_dir, args, argv, parser.prog.replace("npmrf3d ", "", 1), result,
-                         per_view, sources, title, method=method.name)
-        return 0
+        title = f"{method.description.split(':')[0]}, {config.levels} levels, seed {config.seed}"
+        return run_to_output(args, argv, parser.prog.replace("npmrf3d ", "", 1), method, config, per_view,
+                             sources, title, out=out_dir, checkpoint=checkpoint, t_start=t_start, unit="iter",
+                             symbol="E")
 
-    parser.set_defaults(handler=handler)
+    parser.set_defaults(handler=handler or run_command)
     parser.epilog = f"Writes {', '.join(RUN_FILES)} into the output folder."
     return parser

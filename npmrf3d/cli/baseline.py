@@ -27,16 +27,13 @@ from ._common import (
     add_exemplar_kind,
     add_run_options,
     choices,
-    claim_output,
     default,
-    dry_run,
     parse_size,
     prepare_run,
-    write_result,
 )
+from ._blocks import run_to_output, zarr_output
 from ._generic import add_method_parser
 from ._options import given
-from ._progress import run_method
 
 __all__ = ["register"]
 
@@ -151,27 +148,17 @@ def _add_chen_wang(commands, formatter_class, name: str = "chen-wang") -> None:
             "  npmrf3d chen-wang bundled:gravel --size 64\n"
             "  npmrf3d chen-wang bundled:ihc --size 128 --window 8,6,4 --out ihc-cw"
         ),
-        out="npmrf3d-chen-wang-out", field_help=CHEN_WANG_HELP, formatter_class=formatter_class,
+        out="npmrf3d-chen-wang-out", formatter_class=formatter_class,
         refuse=refuse_chen_wang,
     )
 
 
-def refuse_coherence_bias(args: argparse.Namespace, config, per_view=None) -> None:
-    """``--coherence-bias`` weighs the global matches of ``--global-share``; with a share of 0
-    there are none, so a written ``--coherence-bias`` is refused (chen-wang and coherent)."""
-    if given(args, "coherence_bias") and config.global_share == 0:
-        raise ParameterError("--coherence-bias changes nothing with --global-share 0 (it weighs the "
-                             "global matches that --global-share asks for): drop --coherence-bias "
-                             "or set --global-share above 0")
-
-
 def refuse_chen_wang(args: argparse.Namespace, config, per_view: dict) -> None:
-    """What ``chen-wang`` refuses once the exemplars are read: :func:`refuse_coherence_bias`, and
-    a written ``--pca-dims`` above the dimensions of the smallest neighbourhoods (window x window
+    """What ``chen-wang`` refuses once the exemplars are read: a written ``--pca-dims`` above the
+    dimensions of the smallest neighbourhoods (window x window
     x channels at the level with the smallest window), which the PCA could not keep: the value
     would be cut down at that level without a word. The default is kept as the most dimensions
     each level may use."""
-    refuse_coherence_bias(args, config)
     if not given(args, "pca_dims"):
         return
     w = min(config.window)
@@ -182,50 +169,6 @@ def refuse_chen_wang(args: argparse.Namespace, config, per_view: dict) -> None:
             f"--pca-dims {config.pca_dims} is more than the neighbourhoods have: the {w}x{w} window "
             f"of a {channels}-channel exemplar has {limit} dimensions; choose at most {limit} (or "
             f"larger --window values)")
-
-#: One line per configuration field of :class:`npmrf3d.methods.chen_wang.ChenWangConfig`.
-CHEN_WANG_HELP = {
-    "window": "window side per level, coarsest first: one number or one per level (the paper: 8,8,6 or 8,6,4)",
-    "levels": "resolution levels, coarse to fine (the paper: 3)",
-    "iterations": "search + solve iterations per level: one number or one per level, coarsest first",
-    "k": "size of the k-coherence sets (the paper: 5)",
-    "pca_dims": "dimensions of the PCA-reduced neighbourhoods (the paper: about 20)",
-    "r": "exponent of the robust energy ||s - e||^r, in (0, 2]; IRLS weights ||s - e||^(r-2)",
-    "grid": "search sites every GRID voxels along both plane axes (1 = every voxel, the paper)",
-    "index_weight": "strength of the index-histogram penalty on the search distance, >= 0 (0 = off)",
-    "position_weight": "strength of the position-histogram re-weighting of the votes, >= 0 (0 = off)",
-    "position_boost": "this project's addition: votes for under-used exemplar pixels weigh up to 1 + B "
-                      "times more, >= 0 (0 = the paper)",
-    "coherence_exclude": "k-coherence sets skip centres within this many pixels of the query (0 = off)",
-    "random_candidates": "this project's addition: random valid centres added to each site's candidates "
-                         "(0 = the paper)",
-    "global_share": "this project's addition: share of each view's worst-matched sites that also search "
-                    "all exemplar neighbourhoods (k-d tree) and take the global match where it is clearly "
-                    "better, in [0, 1] (0 = the paper)",
-    "coherence_bias": "a global match replaces the coherent one only if its distance times 1 + B is smaller, >= 0",
-    "value_weight": "this project's addition: histogram matching of the voxel values -- votes for texels "
-                    "whose value bins the volume over-uses weigh 1 + W * excess less, >= 0 (0 = the paper); "
-                    "keeps sparse bright features",
-    "value_prior": "strength of the histogram prior log(exemplar share / volume share) on each "
-                   "candidate's score, >= 0 (0 = off; the mean solver ignores it)",
-    "value_bins": "bins per channel of the value histograms",
-    "phase_weight": "this project's addition: a phase control through the histogram prior -- each channel's "
-                    "value bins split at the exemplar's Otsu threshold, and a candidate of the phase the "
-                    "volume over-uses loses W times that phase's price (excess + integral, with a gain that "
-                    "halves when the error flips), >= 0 (0 = off; needs --value-prior > 0)",
-    "batches": "histogram updates per pass (more track the histograms closer, fewer run more in parallel)",
-    "solver": "how a voxel picks among its voted texels: medoid (weighted medoid of the 8 heaviest, "
-              "chosen by measurement) or mean (nearest to the weighted mean, the paper's practice)",
-    "balance_views": "give every view's votes the same total weight at each voxel (the paper: off)",
-    "blockwise": "block-local run: the levels up to --whole-voxels whole, the finer levels reading the position "
-                 "and value histograms of a pilot block (made once, its histograms live) and random "
-                 "numbers hashed from voxel positions, so a volume made in blocks (--out VOL.zarr) "
-                 "equals the volume made at once; no global search or index histogram",
-    "whole_voxels": "with --blockwise: levels of at most this many voxels (and the coarsest) run whole, once "
-                    "for all blocks, with every histogram",
-    "pilot": "with --blockwise: side of the pilot block at the finest level, whose live histograms every "
-             "block reads (larger follows the whole volume's closer and costs one such block more)",
-}
 
 def _parse_iterations(text: str):
     parts = [p.strip() for p in str(text).split(",")]
@@ -292,19 +235,12 @@ def _run(args: argparse.Namespace, argv: list[str]) -> int:
         histogram_weight=args.histogram_weight, mean_shift=_parse_mean_shift(args.mean_shift),
         upsample=args.upsample, constrained=constraint is not None, seed=args.seed,
     )
-    out, checkpoint, per_view, sources = prepare_run(args, METHOD, config)
+    out, checkpoint, per_view, sources = prepare_run(args, METHOD, config, whole=not zarr_output(args))
     if constraint is not None:  # its checks, before the work (the method repeats them)
         channels = next(iter(per_view.values())).shape[2]
         _constraint_arrays(constraint, weight, config.size, channels)
-    if args.dry_run:
-        return dry_run(METHOD, config, per_view)
-    with claim_output(out, args.overwrite):
-        result = run_method(args, METHOD, config, per_view, checkpoint=checkpoint,
-                            t_start=t_start, unit="iter", symbol="E", constraint=constraint,
-                            constraint_weight=weight)
-        title = (f"NP_K (Kopf et al. 2007), window {config.window}, {config.levels} levels, "
-                 f"seed {config.seed}")
-        write_result(out, args, argv, "baseline kopf", result, per_view, sources, title,
-                     method=METHOD.name, constraint=args.constraint,
-                     constraint_weight=args.constraint_weight)
-    return 0
+    title = f"NP_K (Kopf et al. 2007), window {config.window}, {config.levels} levels, seed {config.seed}"
+    return run_to_output(args, argv, "baseline kopf", METHOD, config, per_view, sources, title, out=out,
+                         checkpoint=checkpoint, record={"constraint": args.constraint,
+                                                        "constraint_weight": args.constraint_weight},
+                         t_start=t_start, unit="iter", symbol="E", constraint=constraint, constraint_weight=weight)

@@ -69,6 +69,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import _validation as check
+from ..options import option, options_of, refusing, validate
 from ..config import DEFAULT_SIZE, SynthesisMethod, SynthesisResult
 from ..model.kcoherence_engine import KCoherenceLevels
 from ..model.neighbourhood import VIEWS
@@ -86,44 +87,86 @@ ProgressCallback = Callable[[int, int, int, float], None]
 SOLVERS = ("mean", "medoid")
 
 
+def _blockwise(config) -> bool:
+    return config.blockwise
+
+
+def _global_matches(config) -> bool:
+    return config.global_share > 0
+
+
+def _value_prior(config) -> bool:
+    return config.value_prior > 0
+
+
 @dataclass(frozen=True)
 class ChenWangConfig:
-    """A validated Chen–Wang run; every default lives here (see :func:`chen_wang_synthesize`)."""
+    """A validated Chen–Wang run; every option and its default is a field here (see
+    :func:`chen_wang_synthesize` and :mod:`npmrf3d.options`)."""
 
-    size: tuple[int, int, int] = (DEFAULT_SIZE,) * 3
-    window: tuple[int, ...] = (8, 6, 4)
-    levels: int = 3
-    views: tuple[str, ...] = VIEWS
-    iterations: tuple[int, ...] = (4, 4, 3)
-    k: int = 5
-    pca_dims: int = 20
-    r: float = 0.8
-    grid: int = 1
-    index_weight: float = 8.0
-    position_weight: float = 32.0
-    position_boost: float = 16.0
-    coherence_exclude: float = 0.0
-    random_candidates: int = 8
-    global_share: float = 0.0
-    coherence_bias: float = 0.0
-    value_weight: float = 32.0
-    value_prior: float = 3.0
-    value_bins: int = 16
-    phase_weight: float = 0.0
-    batches: int = 8
-    solver: str = "medoid"
-    balance_views: bool = False
+    size: tuple[int, int, int] = option((DEFAULT_SIZE,) * 3, "output size", kind="own")
+    window: tuple[int, ...] = option(
+        (8, 6, 4), "window side per level, coarsest first: one number or one per level (the paper: "
+        "8,8,6 or 8,6,4)", kind="levels", low=2, high=32, group="volume and pyramid")
+    levels: int = option(3, "resolution levels, coarse to fine", kind="int", low=1, high=8,
+                         metavar="L", group="volume and pyramid")
+    views: tuple[str, ...] = option(VIEWS, "constrained views", kind="own")
+    iterations: tuple[int, ...] = option(
+        (4, 4, 3), "search + solve iterations per level: one number or one per level, coarsest first",
+        kind="levels", low=1, group="volume and pyramid")
+    k: int = option(5, "size of the k-coherence sets", kind="int", low=1, high=64)
+    pca_dims: int = option(20, "dimensions of the PCA-reduced neighbourhoods", kind="int", low=1)
+    r: float = option(0.8, "exponent of the robust energy ||s - e||^r; IRLS weights ||s - e||^(r-2)",
+                      kind="real", low=0.0, high=2.0, low_open=True)
+    grid: int = option(1, "search sites every GRID voxels along both plane axes (1 = every voxel, the "
+                       "paper)", kind="int", low=1, group="volume and pyramid")
+    index_weight: float = option(8.0, "strength of the index-histogram penalty on the search distance "
+                                 "(0 = off)", kind="real", low=0.0)
+    position_weight: float = option(32.0, "strength of the position-histogram re-weighting of the votes "
+                                    "(0 = off)", kind="real", low=0.0)
+    position_boost: float = option(16.0, "votes for under-used exemplar pixels weigh up to 1 + B times "
+                                   "more (0 = the paper)", kind="real", low=0.0)
+    coherence_exclude: float = option(0.0, "k-coherence sets skip centres within this many pixels of the "
+                                      "query (0 = off)", kind="real", low=0.0)
+    random_candidates: int = option(8, "random valid centres added to each site's candidates (0 = the "
+                                    "paper)", kind="int", low=0, high=256)
+    global_share: float = option(0.0, "share of each view's worst-matched sites that also search every "
+                                 "exemplar neighbourhood (k-d tree; 0 = the paper)", kind="real",
+                                 low=0.0, high=1.0)
+    coherence_bias: float = option(0.0, "a global match replaces the coherent one only if its distance "
+                                   "times 1 + B is smaller", kind="real", low=0.0,
+                                   applies=_global_matches, needs="global_share is above 0")
+    value_weight: float = option(32.0, "votes for texels whose value bins the volume over-uses weigh "
+                                 "1 + W * excess less (0 = the paper)", kind="real", low=0.0)
+    value_prior: float = option(3.0, "strength of the histogram prior log(exemplar share / volume share) "
+                                "on each candidate's score (0 = off)", kind="real", low=0.0)
+    value_bins: int = option(16, "bins per channel of the value histograms", kind="int", low=2, high=256)
+    phase_weight: float = option(0.0, "phase control: a candidate of the phase (split at the exemplar's "
+                                 "Otsu threshold) the volume over-uses loses W times that phase's price "
+                                 "(0 = off)", kind="real", low=0.0, applies=_value_prior,
+                                 needs="value_prior is above 0")
+    batches: int = option(8, "histogram updates per pass (more follow the histograms closer, fewer run "
+                          "more in parallel)", kind="int", low=1, high=1024)
+    solver: str = option("medoid", "how a voxel picks among its voted texels: medoid (chosen by "
+                         "measurement) or mean (the paper's practice)", kind="choice", choices=SOLVERS)
+    balance_views: bool = option(False, "give every view's votes the same total weight at each voxel",
+                                 kind="flag")
     # block-local runs: the levels up to whole_voxels whole, the finer ones reading the histograms of a
     # pilot region and random numbers hashed from grid positions, so any block can be made alone
     # (model.regions, model.kcoherence_histograms.PilotHistograms)
-    blockwise: bool = False
+    blockwise: bool = option(False, "the block-local sampler, whose volume can be made in blocks "
+                             "(--out VOL.zarr): bit for bit the volume made at once", kind="flag",
+                             group="blocks")
     # the pilot's block side at the finest level (its cone at the coarser ones)
-    pilot: int = 64
+    pilot: int = option(64, "side of the pilot block whose live histograms every block reads", kind="int",
+                        low=8, group="blocks", applies=_blockwise, needs="blockwise is set")
     # levels of at most this many voxels run whole, once for all blocks, with every histogram
     # (256^3: at 512^3 the two coarsest levels, whose cones per block of 128 would repeat the
     # 256^3 level 8.8 times over)
-    whole_voxels: int = 2 ** 24
-    seed: int | None = None
+    whole_voxels: int = option(2 ** 24, "levels of at most N voxels (and the coarsest) run whole, once "
+                               "for all blocks", kind="int", low=1, group="blocks", applies=_blockwise,
+                               needs="blockwise is set")
+    seed: int | None = option(None, "random seed", kind="own")
 
     def to_dict(self) -> dict:
         """Plain JSON-able dictionary."""
@@ -155,12 +198,13 @@ def make_chen_wang_config(
     (:class:`npmrf3d.model.kcoherence_histograms.PilotHistograms`); the global search, which
     reads the whole volume, is off (``global_share`` recorded as 0).
     """
-    levels = check.integer("levels", levels, low=1, high=8)
+    values = dict(locals())
+    levels = validate(ChenWangConfig, "levels", levels)
     if window is DEFAULTS.window and levels != len(DEFAULTS.window):
         window = (DEFAULTS.window * levels)[-levels:] if levels > 3 else DEFAULTS.window[-levels:]
     if iterations is DEFAULTS.iterations and levels != len(DEFAULTS.iterations):
         iterations = (DEFAULTS.iterations * levels)[-levels:] if levels > 3 else DEFAULTS.iterations[-levels:]
-    window = check.per_level("window", window, levels, low=2, high=32)
+    window = validate(ChenWangConfig, "window", window, levels=levels)
     dims = check.size(size, levels=levels, window=1)
     grid = check.integer("grid", grid, low=1, high=min(window))
     for li, w in enumerate(window):
@@ -174,40 +218,15 @@ def make_chen_wang_config(
             if side % grid:
                 check.fail(f"size {n} does not suit grid {grid} with {levels} levels: level {level} "
                            f"has {side} voxels per side, not a multiple of {grid}")
-    iterations = check.per_level("iterations", iterations, levels, low=1)
-    k = check.integer("k", k, low=1, high=64)
-    pca_dims = check.integer("pca_dims", pca_dims, low=1)
-    r = check.real("r", r, low=0.0, high=2.0, low_open=True)
-    index_weight = check.real("index_weight", index_weight, low=0.0)
-    position_weight = check.real("position_weight", position_weight, low=0.0)
-    position_boost = check.real("position_boost", position_boost, low=0.0)
-    coherence_exclude = check.real("coherence_exclude", coherence_exclude, low=0.0)
-    random_candidates = check.integer("random_candidates", random_candidates, low=0, high=256)
-    global_share = check.real("global_share", global_share, low=0.0, high=1.0)
-    coherence_bias = check.real("coherence_bias", coherence_bias, low=0.0)
-    value_weight = check.real("value_weight", value_weight, low=0.0)
-    value_prior = check.real("value_prior", value_prior, low=0.0)
-    value_bins = check.integer("value_bins", value_bins, low=2, high=256)
-    phase_weight = check.real("phase_weight", phase_weight, low=0.0)
-    batches = check.integer("batches", batches, low=1, high=1024)
-    solver = check.choice("solver", solver, SOLVERS)
-    views = check.views(views, VIEWS)
-    if seed is not None:
-        seed = check.integer("seed", seed, low=0)
-    blockwise = check.boolean("blockwise", blockwise)
-    pilot = check.integer("pilot", pilot, low=8)
-    whole_voxels = check.integer("whole_voxels", whole_voxels, low=1)
-    if blockwise:
-        global_share = 0.0
-    return ChenWangConfig(size=dims, window=window, levels=levels, views=views,
-                          iterations=iterations, k=k, pca_dims=pca_dims, r=r, grid=grid,
-                          index_weight=index_weight, position_weight=position_weight,
-                          position_boost=position_boost, coherence_exclude=coherence_exclude,
-                          random_candidates=random_candidates, global_share=global_share,
-                          coherence_bias=coherence_bias, value_weight=value_weight,
-                          value_prior=value_prior, value_bins=value_bins, phase_weight=phase_weight,
-                          batches=batches, solver=solver, balance_views=bool(balance_views), blockwise=blockwise,
-                          pilot=pilot, whole_voxels=whole_voxels, seed=seed)
+    own = {"size": dims, "window": window, "levels": levels, "grid": grid,
+           "iterations": validate(ChenWangConfig, "iterations", iterations, levels=levels),
+           "views": check.views(views, VIEWS),
+           "seed": None if seed is None else check.integer("seed", seed, low=0)}
+    options = {name: validate(ChenWangConfig, name, values[name])
+               for name in options_of(ChenWangConfig) if name not in own}
+    if options["blockwise"]:
+        options["global_share"] = 0.0
+    return ChenWangConfig(**own, **options)
 
 
 def _check_exemplar_levels(config: ChenWangConfig, per_view: Mapping[str, np.ndarray]) -> None:
@@ -376,7 +395,7 @@ def chen_wang_method(per_view, config: ChenWangConfig, rng: np.random.Generator,
 
 
 METHOD = SynthesisMethod(
-    name="chen-wang", run=chen_wang_method, make_config=make_chen_wang_config,
+    name="chen-wang", run=chen_wang_method, make_config=refusing(make_chen_wang_config, ChenWangConfig),
     config_class=ChenWangConfig, synthesize=chen_wang_synthesize, fit=_fit,
     description="Chen & Wang 2010: k-coherence search, discrete solver, position and index histograms",
     resources=coherent_estimate,

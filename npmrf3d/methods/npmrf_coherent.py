@@ -59,11 +59,11 @@ from ..model.kcoherence_engine import (
     block_aprons,
 )
 from ..model.kcoherence_icm import IcmSchedule
-from ..model.neighbourhood import VIEWS
 from ..model.pyramid import INHERIT, LABEL_UPSAMPLING, run_pyramid
 from ..model.relax.anneal import SCHEDULES
 from ..resources import coherent_estimate
 from . import chen_wang
+from ..options import option, options_of, refusing, same_option, validate
 from ._api import prepare
 
 __all__ = ["CANDIDATE_HEURISTICS", "CANDIDATE_SAMPLERS", "COHERENT_HEURISTICS", "METHOD", "SEGMENTED",
@@ -131,51 +131,90 @@ def is_segmented(exemplars) -> bool:
     return True
 
 
+def _annealed(config) -> bool:
+    return config.t0 > 0
+
+
+def _icm(config) -> bool:
+    return config.icm
+
+
+def _iterated(config) -> bool:
+    return not config.icm
+
+
+_CWC = chen_wang.ChenWangConfig
+
+
 @dataclass(frozen=True)
 class CoherentConfig:
-    """A validated coherent NP-MRF run; every default lives here."""
+    """A validated coherent NP-MRF run; every option and its default is a field here (the
+    coherence options are Chen–Wang's, :class:`npmrf3d.methods.chen_wang.ChenWangConfig`)."""
 
-    size: tuple[int, int, int] = (DEFAULT_SIZE,) * 3
-    window: tuple[int, ...] = _CW.window
-    levels: int = _CW.levels
-    views: tuple[str, ...] = VIEWS
-    iterations: tuple[int, ...] = _CW.iterations
-    grid: int = _CW.grid
-    heuristic: str = "ML_H2b"
-    centre_bandwidth: float = 0.1
-    outlier: float = 0.01
-    k: int = _CW.k
-    index_weight: float = _CW.index_weight
-    position_weight: float = _CW.position_weight
-    position_boost: float = _CW.position_boost
-    random_candidates: int = _CW.random_candidates
-    global_share: float = _CW.global_share
-    coherence_bias: float = _CW.coherence_bias
+    size: tuple[int, int, int] = same_option(_CWC, "size")
+    window: tuple[int, ...] = same_option(_CWC, "window", help="window side per level, coarsest first: "
+                                          "one number or one per level")
+    levels: int = same_option(_CWC, "levels")
+    views: tuple[str, ...] = same_option(_CWC, "views")
+    iterations: tuple[int, ...] = same_option(_CWC, "iterations", applies=_iterated, needs="icm is not set")
+    grid: int = same_option(_CWC, "grid")
+    heuristic: str = option("ML_H2b", "how the views' estimates decide: ML_H2b (product) or ML_H2a (minimum); "
+                            "ML_H1a, ML_H1b (per-view picks) with --t0 0 only", kind="choice",
+                            choices=lambda: COHERENT_HEURISTICS)
+    centre_bandwidth: float = option(0.1, "width of the Parzen kernel on candidate colours, as a factor of "
+                                     "the exemplar's standard deviation", kind="real", low=0.0, low_open=True)
+    outlier: float = option(0.01, "share of a uniform term mixed into each view's estimate", kind="real",
+                            low=0.0, high=1.0, high_open=True)
+    k: int = same_option(_CWC, "k")
+    index_weight: float = same_option(_CWC, "index_weight")
+    position_weight: float = same_option(_CWC, "position_weight")
+    position_boost: float = same_option(_CWC, "position_boost")
+    random_candidates: int = same_option(_CWC, "random_candidates")
+    global_share: float = same_option(_CWC, "global_share")
+    coherence_bias: float = same_option(_CWC, "coherence_bias")
     # measured (docs/quality.md, "Value histograms"): the histogram prior alone keeps hubble's spots and leaves
     # gravel as it was; the vote weighting (Chen–Wang's default) cost gravel's grain here
-    value_weight: float = 0.0
-    value_prior: float = 5.0
-    value_bins: int = _CW.value_bins
-    phase_weight: float = 0.0
+    value_weight: float = same_option(_CWC, "value_weight", 0.0)
+    value_prior: float = same_option(_CWC, "value_prior", 5.0)
+    value_bins: int = same_option(_CWC, "value_bins")
+    phase_weight: float = same_option(_CWC, "phase_weight", 0.0)
     # annealing over the candidates: t0 = 0 decides by the highest score (ICM)
-    t0: float = 0.0
-    t_end: float = 0.05
-    schedule: str = "geometric"
-    sampler: str = "heat-bath"
+    t0: float = option(0.0, "annealing: first temperature of each level; each voxel draws among its "
+                       "candidates ~ exp(score / T) (0 = no annealing: the highest score decides)",
+                       kind="real", low=0.0, group="relaxation")
+    t_end: float = option(0.05, "annealing: last temperature of each level, at most --t0", kind="real",
+                          group="relaxation", applies=_annealed, needs="t0 is above 0")
+    schedule: str = option("geometric", "annealing: how the temperature falls from --t0 to --t-end",
+                           kind="choice", choices=lambda: SCHEDULES, group="relaxation",
+                           applies=_annealed, needs="t0 is above 0")
+    sampler: str = option("heat-bath", "annealing: heat-bath (draw among the candidates ~ exp(score / T)) "
+                          "or metropolis (propose one, accept by the Metropolis rule)", kind="choice",
+                          choices=lambda: CANDIDATE_SAMPLERS, group="relaxation", applies=_annealed,
+                          needs="t0 is above 0")
     # ICM with per-voxel temperatures (Urs et al. 2014; model.kcoherence_icm) instead of the
     # fixed iterations (then unused): a level's sweeps stop by `stop` or `max_sweeps`
-    icm: bool = False
-    xi: float = IcmSchedule.xi
-    stop: float = IcmSchedule.stop
-    max_sweeps: int = IcmSchedule.max_sweeps
-    upsample: str = IcmSchedule.upsample
-    inherit: str = IcmSchedule.inherit
+    icm: bool = option(False, "ICM with per-voxel temperatures (Urs et al. 2014) instead of --iterations",
+                       kind="flag", group="relaxation")
+    xi: float = option(IcmSchedule.xi, "icm: cooling step (more negative cools faster)", kind="real",
+                       high=0.0, high_open=True, group="relaxation", applies=_icm, needs="icm is set")
+    stop: float = option(IcmSchedule.stop, "icm: stop a level once the global temperature fell by this "
+                         "fraction (1 = down to 0)", kind="real", low=0.0, high=1.0, low_open=True,
+                         group="relaxation", applies=_icm, needs="icm is set")
+    max_sweeps: int = option(IcmSchedule.max_sweeps, "icm: most sweeps per level", kind="int", low=1,
+                             group="relaxation", applies=_icm, needs="icm is set")
+    upsample: str = option(IcmSchedule.upsample, "icm: the 7 non-inherited children of a voxel copy its "
+                           "shifted source (8/8) or get random sources (1/8)", kind="choice",
+                           choices=lambda: LABEL_UPSAMPLING, group="relaxation", applies=_icm,
+                           needs="icm is set")
+    inherit: str = option(IcmSchedule.inherit, "icm: inherited voxels may still change (resynth) or are "
+                          "frozen (fixed)", kind="choice", choices=lambda: INHERIT, group="relaxation",
+                          applies=_icm, needs="icm is set")
     # block-local (Chen–Wang's fields): the finer levels read a pilot block's histograms, any
     # block can be made alone
-    blockwise: bool = _CW.blockwise
-    pilot: int = _CW.pilot
-    whole_voxels: int = _CW.whole_voxels
-    seed: int | None = None
+    blockwise: bool = same_option(_CWC, "blockwise")
+    pilot: int = same_option(_CWC, "pilot")
+    whole_voxels: int = same_option(_CWC, "whole_voxels")
+    seed: int | None = same_option(_CWC, "seed")
 
     def to_dict(self) -> dict:
         """Plain JSON-able dictionary."""
@@ -183,9 +222,8 @@ class CoherentConfig:
 
 
 DEFAULTS = CoherentConfig()
-_SHARED = ("size", "window", "levels", "views", "iterations", "grid", "k", "index_weight", "position_weight",
-           "position_boost", "random_candidates", "global_share", "coherence_bias", "value_weight",
-           "value_prior", "value_bins", "phase_weight", "blockwise", "pilot", "whole_voxels", "seed")
+#: The options the coherent sampler takes from Chen–Wang's configuration, as they are.
+_SHARED = tuple(name for name in options_of(chen_wang.ChenWangConfig) if name in options_of(CoherentConfig))
 
 
 def make_coherent_config(
@@ -211,23 +249,16 @@ def make_coherent_config(
         coherence_bias=coherence_bias, value_weight=value_weight, value_prior=value_prior,
         value_bins=value_bins, phase_weight=phase_weight, blockwise=blockwise, pilot=pilot,
         whole_voxels=whole_voxels, seed=seed)
-    heuristic = check.choice("heuristic", heuristic, tuple(COHERENT_HEURISTICS))
-    centre_bandwidth = check.real("centre_bandwidth", centre_bandwidth, low=0.0, low_open=True)
-    outlier = check.real("outlier", outlier, low=0.0, high=1.0, high_open=True)
-    t0 = check.real("t0", t0, low=0.0)
+    heuristic, centre_bandwidth, outlier, t0, schedule, sampler, icm, upsample, inherit, xi, stop, max_sweeps = (
+        validate(CoherentConfig, name, value) for name, value in (
+            ("heuristic", heuristic), ("centre_bandwidth", centre_bandwidth), ("outlier", outlier),
+            ("t0", t0), ("schedule", schedule), ("sampler", sampler), ("icm", icm), ("upsample", upsample),
+            ("inherit", inherit), ("xi", xi), ("stop", stop), ("max_sweeps", max_sweeps)))
     if t0 > 0.0 and heuristic in PER_VIEW_HEURISTICS:
         check.fail(f"heuristic {heuristic} cannot be annealed (t0 > 0): ML_H1a and ML_H1b are ICM-only "
                    f"per-view argmax rules with no score to draw by; use t0 = 0, or ML_H2b or ML_H2a")
-    schedule = check.choice("schedule", schedule, tuple(SCHEDULES))
-    sampler = check.choice("sampler", sampler, tuple(CANDIDATE_SAMPLERS))
     if t0 > 0.0:
         t_end = check.real("t_end", t_end, low=0.0, low_open=schedule == "geometric", high=t0)
-    icm = check.boolean("icm", icm)
-    upsample = check.choice("upsample", upsample, LABEL_UPSAMPLING)
-    inherit = check.choice("inherit", inherit, INHERIT)
-    xi = check.real("xi", xi, high=0.0, high_open=True)
-    stop = check.real("stop", stop, low=0.0, high=1.0, low_open=True)
-    max_sweeps = check.integer("max_sweeps", max_sweeps, low=1)
     if icm and cw.blockwise:
         check.fail("icm=True cannot run blockwise: its stop rule reads every voxel's temperature; "
                    "use icm=False (the fixed iterations) or blockwise=False")
@@ -377,7 +408,7 @@ def best_of_pyramids(per_view, configs, rng: np.random.Generator, *, progress=No
 
 
 METHOD = SynthesisMethod(
-    name="coherent", run=coherent_method, make_config=make_coherent_config,
+    name="coherent", run=coherent_method, make_config=refusing(make_coherent_config, CoherentConfig),
     config_class=CoherentConfig, synthesize=coherent_synthesize, fit=chen_wang._fit,
     description="the coherent NP-MRF sampler: the NP-MRF likelihood over k-coherent candidates",
     resources=coherent_estimate,
