@@ -150,16 +150,12 @@ def unresolved_names(text: str) -> list[str]:
 # ----------------------------------------------------------------------------- defaults
 
 
-def _sub_parser(*path) -> argparse.ArgumentParser:
+def _options(*path) -> dict[str, argparse.Action]:
+    """The options of ``npmrf3d PATH...`` by their spellings."""
     parser = build_parser()
     for name in path:
-        action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-        parser = action.choices[name]
-    return parser
-
-
-def _options(*path) -> dict[str, argparse.Action]:
-    return {opt: a for a in _sub_parser(*path)._actions for opt in a.option_strings}
+        parser = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices[name]
+    return {opt: a for a in parser._actions for opt in a.option_strings}
 
 
 def _spell(value) -> str:
