@@ -37,6 +37,22 @@ def _registry(name: str):
     return tuple(getattr(heuristics, name, None) or getattr(pyramid, name))
 
 
+def _in_table(name: str, needs: str) -> dict:
+    """``applies`` and ``needs`` of an option that only some (support, relaxation, temperatures)
+    combinations read, from the one table that says which
+    (:data:`npmrf3d.methods.npmrf_options.APPLIES`)."""
+    def applies(config) -> bool:
+        from .methods.npmrf_options import applies as in_table
+        return in_table(name, (config.support, config.relaxation, config.temperatures))
+    return {"applies": applies, "needs": needs}
+
+
+_FULL = "support is full"
+_ANNEAL = "relaxation is anneal"
+_COHERENT = "support is coherent"
+_TEMPERED = "temperatures is set (relaxation icm)"
+
+
 @dataclass(frozen=True)
 class DecisionRule:
     """How a visited voxel picks its value (docs/model.md, sections 2 and 8).
@@ -63,18 +79,25 @@ class DecisionRule:
     """
 
     bandwidth: float = option(1.0, "support full: neighbour bandwidth / h_opt", kind="real",
-                              low=0.0, low_open=True, decided=_PRESET_VALUE, metavar="B")
+                              low=0.0, low_open=True, decided=_PRESET_VALUE, metavar="B",
+                              **_in_table('bandwidth', _FULL))
     centre_bandwidth: float = option(1.0, "centre-value bandwidth / h_opt (or / sigma)", kind="real", low=0.0,
                                      low_open=True, decided=_PRESET_VALUE, metavar="B")
     adaptive: float = option(0.0, "support full: 2h^2 = A * best distance", kind="real", low=0.0,
-                             decided=_PRESET_VALUE, metavar="A")
-    decision: str = option("argmax", "support full: argmax, or sample exp(score/tau)", kind="choice", choices=lambda: _registry("DECISIONS"),
-                           decided=_PRESET_VALUE)
+                             decided=_PRESET_VALUE, metavar="A",
+                             **_in_table('adaptive', _FULL))
+    decision: str = option("argmax", "support full: argmax, or sample exp(score/tau)",
+                           kind="choice", choices=lambda: _registry("DECISIONS"),
+                           decided=_PRESET_VALUE,
+                           **_in_table('decision', _FULL))
     tau: float = option(1.0, "support full: temperature of sample", kind="real", low=0.0,
-                        low_open=True, decided=_PRESET_VALUE, metavar="T")
+                        low_open=True, decided=_PRESET_VALUE, metavar="T",
+                        **_in_table('tau', _FULL))
     histogram_weight: float = option(0.0, "support full: over-used label penalty",
-                                     kind="real", low=0.0, decided=_PRESET_VALUE, metavar="W")
-    outlier: float = option(0.0, "uniform share in each view's estimate", kind="real", low=0.0, high=1.0, high_open=True,
+                                     kind="real", low=0.0, decided=_PRESET_VALUE, metavar="W",
+                                     **_in_table('histogram_weight', _FULL))
+    outlier: float = option(0.0, "uniform share in each view's estimate",
+                            kind="real", low=0.0, high=1.0, high_open=True,
                             decided=_PRESET_VALUE, metavar="A")
 
 
@@ -123,39 +146,61 @@ class SynthesisConfig:
     """
 
     size: tuple[int, int, int] = option(help="output size", kind="own")
-    window: int = option(7, "side of each view's square neighbourhood, odd, 3 to 15", kind="int", metavar="W", group="volume and pyramid")
+    window: int = option(7, "side of each view's square neighbourhood, odd, 3 to 15",
+                         kind="int", metavar="W", group="volume and pyramid")
     levels: int = option(3, "pyramid levels (scales), 1 to 8", kind="int", low=1, high=8,
                          metavar="L", group="volume and pyramid")
     heuristic: str = option("ML_H2b", "how the views' estimates combine: ML_H2b product, ML_H2a minimum, "
-                            "ML_H1a/ML_H1b per-view argmax", kind="choice", choices=lambda: _registry("HEURISTICS"))
-    relaxation: str = option("icm", "icm, or anneal (simulated annealing)", kind="choice", choices=lambda: tuple(RELAXATIONS))
+                            "ML_H1a/ML_H1b per-view argmax",
+                            kind="choice", choices=lambda: _registry("HEURISTICS"))
+    relaxation: str = option("icm", "icm, or anneal (simulated annealing)",
+                             kind="choice", choices=lambda: tuple(RELAXATIONS))
     views: tuple[str, ...] = option(("front", "right", "top"), "constrained views", kind="own")
     upsample: str = option("1/8", "a voxel starts 1 or all 8 of its children", kind="choice",
                            choices=lambda: _registry("UPSAMPLING"), group="volume and pyramid",
                            decided="8/8; support full with icm: 1/8")
-    inherit: str = option("resynth", "inherited voxels may change (resynth) or stay (fixed)", kind="choice", choices=lambda: _registry("INHERIT"),
-                          group="volume and pyramid")
+    inherit: str = option("resynth", "inherited voxels may change (resynth) or stay (fixed)",
+                          kind="choice", choices=lambda: _registry("INHERIT"),
+                          group="volume and pyramid",
+                          **_in_table('inherit', "temperatures is set, or support is full"))
     xi: float = option(IcmOptions.xi, "icm: cooling step, < 0", kind="real",
-                       high=0.0, high_open=True, decided="-1; support full: -3")
-    stop: float = option(IcmOptions.stop, "icm: a level stops when its temperature fell by F", kind="real", low=0.0, high=1.0, low_open=True, metavar="F")
-    max_sweeps: int = option(IcmOptions.max_sweeps, "icm: most sweeps per level", kind="int", low=1)
+                       high=0.0, high_open=True, decided="-1; support full: -3",
+                       **_in_table('xi', _TEMPERED))
+    stop: float = option(IcmOptions.stop, "icm: a level stops when its temperature fell by F",
+                         kind="real", low=0.0, high=1.0, low_open=True, metavar="F",
+                         **_in_table('stop', _TEMPERED))
+    max_sweeps: int = option(IcmOptions.max_sweeps, "icm: most sweeps per level", kind="int", low=1,
+                             **_in_table('max_sweeps', _TEMPERED))
     sampler: str = option(AnnealOptions.sampler, "anneal: heat-bath or metropolis (the paper)", kind="choice",
-                          choices=lambda: SAMPLERS, decided="metropolis; support full: heat-bath")
+                          choices=lambda: SAMPLERS, decided="metropolis; support full: heat-bath",
+                          **_in_table('sampler', _ANNEAL))
     schedule: str = option(AnnealOptions.schedule, "anneal: temperature from --t0 to --t-end",
-                           kind="choice", choices=lambda: SCHEDULES)
+                           kind="choice", choices=lambda: SCHEDULES,
+                           **_in_table('schedule', _ANNEAL))
     t0: float = option(AnnealOptions.t0, "anneal: a level's first temperature", kind="real", low=0.0,
-                       low_open=True, metavar="T")
-    t_end: float = option(AnnealOptions.t_end, "anneal: a level's last temperature, <= t0", kind="real", low=0.0, metavar="T")
+                       low_open=True, metavar="T",
+                       **_in_table('t0', _ANNEAL))
+    t_end: float = option(AnnealOptions.t_end, "anneal: a level's last temperature, <= t0",
+                          kind="real", low=0.0, metavar="T",
+                          **_in_table('t_end', _ANNEAL))
     proposals: int = option(AnnealOptions.proposals, "anneal: sweeps per level",
-                            kind="int", low=1, metavar="P")
-    proposal: str = option(AnnealOptions.proposal, "anneal, metropolis, support full: proposals from the exemplar or the labels", kind="choice",
-                           choices=lambda: PROPOSALS)
-    support: str = option("coherent", "estimates over coherent candidates or every patch (full)", kind="choice", choices=lambda: SUPPORTS,
+                            kind="int", low=1, metavar="P",
+                            **_in_table('proposals', _ANNEAL))
+    proposal: str = option(AnnealOptions.proposal,
+                           "anneal, metropolis, support full: proposals from the exemplar or the labels",
+                           kind="choice",
+                           choices=lambda: PROPOSALS,
+                           **_in_table('proposal', "support is full (relaxation anneal)"))
+    support: str = option("coherent", "estimates over coherent candidates or every patch (full)",
+                          kind="choice", choices=lambda: SUPPORTS,
                           decided="coherent")
-    preset: str = option("tuned", "support full: the decision rule", kind="choice", choices=lambda: tuple(PRESETS),
-                         decided="tuned")
+    preset: str = option("tuned", "support full: the decision rule",
+                         kind="choice", choices=lambda: tuple(PRESETS),
+                         decided="tuned",
+                         **_in_table('preset', _FULL))
     segmented: str = option("auto", "support coherent: the preset for segmented exemplars", kind="choice",
-                            choices=lambda: SEGMENTED_MODES)
+                            choices=lambda: SEGMENTED_MODES,
+                            **_in_table('segmented', _COHERENT))
     rule: DecisionRule = option(help="decision rule", kind="nested", default_factory=DecisionRule)
     grey_levels: int | None = option(None, "re-quantise each channel to K levels",
                                      kind="int", low=2, high=65536, optional=True, metavar="K",
@@ -164,23 +209,27 @@ class SynthesisConfig:
                                  kind="int", low=2, high=65536, optional=True, metavar="K",
                                  group="views and exemplars", decided="keep every colour")
     toroidal_exemplar: bool = option(False, "support full: exemplar patches wrap around",
-                                     kind="flag", group="views and exemplars")
+                                     kind="flag", group="views and exemplars",
+                                     **_in_table('toroidal_exemplar', _FULL))
     temperatures: bool = option(False, "icm with per-voxel temperatures (Urs et al. 2014)",
                                 kind="flag", decided="with support full")
     blockwise: bool = option(False, "the block-local sampler (docs/blocks.md)", kind="flag", group="blocks")
     # blockwise: levels of at most this many voxels run whole, once for all blocks (256^3: the
     # cones of blocks of 128 at 512^3 would repeat its 256^3 level 8.8 times over)
     whole_voxels: int = option(2 ** 24, "--blockwise: levels of at most N voxels run whole, once",
-                               kind="int", low=1, group="blocks")
+                               kind="int", low=1, group="blocks", applies=lambda config: config.blockwise,
+                               needs="blockwise is set")
     # the coherent sampler's phase control (docs/materials.md, "Phase control in the default"):
     # on scan slices the minority phase keeps its share and the two-point correlation shape
     # comes nearer the scans' crops; photographs' quality unchanged (docs/quality.md)
     phase_weight: float = option(16.0, "support coherent: phase control (0 = off)", kind="real", low=0.0,
-                                 metavar="W", decided="16; support full: 0")
+                                 metavar="W", decided="16; support full: 0",
+                                 **_in_table('phase_weight', _COHERENT))
     # support coherent: neighbourhoods searched and voting every `grid` voxels along both plane axes;
     # None: the run's own (methods.npmrf_options.coherent_grid: 2 on photographs where every level's
     # side is even, docs/quality.md "Sparse sites"; else every site)
-    grid: int | None = option(None, "support coherent: sites every G voxels", kind="int", low=1, optional=True, metavar="G",
+    grid: int | None = option(None, "support coherent: sites every G voxels",
+                              kind="int", low=1, optional=True, metavar="G",
                               group="volume and pyramid", decided="2 on even sides, else 1")
     seed: int | None = option(None, "random seed", kind="own")
 

@@ -27,7 +27,7 @@ from typing import Any
 from . import _validation as check
 
 __all__ = ["Option", "option", "options_of", "validate", "refuse_inapplicable", "given_options",
-           "option_table", "flag_name", "refusing", "same_option"]
+           "option_table", "flag_name", "recorded", "refusing", "same_option"]
 
 _KEY = "npmrf3d_option"
 
@@ -170,6 +170,34 @@ def refusing(make_config: Callable[..., Any], config_class) -> Callable[..., Any
         refuse_inapplicable(config, given_options(config_class, values))
         return config
     return make
+
+
+def recorded(config) -> dict:
+    """What a run of ``config`` read, for its record (``run.json``): every field but the options
+    the run does not read (:attr:`Option.applies`), a nested configuration (the decision rule)
+    likewise. Fields that are not options are kept as they are.
+
+    >>> from npmrf3d.methods.npmrf_options import make_config
+    >>> record = recorded(make_config(size=16, levels=2))
+    >>> "preset" in record, "xi" in record, sorted(record["rule"])
+    (False, False, ['centre_bandwidth', 'outlier'])
+    """
+    def read(opt) -> bool:
+        return opt is None or opt.applies is None or opt.applies(config)
+
+    out = {}
+    for f in dataclasses.fields(config):
+        opt = f.metadata.get(_KEY)
+        if not read(opt):
+            continue
+        value = getattr(config, f.name)
+        if opt is not None and opt.kind == "nested":
+            value = {name: getattr(value, name) for name, (_, inner) in options_of(type(value)).items()
+                     if read(inner)}
+        elif dataclasses.is_dataclass(value):
+            value = dataclasses.asdict(value)
+        out[f.name] = value
+    return out
 
 
 def default_text(f: dataclasses.Field, opt: Option) -> str:

@@ -19,7 +19,7 @@ from npmrf3d.config import SynthesisConfig
 from npmrf3d.errors import ParameterError
 from npmrf3d.methods.chen_wang import ChenWangConfig
 from npmrf3d.methods.npmrf_coherent import CoherentConfig
-from npmrf3d.options import Option, field_default, option, options_of, refusing, validate
+from npmrf3d.options import field_default, option, options_of, refusing, validate
 
 DOCS = pathlib.Path(__file__).resolve().parents[1] / "docs" / "commands"
 
@@ -37,7 +37,7 @@ def test_every_field_is_an_option_with_help(config_class):
     fields = {f.name for f in dataclasses.fields(config_class)}
     assert set(options_of(config_class)) == fields
     for name, (_, opt) in method_options(config_class).items():
-        assert isinstance(opt, Option) and opt.help and not opt.help.endswith("."), name
+        assert opt.help and not opt.help.endswith("."), name
         assert (opt.applies is None) == (not opt.needs), name
 
 

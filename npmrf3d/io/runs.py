@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ParameterError
+from ..options import options_of, recorded
 from ..plotting import preview_figure, save_figure
 from .files import as_volume, json_text, package_versions, to_jsonable, write_npy, write_volume_tiff
 
@@ -35,10 +36,13 @@ RUN_FILES = ("volume.npy", "volume.tif", "preview.png", "run.json")
 
 
 def config_dict(result) -> Any:
-    """The JSON-able configuration of a result (None for a run without one)."""
+    """The JSON-able configuration of a result (None for a run without one): for a configuration
+    made of options (:mod:`npmrf3d.options`), the options its run read."""
     config = getattr(result, "config", None)
     if config is None:
         return None
+    if options_of(type(config)):  # only what the run read
+        return to_jsonable(recorded(config))
     if hasattr(config, "to_dict"):
         return config.to_dict()
     try:
