@@ -334,3 +334,20 @@ def test_a_second_study_into_a_held_folder_is_refused_in_one_line(tmp_path, caps
         holder.communicate("", timeout=60)
     assert holder.returncode == 0
     assert not any(p.name.endswith(".lock") for p in (tmp_path / "results").iterdir())
+
+
+def test_the_time_left_leaves_out_the_kernels_compiling(capsys):
+    class Clock:
+        seconds = 0.0
+
+    clock = Clock()
+    line = _progress.LevelProgress((8, 8, 8), enabled=True, symbol="E", compiling=clock)
+    line(0, 0, 4, float("nan"))
+    clock.seconds = 90.0  # of the next 100 s, 90 went to compiling
+    line.bar.start_t -= 100.0
+    line(0, 2, 4, 1.0)
+    stats = line.bar.format_dict
+    assert (stats["total"] - stats["n"]) / stats["rate"] == pytest.approx(10.0, rel=0.05)
+    assert "<00:10" in str(line.bar) or "<00:09" in str(line.bar)
+    line.close()
+    capsys.readouterr()

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 import threading
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -146,6 +147,46 @@ def _package_kernel(dispatcher) -> bool:
     own helpers, compiled as part of a kernel)."""
     module = getattr(getattr(dispatcher, "py_func", None), "__module__", None) or ""
     return module.split(".", 1)[0] == __name__.split(".", 1)[0]
+
+
+class CompileClock:
+    """Seconds spent compiling the package's kernels while it is installed
+    (:func:`timing_compiles`), the compilation under way included; a kernel compiled inside
+    another counts once."""
+
+    def __init__(self):
+        self._done, self._since, self._depth = 0.0, None, 0
+
+    @property
+    def seconds(self) -> float:
+        since = self._since
+        return self._done + (time.perf_counter() - since if since is not None else 0.0)
+
+    def on_start(self, ev) -> None:
+        if _package_kernel(ev.data.get("dispatcher")):
+            self._depth += 1
+            if self._depth == 1:
+                self._since = time.perf_counter()
+
+    def on_end(self, ev) -> None:
+        if _package_kernel(ev.data.get("dispatcher")) and self._depth > 0:
+            self._depth -= 1
+            if self._depth == 0 and self._since is not None:
+                self._done += time.perf_counter() - self._since
+                self._since = None
+
+
+@contextmanager
+def timing_compiles() -> Iterator[CompileClock]:
+    """A :class:`CompileClock` over the block (nothing is compiled on a warm cache: it stays 0)."""
+    from numba.core import event
+
+    clock = CompileClock()
+    listener = type("CompileListener", (event.Listener,),
+                    {"on_start": lambda self, ev: clock.on_start(ev),
+                     "on_end": lambda self, ev: clock.on_end(ev)})()
+    with event.install_listener("numba:compile", listener):
+        yield clock
 
 
 @contextmanager

@@ -11,6 +11,7 @@ import sys
 import numpy as np
 from tqdm import tqdm
 
+from .._kernels._jit import timing_compiles
 from ..model.pyramid import level_shape
 from . import _interrupt
 from ._common import PROG, say
@@ -28,6 +29,22 @@ def value_symbol(config) -> str:
     return "T" if getattr(config, "support", None) == "full" else "E"
 
 
+class _RunLine(tqdm):
+    """A tqdm line whose time left leaves out the seconds ``excluded()`` (the kernels compiling
+    on a cold cache, which the rest of the run does not repeat): the rate is the share done over
+    the time spent computing."""
+
+    excluded = staticmethod(lambda: 0.0)
+
+    @property
+    def format_dict(self):
+        d = super().format_dict
+        computing = d["elapsed"] - self.excluded()
+        if d["n"] and computing > 0:
+            d["rate"] = (d["n"] - d["initial"]) / computing
+        return d
+
+
 class LevelProgress:
     """One line on stderr over a whole pyramid: the share of the run done, the time left, the
     level running, its step and its value (``symbol``, e.g. ``E=`` an energy, ``T=`` a temperature).
@@ -38,7 +55,9 @@ class LevelProgress:
     is its share of the voxels (a finer level holds 8x those of the one before), and within a
     level the share of its ``steps`` done (a count its method may correct as it goes). The line
     counts in the steps of the level running: its ``total`` is the whole run in those steps, so
-    the time left, (total - done) / (done / elapsed), is the same whatever the unit. A coarser
+    the time left, (total - done) / (done / elapsed), is the same whatever the unit; the seconds
+    the kernels spent compiling (``compiling``, a :class:`~npmrf3d._kernels._jit.CompileClock`)
+    are left out of ``elapsed`` there, since the rest of the run does not repeat them. A coarser
     level called after a finer one starts a new pyramid (the segmented preset's second one) on
     a new line. ``unit`` names a step (``sweep``, ``iter``, ``pass``): the line shows the level's
     step count beside the share of the whole run.
@@ -47,7 +66,8 @@ class LevelProgress:
     BAR_FORMAT = "{desc}: {percentage:3.0f}%|{bar}| {elapsed}<{remaining}{postfix}"
 
     def __init__(self, size: tuple[int, int, int], enabled: bool, unit: str = "sweep",
-                 symbol: str = "T"):
+                 symbol: str = "T", compiling=None):
+        self.compiling = compiling  # a CompileClock: its seconds are left out of the time left
         self.size = size
         self.enabled = enabled
         self.unit = unit
@@ -84,8 +104,11 @@ class LevelProgress:
         self.weights = {k: math.prod(level_shape(self.size, k)) for k in range(level, -1, -1)}
         self.done = 0
         # smoothing 0: the time left is from the average rate since the start, not the last step
-        self.bar = tqdm(total=1, desc=desc, file=sys.stderr, leave=True, dynamic_ncols=True,
-                        smoothing=0, bar_format=self.BAR_FORMAT, unit=self.unit)
+        self.bar = _RunLine(total=1, desc=desc, file=sys.stderr, leave=True, dynamic_ncols=True,
+                            smoothing=0, bar_format=self.BAR_FORMAT, unit=self.unit)
+        if self.compiling is not None:
+            clock, before = self.compiling, self.compiling.seconds
+            self.bar.excluded = lambda: clock.seconds - before
 
     def note(self, text: str) -> None:
         """One line on stderr between levels (a method's optional hook: the segmented preset
@@ -172,12 +195,14 @@ def run_method(args: argparse.Namespace, method, config, per_view: dict, *, chec
     """``method.run`` seeded by ``config.seed`` with one progress line over the run (none with
     ``--quiet``); ``symbol`` names the level value (None: :func:`value_symbol` of ``config``)."""
     symbol = value_symbol(config) if symbol is None else symbol
-    progress = LevelProgress(config.size, enabled=not args.quiet, unit=unit, symbol=symbol)
-    try:
-        result = method.run(per_view, config, np.random.default_rng(config.seed), progress=progress,
-                            checkpoint=checkpoint, t_start=t_start, **inputs)
-        progress.finish()
-    finally:
-        progress.close()
+    with timing_compiles() as compiling:
+        progress = LevelProgress(config.size, enabled=not args.quiet, unit=unit, symbol=symbol,
+                                 compiling=compiling)
+        try:
+            result = method.run(per_view, config, np.random.default_rng(config.seed),
+                                progress=progress, checkpoint=checkpoint, t_start=t_start, **inputs)
+            progress.finish()
+        finally:
+            progress.close()
     _interrupt.check()  # an interrupt swallowed after the last progress tick: write nothing
     return result
