@@ -28,7 +28,7 @@ from ..methods import check_resources, estimate
 from ..model.exemplar import exemplar_source, resolve_exemplars
 from ..model.neighbourhood import VIEWS
 from ..resources import available_memory, format_bytes
-from ._options import speak_options
+from ._options import given, speak_options
 
 PROG = "npmrf3d"
 
@@ -287,6 +287,8 @@ def prepare_run(args: argparse.Namespace, method, config, *, whole: bool = True)
     checkpoint = pathlib.Path(args.checkpoint) if getattr(args, "checkpoint", None) is not None else None
     check_checkpoint(checkpoint, out)
     exemplar, per_view_sources, source_names = view_sources(args)
+    if not given(args, "exemplar") and all(view in per_view_sources for view in config.views):
+        exemplar = None  # the default exemplar, not written, is not refused as unused
     per_view = resolve_exemplars(exemplar, per_view_sources, config.views, **method.fit(config),
                                  exemplar_kind=getattr(args, "exemplar_kind", "auto"))
     if whole and not getattr(args, "dry_run", False):
