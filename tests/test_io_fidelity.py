@@ -171,7 +171,7 @@ def test_a_full_disk_names_the_file_and_says_to_free_space(tmp_path, capsys, mon
                         lambda path: shutil._ntuple_diskusage(100, 100, 0))
     line = one_line_error(["synth", "labels.png", *TINY, "--out", "run"], tmp_path, capsys)
     assert "volume.npy'" in line and "No space left on device" in line
-    assert "wrote 5088 of 32768 bytes" in line and "free some space" in line
+    assert "requested" not in line and "free some space" in line
 
 
 def test_a_positional_exemplar_beside_one_per_view_is_refused(tmp_path, capsys, monkeypatch):

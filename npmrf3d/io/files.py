@@ -26,6 +26,7 @@ import dataclasses
 import errno
 import importlib.metadata
 import json
+import math
 import os
 import pathlib
 import platform
@@ -416,9 +417,7 @@ def _write_failure(exc: OSError, path: pathlib.Path, tmp: pathlib.Path) -> OSErr
         except OSError:
             full = False
         if full:
-            code = errno.ENOSPC
-            reason = (f"{os.strerror(errno.ENOSPC)} (wrote {short.group(2)} of "
-                      f"{short.group(1)} bytes)")
+            code, reason = errno.ENOSPC, os.strerror(errno.ENOSPC)
     return OSError(code, reason, str(path))
 
 
@@ -453,10 +452,11 @@ def write_volume_tiff(path: str | os.PathLike[str], volume: np.ndarray) -> pathl
     zcyx = np.ascontiguousarray(volume.transpose(0, 3, 1, 2))
     metadata: dict[str, Any] = {"axes": "ZCYX"}
     if volume.shape[3] == 3:
-        finite = volume[np.isfinite(volume)]
-        lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
-        lo, hi = (0.0, 1.0) if 0.0 <= lo and hi <= 1.0 else (lo, max(hi, lo + 1.0))
-        metadata.update(mode="composite", LUTs=list(_RGB_LUTS), Ranges=(lo, hi) * 3)
+        lo, hi = float(volume.min()), float(volume.max())
+        if (0.0 <= lo and hi <= 1.0) or not (math.isfinite(lo) and math.isfinite(hi)):
+            lo, hi = 0.0, 1.0  # a photograph's range (NaN or Inf: no range to read)
+        metadata.update(mode="composite", LUTs=list(_RGB_LUTS),
+                        Ranges=(lo, hi if hi > lo else lo + 1.0) * 3)
     return atomic_write(
         path,
         lambda tmp: tifffile.imwrite(tmp, zcyx, imagej=True, metadata=metadata),
