@@ -185,6 +185,24 @@ def test_a_positional_exemplar_beside_one_per_view_is_refused(tmp_path, capsys, 
                            levels=1, window=3)
 
 
+@pytest.mark.parametrize("command", [["synth"], ["neural", "train", "--out", "m.pt"]])
+def test_the_default_exemplar_not_written_is_not_refused_as_unused(command, tmp_path, monkeypatch):
+    from npmrf3d.cli._common import view_sources
+    from npmrf3d.cli._options import given_options
+    from npmrf3d.cli.main import build_parser
+
+    iio.imwrite(tmp_path / "a.png", labels())
+    monkeypatch.chdir(tmp_path)
+    views = [arg for v in ("front", "right", "top") for arg in (f"--exemplar-{v}", "a.png")]
+    argv = [*command, *views]
+    args = build_parser().parse_args(argv)
+    args.given = given_options(build_parser(), argv)
+    exemplar, per_view, _ = view_sources(args)
+    assert exemplar is None and sorted(per_view) == ["front", "right", "top"]
+    if command == ["synth"]:
+        assert cli.main([*argv, *TINY, "--dry-run"]) == 0
+
+
 # --------------------------------------------------------------------------- the Python API
 
 

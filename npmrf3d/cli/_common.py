@@ -268,8 +268,12 @@ def add_exemplar_kind(group) -> None:
 
 
 def view_sources(args: argparse.Namespace):
-    """(EXEMPLAR file, {view: --exemplar-VIEW file}, views -> {view: name for run.json})."""
+    """(EXEMPLAR file, {view: --exemplar-VIEW file}, views -> {view: name for run.json}). An
+    EXEMPLAR not written is None: the default, which the views without an --exemplar-VIEW read
+    and which is not refused as unused when every view has its own."""
     exemplar, exemplar_name = exemplar_source(args.exemplar)
+    if not given(args, "exemplar"):
+        exemplar = None
     per_view_sources, names = {}, {}
     for view in VIEWS:
         source, name = exemplar_source(getattr(args, f"exemplar_{view}"))
@@ -287,8 +291,6 @@ def prepare_run(args: argparse.Namespace, method, config, *, whole: bool = True)
     checkpoint = pathlib.Path(args.checkpoint) if getattr(args, "checkpoint", None) is not None else None
     check_checkpoint(checkpoint, out)
     exemplar, per_view_sources, source_names = view_sources(args)
-    if not given(args, "exemplar") and all(view in per_view_sources for view in config.views):
-        exemplar = None  # the default exemplar, not written, is not refused as unused
     per_view = resolve_exemplars(exemplar, per_view_sources, config.views, **method.fit(config),
                                  exemplar_kind=getattr(args, "exemplar_kind", "auto"))
     if whole and not getattr(args, "dry_run", False):
