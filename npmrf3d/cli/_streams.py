@@ -29,9 +29,10 @@ _STREAMS = (("stdout", 1), ("stderr", 2))
 
 class TolerantStream:
     """A text stream whose failed writes are dropped and remembered (``lost``: the error, or
-    None while every write went through). Everything else is the wrapped stream's."""
+    None while every write went through); ``fd``: the descriptor it writes to (pointed at the
+    null device after a failure; None: none). Everything else is the wrapped stream's."""
 
-    def __init__(self, stream, fd: int, lost: OSError | None = None):
+    def __init__(self, stream, fd: int | None, lost: OSError | None = None):
         self._stream, self._fd, self.lost = stream, fd, lost
 
     def write(self, text: str) -> int:
@@ -53,7 +54,8 @@ class TolerantStream:
         """Remember the failure and point the descriptor at the null device, where whatever is
         still buffered (or written by a library that holds the old stream) goes quietly."""
         self.lost = exc if isinstance(exc, OSError) else OSError(errno.EBADF, "the stream is closed")
-        _fill_with_null(self._fd, replace=True)
+        if self._fd is not None:
+            _fill_with_null(self._fd, replace=True)
 
     def isatty(self) -> bool:
         try:
@@ -86,6 +88,14 @@ def _fill_with_null(fd: int, *, replace: bool = False) -> None:
         os.close(null)
 
 
+def _descriptor(stream) -> int | None:
+    """The descriptor a stream writes to (None for one in memory, e.g. a test's capture)."""
+    try:
+        return stream.fileno()
+    except (AttributeError, OSError, ValueError):
+        return None
+
+
 def _null_stream():
     return open(os.devnull, "w", encoding="utf-8")  # noqa: SIM115 (lives as long as the process)
 
@@ -107,7 +117,7 @@ def guard_streams() -> Iterator[dict[str, TolerantStream]]:
             guarded[name] = TolerantStream(_null_stream(), fd,
                                            lost=OSError(errno.EBADF, "Bad file descriptor"))
         else:
-            guarded[name] = TolerantStream(stream, fd)
+            guarded[name] = TolerantStream(stream, _descriptor(stream))
         setattr(sys, name, guarded[name])
     try:
         yield guarded
