@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from .model import heuristics, pyramid
 from .model.relax import RELAXATIONS, AnnealOptions, IcmOptions
 from .model.relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
 from .options import option
@@ -22,7 +23,7 @@ from .options import option
 #: Side of the cube made when no size is given (API and command line, every method).
 DEFAULT_SIZE = 64
 
-__all__ = ["COHERENT_RULE", "DEFAULT_SIZE", "DecisionRule", "PRESETS", "SUPPORTS", "SynthesisConfig",
+__all__ = ["APPLIES", "COHERENT_RULE", "TEMPERATURE_OPTIONS", "applies", "DEFAULT_SIZE", "DecisionRule", "PRESETS", "SUPPORTS", "SynthesisConfig",
            "SynthesisMethod", "SynthesisResult", "VARIANTS"]
 
 
@@ -31,20 +32,53 @@ _PRESET_VALUE = "--preset's"
 
 
 def _registry(name: str):
-    """A registry of the model by name, read when first needed (the model imports this module's
-    neighbours)."""
-    from .model import heuristics, pyramid
+    """A registry of the model by name (read when ``--help`` or a check first needs it)."""
     return tuple(getattr(heuristics, name, None) or getattr(pyramid, name))
+
+
+#: The combinations (support, relaxation) that use an option, for the options that some
+#: combinations cannot use; every other option applies everywhere.
+APPLIES: dict[str, tuple[tuple[str, str], ...]] = {
+    "xi": (("full", "icm"), ("coherent", "icm")),
+    "stop": (("full", "icm"), ("coherent", "icm")),
+    "max_sweeps": (("full", "icm"), ("coherent", "icm")),
+    "temperatures": (("full", "icm"), ("coherent", "icm")),
+    "inherit": (("full", "icm"), ("full", "anneal"), ("coherent", "icm")),
+    "sampler": (("full", "anneal"), ("coherent", "anneal")),
+    "schedule": (("full", "anneal"), ("coherent", "anneal")),
+    "t0": (("full", "anneal"), ("coherent", "anneal")),
+    "t_end": (("full", "anneal"), ("coherent", "anneal")),
+    "proposals": (("full", "anneal"), ("coherent", "anneal")),
+    "proposal": (("full", "anneal"),),
+    "preset": (("full", "icm"), ("full", "anneal")),
+    "bandwidth": (("full", "icm"), ("full", "anneal")),
+    "adaptive": (("full", "icm"), ("full", "anneal")),
+    "decision": (("full", "icm"), ("full", "anneal")),
+    "tau": (("full", "icm"), ("full", "anneal")),
+    "histogram_weight": (("full", "icm"), ("full", "anneal")),
+    "toroidal_exemplar": (("full", "icm"), ("full", "anneal")),
+    "segmented": (("coherent", "icm"), ("coherent", "anneal")),
+    "phase_weight": (("coherent", "icm"), ("coherent", "anneal")),
+}
+#: The options that support ``coherent`` with ICM uses only with per-voxel temperatures (without
+#: them every voxel is re-decided in each of a level's iterations and children copy 8/8).
+TEMPERATURE_OPTIONS = ("xi", "stop", "max_sweeps", "inherit")
+
+
+def applies(name: str, where: tuple) -> bool:
+    """Whether option ``name`` changes the result of the combination ``where``, a (support,
+    relaxation) pair or the (support, relaxation, temperatures) of :func:`combination`."""
+    if name in TEMPERATURE_OPTIONS and len(where) > 2 and where[:2] == ("coherent", "icm"):
+        return bool(where[2])
+    return name not in APPLIES or tuple(where[:2]) in APPLIES[name]
 
 
 def _in_table(name: str, needs: str) -> dict:
     """``applies`` and ``needs`` of an option that only some (support, relaxation, temperatures)
-    combinations read, from the one table that says which
-    (:data:`npmrf3d.methods.npmrf_options.APPLIES`)."""
-    def applies(config) -> bool:
-        from .methods.npmrf_options import applies as in_table
-        return in_table(name, (config.support, config.relaxation, config.temperatures))
-    return {"applies": applies, "needs": needs}
+    combinations read, from the one table that says which (:data:`APPLIES`)."""
+    def read(config) -> bool:
+        return applies(name, (config.support, config.relaxation, config.temperatures))
+    return {"applies": read, "needs": needs}
 
 
 _FULL = "support is full"

@@ -13,6 +13,7 @@ import argparse
 import pathlib
 import sys
 
+from .main import build_parser
 
 __all__ = ["COMMAND_PAGES", "command_page", "write_pages"]
 
@@ -56,7 +57,6 @@ def command_page(name: str, parser: argparse.ArgumentParser | None = None) -> st
     """The Markdown reference of command ``name``: what it does, an example, and a table per
     section of ``--help`` (option, default, meaning)."""
     if parser is None:
-        from .main import build_parser
         parser = build_parser()
     sub = _sub_parser(parser, name)
     lines = [f"# `npmrf3d {name}`", "",
@@ -79,7 +79,6 @@ def command_page(name: str, parser: argparse.ArgumentParser | None = None) -> st
 
 def write_pages(folder: str | pathlib.Path) -> list[pathlib.Path]:
     """Write every page of :data:`COMMAND_PAGES` into ``folder``; returns the paths."""
-    from .main import build_parser
     folder = pathlib.Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     parser = build_parser()

@@ -15,6 +15,9 @@ import dataclasses
 
 from .. import _validation as check
 from ..config import (
+    APPLIES,
+    TEMPERATURE_OPTIONS,
+    applies,
     COHERENT_RULE,
     DEFAULT_SIZE,
     PRESETS,
@@ -68,34 +71,6 @@ def coherent_grid(config: SynthesisConfig, segmented: bool, levels: int) -> int:
 #: support's"): any value given for them counts as given.
 BY_SUPPORT = {"xi": DEFAULT_XI, "sampler": DEFAULT_SAMPLER}
 
-#: The combinations (support, relaxation) that use an option, for the options that some
-#: combinations cannot use; every other option applies everywhere.
-APPLIES: dict[str, tuple[tuple[str, str], ...]] = {
-    "xi": (("full", "icm"), ("coherent", "icm")),
-    "stop": (("full", "icm"), ("coherent", "icm")),
-    "max_sweeps": (("full", "icm"), ("coherent", "icm")),
-    "temperatures": (("full", "icm"), ("coherent", "icm")),
-    "inherit": (("full", "icm"), ("full", "anneal"), ("coherent", "icm")),
-    "sampler": (("full", "anneal"), ("coherent", "anneal")),
-    "schedule": (("full", "anneal"), ("coherent", "anneal")),
-    "t0": (("full", "anneal"), ("coherent", "anneal")),
-    "t_end": (("full", "anneal"), ("coherent", "anneal")),
-    "proposals": (("full", "anneal"), ("coherent", "anneal")),
-    "proposal": (("full", "anneal"),),
-    "preset": (("full", "icm"), ("full", "anneal")),
-    "bandwidth": (("full", "icm"), ("full", "anneal")),
-    "adaptive": (("full", "icm"), ("full", "anneal")),
-    "decision": (("full", "icm"), ("full", "anneal")),
-    "tau": (("full", "icm"), ("full", "anneal")),
-    "histogram_weight": (("full", "icm"), ("full", "anneal")),
-    "toroidal_exemplar": (("full", "icm"), ("full", "anneal")),
-    "segmented": (("coherent", "icm"), ("coherent", "anneal")),
-    "phase_weight": (("coherent", "icm"), ("coherent", "anneal")),
-}
-#: The options that support ``coherent`` with ICM uses only with per-voxel temperatures (without
-#: them every voxel is re-decided in each of a level's iterations and children copy 8/8).
-TEMPERATURE_OPTIONS = ("xi", "stop", "max_sweeps", "inherit")
-
 _C = SynthesisConfig  # every default below is a field default of the configuration
 
 
@@ -113,14 +88,6 @@ def combination(options) -> tuple[str, str, bool]:
     if temperatures is None:
         temperatures = support == "full" and relaxation == "icm"
     return support, relaxation, bool(temperatures)
-
-
-def applies(name: str, where: tuple) -> bool:
-    """Whether option ``name`` changes the result of the combination ``where``, a (support,
-    relaxation) pair or the (support, relaxation, temperatures) of :func:`combination`."""
-    if name in TEMPERATURE_OPTIONS and len(where) > 2 and where[:2] == ("coherent", "icm"):
-        return bool(where[2])
-    return name not in APPLIES or tuple(where[:2]) in APPLIES[name]
 
 
 def _unset(name: str, value) -> bool:
@@ -153,6 +120,46 @@ def _support_and_preset(variant, support, preset) -> tuple[str, str]:
     support = check.choice("support", _C.support if support is None else support, SUPPORTS)
     preset = check.choice("preset", _C.preset if preset is None else preset, tuple(PRESETS))
     return support, preset
+
+
+def _support_rule(support: str, preset_name: str, **rule_options):
+    """The support's decision rule (:data:`npmrf3d.config.COHERENT_RULE`, or the full support's
+    preset) with each rule option that is not None checked and put in its place."""
+    rule = COHERENT_RULE if support == "coherent" else PRESETS[preset_name]
+    overrides = {}
+    for name in ("bandwidth", "centre_bandwidth", "tau"):
+        if rule_options[name] is not None:
+            overrides[name] = check.real(name, rule_options[name], low=0.0, low_open=True)
+    for name in ("adaptive", "histogram_weight"):
+        if rule_options[name] is not None:
+            overrides[name] = check.real(name, rule_options[name], low=0.0)
+    if rule_options["outlier"] is not None:
+        overrides["outlier"] = check.real("outlier", rule_options["outlier"], low=0.0, high=1.0, high_open=True)
+    if rule_options["decision"] is not None:
+        overrides["decision"] = check.choice("decision", rule_options["decision"], DECISIONS)
+    return dataclasses.replace(rule, **overrides)
+
+
+def _refuse_relaxation_mismatch(given: dict, support: str, relaxation: str, temperatures: bool, upsample: str,
+                                decision: str, heuristic: str) -> None:
+    """Refuse a relaxation that the support, per-voxel temperatures, the up-sampling or the
+    heuristic cannot run (one line naming what to change)."""
+    if support == "full" and relaxation == "icm" and not temperatures:
+        check.fail("support 'full' runs ICM with per-voxel temperatures only; drop temperatures=False")
+    if support == "coherent" and relaxation == "icm" and not temperatures:
+        for name in TEMPERATURE_OPTIONS:
+            if not _unset(name, given[name]):
+                check.fail(f"option {name} needs per-voxel temperatures with support 'coherent': "
+                           f"add temperatures=True (--temperatures), or drop it")
+        if upsample == "1/8":
+            check.fail("upsample '1/8' needs per-voxel temperatures with support 'coherent': add "
+                       "temperatures=True (--temperatures), or drop it")
+    if support == "coherent" and relaxation == "anneal" and upsample != "8/8":
+        check.fail(f"support 'coherent' anneals with 8/8 up-sampling (every child copies its "
+                   f"parent's shifted sources); upsample {upsample!r} runs with support 'full'")
+    if decision == "sample" and heuristic in ("ML_H1a", "ML_H1b"):
+        check.fail(f"decision 'sample' needs a heuristic with an objective (ML_H2a, ML_H2b); "
+                   f"{heuristic} is defined by per-view argmax searches: use decision='argmax'")
 
 
 def make_config(
@@ -221,40 +228,13 @@ def make_config(
     proposals = check.integer("proposals", proposals, low=1)
     proposal = check.choice("proposal", proposal, PROPOSALS)
     segmented = check.choice("segmented", segmented, SEGMENTED_MODES)
-    rule = COHERENT_RULE if support == "coherent" else PRESETS[preset_name]
-    overrides = {}
-    for name, value, low in (("bandwidth", bandwidth, 0.0), ("centre_bandwidth", centre_bandwidth, 0.0),
-                             ("tau", tau, 0.0)):
-        if value is not None:
-            overrides[name] = check.real(name, value, low=low, low_open=True)
-    for name, value in (("adaptive", adaptive), ("histogram_weight", histogram_weight)):
-        if value is not None:
-            overrides[name] = check.real(name, value, low=0.0)
-    if outlier is not None:
-        overrides["outlier"] = check.real("outlier", outlier, low=0.0, high=1.0, high_open=True)
-    if decision is not None:
-        overrides["decision"] = check.choice("decision", decision, DECISIONS)
-    rule = dataclasses.replace(rule, **overrides)
+    rule = _support_rule(support, preset_name, bandwidth=bandwidth, centre_bandwidth=centre_bandwidth, tau=tau,
+                         adaptive=adaptive, histogram_weight=histogram_weight, outlier=outlier, decision=decision)
     _refuse_unused(given, support, relaxation)  # after the values' own checks
     if temperatures is None:
         temperatures = support == "full" and relaxation == "icm"
     temperatures = check.boolean("temperatures", temperatures)
-    if support == "full" and relaxation == "icm" and not temperatures:
-        check.fail("support 'full' runs ICM with per-voxel temperatures only; drop temperatures=False")
-    if support == "coherent" and relaxation == "icm" and not temperatures:
-        for name in TEMPERATURE_OPTIONS:
-            if not _unset(name, given[name]):
-                check.fail(f"option {name} needs per-voxel temperatures with support 'coherent': "
-                           f"add temperatures=True (--temperatures), or drop it")
-        if upsample == "1/8":
-            check.fail("upsample '1/8' needs per-voxel temperatures with support 'coherent': add "
-                       "temperatures=True (--temperatures), or drop it")
-    if support == "coherent" and relaxation == "anneal" and upsample != "8/8":
-        check.fail(f"support 'coherent' anneals with 8/8 up-sampling (every child copies its "
-                   f"parent's shifted sources); upsample {upsample!r} runs with support 'full'")
-    if rule.decision == "sample" and heuristic in ("ML_H1a", "ML_H1b"):
-        check.fail(f"decision 'sample' needs a heuristic with an objective (ML_H2a, ML_H2b); "
-                   f"{heuristic} is defined by per-view argmax searches: use decision='argmax'")
+    _refuse_relaxation_mismatch(given, support, relaxation, temperatures, upsample, rule.decision, heuristic)
     if grey_levels is not None:
         grey_levels = check.integer("grey_levels", grey_levels, low=2, high=65536)
     if palette is not None:
