@@ -81,7 +81,8 @@ def _check_segmented_window(args: argparse.Namespace, config, per_view: dict) ->
                              f"preset uses window {SEGMENTED.window} at every level: drop --window, "
                              f"or pass --segmented no to use it")
     if config.segmented == "auto" and segmented(config, per_view):
-        say(f"{PROG}: warning: the exemplar holds at most {SEGMENTED_MAX_VALUES} grey values, so "
+        kind = "grey values" if all(a.shape[-1] == 1 for a in per_view.values()) else "colours (by their mean)"
+        say(f"{PROG}: warning: the exemplar holds at most {SEGMENTED_MAX_VALUES} distinct {kind}, so "
             f"--segmented auto runs the segmented preset with window {SEGMENTED.window} and "
             f"--window {config.window} is not used; pass --segmented no to use it", error=True)
 
