@@ -29,6 +29,7 @@ from . import (
     baseline,
     coherent,
     info,
+    materials,
     metrics,
     neural,
     study,
@@ -44,7 +45,7 @@ from ._options import environment_problem, given_options, option_strings
 __all__ = ["COMMANDS", "build_parser", "main"]
 
 #: The sub-command modules, in the order ``--help`` lists them (``study`` adds ``report``).
-COMMANDS = (synth, coherent, info, metrics, study, baseline, volume, neural)
+COMMANDS = (synth, coherent, info, metrics, study, baseline, volume, neural, materials)
 #: Library parameter names that messages should call by their option names (besides the
 #: options of the command that ran, which :func:`main` adds).
 OPTION_NAMES = synth.OPTION_NAMES
