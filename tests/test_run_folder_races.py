@@ -63,7 +63,7 @@ def no_work(monkeypatch):
     def never(*args, **kwargs):
         raise AssertionError("the run started although its arguments clash")
 
-    for module in ("synth", "baseline", "_generic", "volume"):
+    for module in ("synth", "_blocks"):
         monkeypatch.setattr(f"npmrf3d.cli.{module}.run_method", never)
 
 
