@@ -39,13 +39,11 @@ from ..model.otsu import otsu_threshold
 from .metrics.autocorrelations import autocorrelation
 from .metrics.inputs import as_exemplar, exemplar_and_volume, view_slices
 
-__all__ = ["ESTIMATORS", "LineFeatures", "SCORES", "StructureScores", "image_distances", "image_scores",
+__all__ = ["ESTIMATORS", "LineFeatures", "StructureScores", "image_scores",
            "line_features", "pyramid_statistics", "structure_scores", "structureless_images"]
 
 #: The estimators, in the order of the report's columns.
 ESTIMATORS: tuple[str, ...] = ("continuity", "pyramid")
-#: The ratios reported: each estimator's and ``structure``, their mean (the judge's one number).
-SCORES: tuple[str, ...] = (*ESTIMATORS, "structure")
 #: Slices perpendicular to axis 0, 1, 2 are the right, top and front views' slices, oriented
 #: like the exemplar (:func:`npmrf3d.analysis.metrics.view_slices`).
 AXIS_VIEWS = {0: "right", 1: "top", 2: "front"}
@@ -130,9 +128,9 @@ def _log_lengths(lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def continuity_distance(a: LineFeatures, b: LineFeatures, area: int) -> float:
-    """``|log|`` ratio of the densities (plus one skeleton pixel of the smaller image area) and
-    of the ends per skeleton pixel (plus 0.01), plus the Wasserstein-1 distance of the
-    pixel-weighted log piece lengths."""
+    """``|log|`` ratio of the densities (each plus ``1 / area``, one pixel of the compared
+    image) and of the ends per skeleton pixel (each plus 0.01), plus the Wasserstein-1 distance
+    of the pixel-weighted log piece lengths."""
     eps = 1.0 / area
     density = abs(np.log((a.density + eps) / (b.density + eps)))
     ends = abs(np.log((a.ends + 0.01) / (b.ends + 0.01)))
@@ -274,27 +272,6 @@ def _grey_images(images: Any, channels: int, name: str) -> np.ndarray:
     return np.stack([as_exemplar(image, name) for image in a]).mean(axis=-1)
 
 
-def image_distances(images: Any, exemplar: Any, *, width: int = 6) -> dict[str, np.ndarray]:
-    """Each image's distance from the exemplar by each estimator (raw, not ratios).
-
-    Parameters
-    ----------
-    images : (S, H, W, C), (S, H, W) or one (H, W[, C]) array
-    exemplar : (H, W) or (H, W, C) array
-    width : int
-        Widest line the top-hats find, in pixels (the disk's diameter less one).
-
-    Returns
-    -------
-    dict estimator -> (S,) float64 ndarray (:data:`ESTIMATORS`).
-    """
-    grey_e = _grey_exemplar(exemplar)
-    channels = as_exemplar(exemplar).shape[-1]
-    grey = _grey_images(images, channels, "images")
-    width = check.integer("width", width, low=2, high=32)
-    return _distances(grey, _Reference.of(grey_e, width, _scales(grey_e.shape, grey.shape[1:])))
-
-
 def _distances(grey: np.ndarray, reference: _Reference) -> dict[str, np.ndarray]:
     area = grey.shape[1] * grey.shape[2]
     rows = np.array([reference.distances(g, area) for g in grey]).reshape(-1, len(ESTIMATORS))
@@ -316,13 +293,13 @@ class StructureScores:
     """What :func:`structure_scores` (or :func:`image_scores`) found. Lower is better; ratios
     are to the structureless control (1 = no structure)."""
 
-    ratio: dict[Any, dict[str, float]]     # axis (or "images") -> score (SCORES) -> ratio
-    worst: dict[str, float]                # score -> the worst axis's ratio
-    worst_axis: dict[str, Any]             # score -> that axis
+    ratio: dict[Any, dict[str, float]]     # axis (or "images") -> estimator -> ratio
+    worst: dict[str, float]                # estimator -> the worst axis's ratio
+    worst_axis: dict[str, Any]             # estimator -> that axis
     raw: dict[Any, dict[str, float]]       # axis -> estimator -> mean distance
     control: dict[Any, dict[str, float]]   # axis -> estimator -> the control's mean distance
-    floor: dict[str, float] | None         # score -> the floor crops' ratio
-    to_floor: dict[str, float] | None      # score -> worst / floor (1 = as good as a crop)
+    floor: dict[str, float] | None         # estimator -> the floor crops' ratio
+    to_floor: dict[str, float] | None      # estimator -> worst / floor (1 = as good as a crop)
     settings: dict[str, Any]
 
     def to_dict(self) -> dict[str, Any]:
@@ -339,7 +316,6 @@ def _summary(groups: dict[Any, np.ndarray], grey_e: np.ndarray, reference: _Refe
         raw[key] = {k: float(v.mean()) for k, v in mine.items()}
         control[key] = {k: float(v.mean()) for k, v in noise.items()}
         ratio[key] = {k: raw[key][k] / max(control[key][k], 1e-12) for k in ESTIMATORS}
-        ratio[key]["structure"] = float(np.mean([ratio[key][k] for k in ESTIMATORS]))
     return raw, control, ratio
 
 
@@ -349,12 +325,12 @@ def _scores(groups, grey_e, floor, channels, width, count, rng, settings) -> Str
     scales = _scales(grey_e.shape, *shapes)
     reference = _Reference.of(grey_e, width, scales)
     raw, control, ratio = _summary(groups, grey_e, reference, count, rng)
-    worst_axis = {k: max(ratio, key=lambda a: ratio[a][k]) for k in SCORES}
-    worst = {k: ratio[worst_axis[k]][k] for k in SCORES}
+    worst_axis = {k: max(ratio, key=lambda a: ratio[a][k]) for k in ESTIMATORS}
+    worst = {k: ratio[worst_axis[k]][k] for k in ESTIMATORS}
     floor_ratio = to_floor = None
     if grey_f is not None:
         floor_ratio = _summary({"floor": grey_f}, grey_e, reference, count, rng)[2]["floor"]
-        to_floor = {k: worst[k] / max(floor_ratio[k], 1e-12) for k in SCORES}
+        to_floor = {k: worst[k] / max(floor_ratio[k], 1e-12) for k in ESTIMATORS}
     settings = {**settings, "width": width, "scales": scales, "control_images": count}
     return StructureScores(ratio, worst, worst_axis, raw, control, floor_ratio, to_floor, settings)
 
@@ -385,8 +361,7 @@ def structure_scores(volume: Any, exemplar: Any, *, axes=(0, 1, 2), slices: int 
     -------
     StructureScores
         Per axis and estimator (:data:`ESTIMATORS`) the ratio of the slices' mean distance to
-        the control's, and ``structure``, the mean of the two (:data:`SCORES`); the worst
-        axis; with ``floor``, the floor's ratios and worst / floor.
+        the control's; the worst axis; with ``floor``, the floor's ratios and worst / floor.
 
     Examples
     --------
