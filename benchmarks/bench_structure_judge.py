@@ -38,6 +38,7 @@ from _common import hardware
 from _quality import ETR_HINT, Exemplar, blurred, floor_volume, measure, ratios, structureless
 
 from npmrf3d.analysis import structure
+from npmrf3d.analysis.structure import shuffled_tiles
 
 #: name -> top-left corners of the crops B (pave02 repeats every 64 rows: (64, 0) is crop A).
 PHOTOS = {
@@ -59,16 +60,6 @@ CHECK = {name: ((64, 64), (0, 64), (64, 0)) for name in (
 SETS = {"validation": PHOTOS, "check": CHECK}
 ROWS = ("floor", "B-tiles 16", "B-tiles 8", "A-tiles 16", "A-tiles 8", "blurred", "structureless")
 POOLED_ROWS = ("floor", "B-tiles 16", "A-tiles 16", "A-tiles 8", "blurred")
-
-
-def shuffled_tiles(image: np.ndarray, tile: int, rng: np.random.Generator) -> np.ndarray:
-    """``image`` (H, W, C) cut into ``tile x tile`` tiles put back in a random order."""
-    h, w = image.shape[:2]
-    blocks = [image[r:r + tile, c:c + tile] for r in range(0, h, tile) for c in range(0, w, tile)]
-    order = rng.permutation(len(blocks))
-    per_row = w // tile
-    return np.concatenate([np.concatenate([blocks[order[i * per_row + j]] for j in range(per_row)], 1)
-                           for i in range(h // tile)], 0)
 
 
 def image_sets(a: np.ndarray, crops_b: list[np.ndarray], control: np.ndarray,

@@ -54,15 +54,6 @@ def wall(rows=64, cols=64, block=(8, 16), shift=0):
     return shade
 
 
-def shuffled_tiles(image, tile, rng):
-    h, w = image.shape[:2]
-    blocks = [image[r:r + tile, c:c + tile] for r in range(0, h, tile) for c in range(0, w, tile)]
-    order = rng.permutation(len(blocks))
-    per_row = w // tile
-    return np.block([[blocks[order[i * per_row + j]] for j in range(per_row)]
-                     for i in range(h // tile)])
-
-
 def scores(images, exemplar):
     return structure.image_scores(np.stack(images), exemplar, rng=0).ratio["images"]
 
@@ -96,7 +87,7 @@ def test_a_wall_beats_its_tiles_shuffled():
     crops = [wall(shift=s) for s in (5, 21, 40)]               # the same wall seen elsewhere
     rng = np.random.default_rng(2)
     real = scores(crops, exemplar)
-    broken = scores([shuffled_tiles(c, 8, rng) for c in crops], exemplar)
+    broken = scores([structure.shuffled_tiles(c, 8, rng) for c in crops], exemplar)
     noise = scores(structure.structureless_images(exemplar, 3, exemplar.shape, 5), exemplar)
     for name in structure.ESTIMATORS:
         assert real[name] < broken[name] < noise[name], name
@@ -164,3 +155,10 @@ def test_missing_scikit_image_names_the_extra(monkeypatch):
     monkeypatch.setitem(sys.modules, "skimage.morphology", None)
     with pytest.raises(ParameterError, match=r"pip install 'npmrf3d\[structure\]'"):
         structure.image_scores(wall(16, 16), wall(16, 16))
+
+
+def test_shuffled_tiles_moves_whole_tiles():
+    image = np.arange(32 * 32).reshape(32, 32)
+    out = structure.shuffled_tiles(image, 8, 0)
+    tiles = lambda a: sorted(a[r:r + 8, c:c + 8].tobytes() for r in range(0, 32, 8) for c in range(0, 32, 8))
+    assert tiles(out) == tiles(image) and not np.array_equal(out, image)

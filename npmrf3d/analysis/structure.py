@@ -40,7 +40,8 @@ from .metrics.autocorrelations import autocorrelation
 from .metrics.inputs import as_exemplar, exemplar_and_volume, view_slices
 
 __all__ = ["ESTIMATORS", "LineFeatures", "StructureScores", "image_scores",
-           "line_features", "pyramid_statistics", "structure_scores", "structureless_images"]
+           "line_features", "pyramid_statistics", "shuffled_tiles", "structure_scores",
+           "structureless_images"]
 
 #: The estimators, in the order of the report's columns.
 ESTIMATORS: tuple[str, ...] = ("continuity", "pyramid")
@@ -284,6 +285,15 @@ def structureless_images(grey_exemplar: np.ndarray, count: int, shape: tuple[int
     independently from the exemplar's (its histogram, no structure), ``(count, *shape)``."""
     flat = np.asarray(grey_exemplar, dtype=np.float64).ravel()
     return flat[np.random.default_rng(rng).integers(0, flat.size, size=(count, *shape))]
+
+
+def shuffled_tiles(image: np.ndarray, tile: int, rng) -> np.ndarray:
+    """The broken control: ``image`` (H, W[, C]) cut into ``tile x tile`` tiles (sides that are
+    multiples of ``tile``) put back in an order drawn by ``rng``."""
+    h, w = image.shape[:2]
+    blocks = [image[r:r + tile, c:c + tile] for r in range(0, h, tile) for c in range(0, w, tile)]
+    order = np.random.default_rng(rng).permutation(len(blocks)).reshape(h // tile, w // tile)
+    return np.concatenate([np.concatenate([blocks[k] for k in row], axis=1) for row in order])
 
 
 # --------------------------------------------------------------------------- the judge
