@@ -157,7 +157,7 @@ def run_zarr(args: argparse.Namespace, argv: list[str], command: str, method, co
     block = clamp_block(args.block, config.size)
     plan = block_plan(method, per_view, config, block=block)
     clamped = (f" (--block {args.block} is more than the volume's largest side: one block holds it)"
-               if block < args.block else "")
+               if block < args.block and given(args, "block") else "")
     if args.dry_run:
         say(f"{method.name} {'x'.join(map(str, config.size))} into {out}: {plan.describe()}{clamped}")
         say(plan.total(args.workers, scheduler))
@@ -169,14 +169,13 @@ def run_zarr(args: argparse.Namespace, argv: list[str], command: str, method, co
     run = _record(command, argv, method, config, sources, block=block,
                   workers=None if scheduler else args.workers, scheduler=scheduler, **(record or {}))
     bar = None
-    if not args.quiet:
-        say(f"{method.name}: {plan.describe()}{clamped}")
 
     def progress(done, total):
         nonlocal bar
         if args.quiet:
             return
-        if bar is None:
+        if bar is None:  # the output is claimed and checked: the plan, then the bar
+            say(f"{method.name}: {plan.describe()}{clamped}")
             bar = tqdm(total=total, initial=done, desc="blocks", unit="block", file=sys.stderr,
                        dynamic_ncols=True)
         else:

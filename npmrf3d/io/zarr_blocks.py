@@ -125,16 +125,17 @@ def _refuse_other(out: pathlib.Path, attrs: dict, existing: dict) -> None:
     """Refuse the volume at ``out`` when its identity differs from ``attrs``, naming what differs."""
     differ = differences(attrs, existing)
     if differ:
-        raise ParameterError(f"output '{out}' holds a volume of another {'; '.join(differ)}; "
+        listed = differ[0] if len(differ) == 1 else f"{', '.join(differ[:-1])} and {differ[-1]}"
+        raise ParameterError(f"output '{out}' holds a volume of another {listed}; "
                              f"pass --overwrite or choose another --out")
 
 
 def differences(attrs: dict, existing: dict) -> list[str]:
     """What differs between this run's identifying ``attrs`` and an ``existing`` volume's, each
-    as ``what VALUE (this run: VALUE)``; a run's settings field by field.
+    as ``what (ITS VALUE, this run: VALUE)``; a run's settings field by field.
 
     >>> differences({"npmrf3d_size": [8, 8, 8], "npmrf3d_block": 8}, {"npmrf3d_size": [8, 8, 8], "npmrf3d_block": 4})
-    ['block 4 (this run: 8)']
+    ['block (4, this run: 8)']
     """
     found = []
     for key, value in attrs.items():
@@ -144,8 +145,8 @@ def differences(attrs: dict, existing: dict) -> list[str]:
         if key == "npmrf3d_run":
             found.extend(_run_differences(value, old))
         else:
-            found.append(f"{_WHAT.get(key, key)} {_show(old)} (this run: {_show(value)})")
-    return found
+            found.append(f"{_WHAT.get(key, key)} ({_show(old)}, this run: {_show(value)})")
+    return list(dict.fromkeys(found))  # the size is in the settings too
 
 
 def _run_differences(new: str, old) -> list[str]:
@@ -156,12 +157,12 @@ def _run_differences(new: str, old) -> list[str]:
         return ["run (made by another version of npmrf3d)"]
     found = []
     if new.get("method") != old.get("method"):
-        found.append(f"method {old.get('method')} (this run: {new.get('method')})")
+        found.append(f"method ({old.get('method')}, this run: {new.get('method')})")
     else:
         mine, theirs = new.get("config") or {}, old.get("config") or {}
         for name in sorted(set(mine) | set(theirs)):
             if mine.get(name) != theirs.get(name):
-                found.append(f"{name} {_show(theirs.get(name))} (this run: {_show(mine.get(name))})")
+                found.append(f"{name} ({_show(theirs.get(name))}, this run: {_show(mine.get(name))})")
     if new.get("exemplars") != old.get("exemplars"):
         found.append("exemplar")
     return found or ["run"]
@@ -174,7 +175,7 @@ def _show(value) -> str:
 
 
 #: The marker of the folder beside a volume where a resumable run that replaces it is made:
-#: ``.NAME.next-KEY``, the key from the output and the run's identity (:func:`next_folder`).
+#: ``.NAME.next-KEY.zarr``, the key from the output and the run's identity (:func:`next_folder`).
 NEXT = ".next-"
 
 
@@ -184,7 +185,7 @@ def next_folder(out, attrs: dict) -> pathlib.Path:
     it."""
     out = pathlib.Path(out).absolute()
     key = hashlib.sha256(json.dumps({"out": str(out), **attrs}, sort_keys=True, default=str).encode())
-    return out.parent / f".{out.name}{NEXT}{key.hexdigest()[:16]}"
+    return out.parent / f".{out.name}{NEXT}{key.hexdigest()[:16]}.zarr"
 
 
 @contextlib.contextmanager
