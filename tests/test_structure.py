@@ -160,5 +160,8 @@ def test_missing_scikit_image_names_the_extra(monkeypatch):
 def test_shuffled_tiles_moves_whole_tiles():
     image = np.arange(32 * 32).reshape(32, 32)
     out = structure.shuffled_tiles(image, 8, 0)
-    tiles = lambda a: sorted(a[r:r + 8, c:c + 8].tobytes() for r in range(0, 32, 8) for c in range(0, 32, 8))
+
+    def tiles(a):
+        return sorted(a[r:r + 8, c:c + 8].tobytes() for r in range(0, 32, 8) for c in range(0, 32, 8))
+
     assert tiles(out) == tiles(image) and not np.array_equal(out, image)
