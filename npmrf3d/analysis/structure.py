@@ -263,7 +263,7 @@ def _grey_images(images: Any, channels: int, name: str) -> np.ndarray:
         a = np.asarray(images)
     except ValueError:
         check.fail(f"{name} must be an array or a list of images of one shape")
-    if a.ndim == 2 or (a.ndim == 3 and a.shape[-1] == channels and (channels > 1 or a.shape[-1] == 1)):
+    if a.ndim == 2 or (a.ndim == 3 and a.shape[-1] == channels):     # one image (H, W[, C])
         a = a[None] if a.ndim == 3 else a[None, ..., None]
     elif a.ndim == 3:
         a = a[..., None]
