@@ -49,9 +49,27 @@ def _shape(s2: np.ndarray) -> list[float] | None:
     return ((np.asarray(s2) - f * f) / (f - f * f)).tolist()
 
 
+def _pieces(cube: np.ndarray, axis: int, window: int | None) -> list:
+    """``cube`` cut along ``axis`` into pieces ``window`` long (the rest dropped), so that its
+    chords are cut where a volume of that side cuts them; the whole without a window."""
+    n = cube.shape[axis]
+    if window is None or window >= n:
+        return [cube]
+    return [np.take(cube, np.arange(k * window, (k + 1) * window), axis=axis) for k in range(n // window)]
+
+
+def _distribution(lengths: np.ndarray, top: int) -> list:
+    hist = np.bincount(np.minimum(lengths, top) - 1, minlength=top)[:top].astype(np.float64)
+    return (hist / hist.sum() if hist.sum() else hist).tolist()
+
+
 def image_statistics(labels: np.ndarray, value, *, max_distance: int, max_chord: int,
-                     diffusivity: str | None = None) -> dict:
+                     diffusivity: str | None = None, chord_window: list | None = None) -> dict:
     """One phase's statistics of a 2D or 3D label array, each a list over its axes.
+
+    ``chord_window``: per axis, the length of the pieces its chords are measured in (the side of
+    the volume it is compared with: a chord longer than the volume cannot lie inside it, and
+    border chords are dropped in both alike); None: the whole array.
 
     ``diffusivity``: a solver of :data:`npmrf3d.analysis.materials.DIFFUSIVITY_SOLVERS` (3D
     only; None: not computed); 3D arrays also get ``surface_area`` by marching cubes."""
@@ -59,15 +77,16 @@ def image_statistics(labels: np.ndarray, value, *, max_distance: int, max_chord:
     cube = ind if ind.ndim == 3 else ind[None]
     shift = 3 - ind.ndim
     axes = range(ind.ndim)
-    chords = [materials.chord_lengths(cube, a + shift) for a in axes]
+    window = [None] * ind.ndim if chord_window is None else chord_window
+    pieces = [_pieces(cube, a + shift, window[a]) for a in axes]
+    chords = [np.concatenate([materials.chord_lengths(p, a + shift) for p in pieces[a]]) for a in axes]
     s2 = two_point_correlation(ind.astype(np.uint8), 1, max_distance=max_distance)
     stats = {
         "fraction": float(ind.mean()),
         "interface_density": [materials.interface_density(ind, a) for a in axes],
         "two_point": s2.tolist(),
         "two_point_shape": [_shape(row) for row in s2],
-        "chord_distribution": [materials.chord_length_distribution(cube, a + shift, max_length=max_chord).tolist()
-                               for a in axes],
+        "chord_distribution": [_distribution(c, max_chord) for c in chords],
         "mean_chord": [float(c.mean()) if c.size else 0.0 for c in chords],
         "percolates": materials.percolates(ind),
     }
@@ -170,7 +189,8 @@ def _percolation(mine: list, theirs: list, *, crop: bool) -> dict:
         else:
             axes.append(None)  # a slice that does not percolate proves nothing about 3D
     yes = [a for a, m in enumerate(mine) if m]
-    words = f"connects face to face along {'axes ' + ', '.join(map(str, yes)) if yes else 'no axis'}"
+    words = "connects face to face along " + (
+        "no axis" if not yes else f"{'axes' if len(yes) > 1 else 'axis'} {', '.join(map(str, yes))}")
     lost = [a for a, x in enumerate(axes) if x is False and theirs[a]]
     extra = [a for a, x in enumerate(axes) if x is False and not theirs[a]]
     if lost:
@@ -218,9 +238,11 @@ def materials_report(volume: np.ndarray, values, *, inputs: dict, diffusivity: s
         mine = image_statistics(vol, value, max_distance=r_max, max_chord=top, diffusivity=diffusivity)
         if crop:
             ref = image_statistics(inputs["volume"], value, max_distance=r_max, max_chord=top,
-                                   diffusivity=diffusivity)
+                                   diffusivity=diffusivity, chord_window=list(vol.shape))
         else:
-            own = {v: image_statistics(a, value, max_distance=r_max, max_chord=top) for v, a in inputs.items()}
+            own = {v: image_statistics(a, value, max_distance=r_max, max_chord=top,
+                                       chord_window=[vol.shape[a] for a in VIEW_AXES[v]])
+                   for v, a in inputs.items()}
             ref = {**reference_along_axes(own), "slices": own}
         phases.append({"value": value, "volume": mine, "input": ref, "compare": compare(mine, ref, crop=crop)})
     return {"phases": phases, "max_distance": r_max, "max_chord": top, **_summary(phases)}

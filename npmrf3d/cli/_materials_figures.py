@@ -50,7 +50,7 @@ def _slices(report: dict, volume: np.ndarray, inputs: dict):
             distinct.setdefault(id(image), (view, image))
         first = [(f"input: {'every view' if len(distinct) == 1 else view}", image)
                  for view, image in distinct.values()]
-    fig, axes = _subplots(2, 3, figsize=(9, 6.4))
+    fig, axes = _subplots(2, 3, figsize=(9, 6.8))
     for ax in axes[0]:
         ax.axis("off")
     for ax, (title, image) in zip(axes[0], first):
@@ -112,15 +112,17 @@ def _curves(report: dict, key: str, ylabel: str, first: int):
 def _connectivity(report: dict):
     phases = report["phases"]
     fig, (left, right) = _subplots(1, 2, figsize=(10, 0.8 + 0.7 * max(len(phases), 3)))
-    grid = np.array([[1.0 if c else 0.0 for c in p["volume"]["percolates"]] for p in phases])
-    left.imshow(grid, cmap="RdYlGn", vmin=0, vmax=1, aspect="auto")
-    for (i, a), value in np.ndenumerate(grid):
-        ref = phases[i]["input"]["percolates"][a]
-        left.text(a, i, f"{'yes' if value else 'no'}\n(input: {'-' if ref is None else ('yes' if ref else 'no')})",
+    verdicts = np.array([[{True: 1.0, False: 0.0, None: 0.5}[x] for x in p["compare"]["percolation"]["axes"]]
+                         for p in phases])
+    left.imshow(verdicts, cmap="RdYlGn", vmin=0, vmax=1, aspect="auto")
+    for (i, a), _ in np.ndenumerate(verdicts):
+        mine, ref = phases[i]["volume"]["percolates"][a], phases[i]["input"]["percolates"][a]
+        left.text(a, i, f"{'yes' if mine else 'no'}\n(input: {'-' if ref is None else ('yes' if ref else 'no')})",
                   ha="center", va="center", fontsize=8)
     left.set_xticks(range(3), [f"axis {a}" for a in range(3)])
     left.set_yticks(range(len(phases)), [f"phase {p['value']}" for p in phases])
-    left.set_title("connects face to face (volume)", fontsize=9)
+    left.set_title("connects face to face? green: as the input, red: not kept, yellow: "
+               "the slices cannot tell", fontsize=9)
     x = np.arange(len(phases))
     for axis in range(3):
         right.bar(x + (axis - 1) * 0.27, [p["volume"]["diffusivity"][axis] for p in phases], 0.27,
