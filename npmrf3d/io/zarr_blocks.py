@@ -198,7 +198,7 @@ def claim_volume(out, *, attrs: dict, overwrite: bool = False, resume: bool = Tr
     at ``out`` is refused unless it is nothing, an empty folder or a Zarr volume of npmrf3d, and
     a volume is refused unless ``overwrite`` or, for a ``resume``-able (block-wise) run, it is
     this run's (the refusal names what differs). A resumable run is made in place (created, or
-    resumed); one that replaces a volume in ``NEXT`` folder beside it (:func:`next_folder`,
+    resumed); one that replaces a volume, in a ``NEXT`` folder beside it (:func:`next_folder`,
     resumed by the same command); a run made at once in a staging folder. A staged volume takes
     the place of ``out`` only once complete (the old one stays until then). On failure or
     interruption a staging folder, or a resumable volume without a finished block, is removed,
