@@ -124,9 +124,9 @@ ERRORS = [
                             (["--whole-voxels", "4096"], "--blockwise"),
                             (["--phase-weight", "4", "--value-prior", "0"], "--value-prior is above 0"))],
     (["kopf", "seg.png", *KTINY, "--histogram-bins", "7", "--histogram-weight", "0"],
-     ["--histogram-bins", "--histogram-weight 0"], []),
+     ["--histogram-bins", "--histogram-weight is above 0"], []),
     (["baseline", "kopf", "seg.png", *KTINY, "--histogram-bins", "7", "--histogram-weight", "0"],
-     ["--histogram-bins", "--histogram-weight 0"], []),
+     ["--histogram-bins", "--histogram-weight is above 0"], []),
     (["chen-wang", "seg.png", *TINY, "--pca-dims", "1000"], ["--pca-dims 1000", "at most 16"], []),
     (["chen-wang", "rgb.png", *TINY, "--pca-dims", "49"], ["--pca-dims 49", "at most 48"], []),
 ]

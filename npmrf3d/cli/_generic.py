@@ -33,7 +33,7 @@ from ._blocks import add_block_options, blockwise_requested, run_to_output, zarr
 __all__ = ["add_method_parser", "config_options", "method_options"]
 
 #: The order of the sections of ``--help``; a field's ``group`` names one.
-SECTIONS = ("volume and pyramid", "method", "relaxation", "views and exemplars", "blocks")
+SECTIONS = ("volume and pyramid", "method", "energy and search", "relaxation", "views and exemplars", "blocks")
 _METAVARS = {"int": "N", "real": "X", "levels": "N[,N..]", "text": "NAME"}
 
 
@@ -88,36 +88,43 @@ def config_options(args: argparse.Namespace, config_class) -> dict:
     return values
 
 
+def _exemplar_inputs(parser: argparse.ArgumentParser, sections: dict) -> None:
+    """The inputs of a command with 2D exemplars: the exemplar, the constrained views and one
+    exemplar per view."""
+    parser.add_argument(
+        "exemplar", nargs="?", default=f"{BUNDLED_PREFIX}{data.DEFAULT_EXEMPLAR}", metavar="EXEMPLAR",
+        help=f"2D image or .npy for every view, or {BUNDLED_PREFIX}NAME (default: %(default)s)")
+    views = sections["views and exemplars"]
+    views.add_argument("--views", default=",".join(VIEWS), metavar="V[,V..]",
+                       help=f"constrained views, of {', '.join(VIEWS)}")
+    for view in VIEWS:
+        views.add_argument(f"--exemplar-{view}", default=None, metavar="PATH",
+                           help=f"the {view} view's (default: EXEMPLAR)")
+    add_exemplar_kind(views)
+
+
 def add_method_parser(commands, name: str, method, *, help: str, description: str,
                       out: str, formatter_class, refuse=None, handler=None, aliases=(),
-                      extra=None) -> argparse.ArgumentParser:
+                      extra=None, inputs=None) -> argparse.ArgumentParser:
     """Add sub-command ``name`` (and ``aliases``) that runs ``method`` (a
     :class:`npmrf3d.config.SynthesisMethod`) with its configuration's options.
 
     ``refuse(args, config, per_view)``, when given, raises a :class:`~npmrf3d.errors.ParameterError`
     for what only the exemplars can tell (before any work, also with ``--dry-run``);
     ``handler(args, argv)`` replaces the run below; ``extra(parser, sections)`` adds the command's
-    own options (a later option of the same name replaces a field's)."""
+    own options (a later option of the same name replaces a field's); ``inputs(parser, sections)``
+    replaces the 2D exemplar, its views and the per-view exemplars (a 3D exemplar's command; its
+    ``usage`` attribute names the input in the usage line)."""
     parser = commands.add_parser(name, aliases=list(aliases), help=help, description=description,
                                  formatter_class=formatter_class, conflict_handler="resolve",
-                                 usage="%(prog)s [EXEMPLAR] [options]")
-    parser.add_argument(
-        "exemplar", nargs="?", default=f"{BUNDLED_PREFIX}{data.DEFAULT_EXEMPLAR}", metavar="EXEMPLAR",
-        help=f"2D image or .npy for every view, or {BUNDLED_PREFIX}NAME (default: %(default)s)",
-    )
+                                 usage=f"%(prog)s {getattr(inputs, 'usage', '[EXEMPLAR]')} [options]")
     sections = {title: parser.add_argument_group(title) for title in SECTIONS}
     sections["volume and pyramid"].add_argument(
         "--size", default=str(DEFAULT_SIZE), metavar="N",
         help="output side N, or N1,N2,N3")
     for fname, (f, opt) in method_options(method.config_class).items():
         _add_option(sections[opt.group], fname, f, opt)
-    views = sections["views and exemplars"]
-    views.add_argument("--views", default=",".join(options_of(method.config_class)["views"][0].default),
-                       metavar="V[,V..]", help=f"constrained views, of {', '.join(VIEWS)}")
-    for view in VIEWS:
-        views.add_argument(f"--exemplar-{view}", default=None, metavar="PATH",
-                           help=f"the {view} view's (default: EXEMPLAR)")
-    add_exemplar_kind(views)
+    (inputs or _exemplar_inputs)(parser, sections)
     if extra is not None:
         extra(parser, sections)
     add_run_options(parser, out=out)

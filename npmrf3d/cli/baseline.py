@@ -1,7 +1,8 @@
 """Command line of the baselines: ``npmrf3d baseline kopf [EXEMPLAR] ...`` (NP_K).
 
-Registered by :data:`npmrf3d.cli.main.COMMANDS`. Every option's default is the field default of
-:class:`npmrf3d.methods.kopf.KopfConfig`; the sub-command runs the ``kopf`` entry of
+Registered by :data:`npmrf3d.cli.main.COMMANDS`. Every option is a field of
+:class:`npmrf3d.methods.kopf.KopfConfig` (or of ``chen-wang``'s configuration), made an option by
+:func:`npmrf3d.cli._generic.add_method_parser`; the sub-command runs the ``kopf`` entry of
 :data:`npmrf3d.methods.METHODS`. Same
 conventions as ``npmrf3d synth``: every option shows its default in ``--help``; a tqdm bar per
 level on stderr (``--quiet`` turns it off); the run folder holds ``volume.npy``, ``volume.tif``,
@@ -14,25 +15,16 @@ from __future__ import annotations
 import argparse
 import time
 
-from .. import data, io
-from ..config import DEFAULT_SIZE
+from .. import io
 from ..errors import ParameterError
 from ..io.runs import RUN_FILES
 from ..methods import chen_wang
 from ..methods._kopf_steps import _constraint_arrays
-from ..methods.kopf import DEFAULT_ITERATIONS, METHOD, UPSAMPLING, KopfConfig
-from ..model.exemplar import BUNDLED_PREFIX
-from ..model.neighbourhood import VIEWS
-from ._common import (
-    add_exemplar_kind,
-    add_run_options,
-    choices,
-    default,
-    parse_size,
-    prepare_run,
-)
+from ..methods.kopf import DEFAULT_ITERATIONS, METHOD, KopfConfig
+from ..options import options_of
 from ._blocks import run_to_output, zarr_output
-from ._generic import add_method_parser
+from ._common import parse_size, prepare_run
+from ._generic import add_method_parser, config_options
 from ._options import given
 
 __all__ = ["register"]
@@ -40,9 +32,6 @@ __all__ = ["register"]
 #: Library parameter names whose messages should name the command-line option instead.
 _OPTION_NAMES = ("histogram_bins", "histogram_weight", "mean_shift", "constraint_weight",
                  "iterations", "variance", "grid", "eps", "window", "levels")
-
-def _d(name: str):
-    return default(KopfConfig, name)
 
 def register(commands, formatter_class) -> None:
     """Add ``kopf`` and ``chen-wang``, each by its method's name and under ``baseline``."""
@@ -58,9 +47,28 @@ def register(commands, formatter_class) -> None:
         add(commands, formatter_class)  # npmrf3d kopf | chen-wang, as every method by its name
 
 
+def _kopf_options(parser: argparse.ArgumentParser, sections: dict) -> None:
+    """``kopf``'s options beyond its configuration's fields: iterations and mean-shift bandwidths
+    as written on the command line, and the voxel constraints (inputs, not configuration)."""
+    sections["volume and pyramid"].add_argument(
+        "--iterations", default=str(DEFAULT_ITERATIONS), metavar="N[,N..]",
+        help="search + optimisation iterations per level: one number, or one per level (coarsest first)")
+    mean_shift = options_of(KopfConfig)["mean_shift"]
+    sections["energy and search"].add_argument(
+        "--mean-shift", default=",".join(str(h) for h in mean_shift[0].default), metavar="H0,H1",
+        help=mean_shift[1].help)
+    views = sections["views and exemplars"]
+    views.add_argument("--constraint", default=None, metavar="PATH",
+                       help="voxel constraints: a .npy or .tif volume (N1, N2, N3[, C]) of target values "
+                            "(default: none)")
+    views.add_argument("--constraint-weight", default=None, metavar="W|PATH",
+                       help="constraint weights: a number >= 0 or a .npy/.tif volume (N1, N2, N3) "
+                            "(default: 1 everywhere when --constraint is given)")
+
+
 def _add_kopf(commands, formatter_class, name: str = "kopf") -> None:
-    kopf = commands.add_parser(
-        name,
+    add_method_parser(
+        commands, name, METHOD,
         help="NP_K: texture optimisation with histogram matching (Kopf et al. 2007)",
         description=(
             "NP_K (Kopf et al. 2007): minimise the robust distance between the volume's\n"
@@ -72,66 +80,8 @@ def _add_kopf(commands, formatter_class, name: str = "kopf") -> None:
             "  npmrf3d kopf bundled:ihc --size 128 --out ihc-kopf\n"
             "  npmrf3d kopf wood.png --views front,right    # two constrained views"
         ),
-        formatter_class=formatter_class,
+        out="npmrf3d-kopf-out", formatter_class=formatter_class, handler=_kopf, extra=_kopf_options,
     )
-    kopf.add_argument(
-        "exemplar", nargs="?", default=f"{BUNDLED_PREFIX}{data.DEFAULT_EXEMPLAR}", metavar="EXEMPLAR",
-        help="2D exemplar image (.png, .jpg, .bmp, .gif, .tif or .npy) used for every view; "
-             f"omitted = the bundled default exemplar, or '{BUNDLED_PREFIX}NAME' for a bundled one "
-             f"({', '.join(data.available())})",
-    )
-    shape = kopf.add_argument_group("volume and pyramid")
-    shape.add_argument("--size", default=str(DEFAULT_SIZE), metavar="N",
-                       help="output size in voxels: N for an N^3 cube or N1,N2,N3; each divisible "
-                            "by 2**(levels-1) and by grid at every level")
-    shape.add_argument("--window", type=int, default=_d("window"), metavar="W",
-                       help="side of the square 2D neighbourhoods, an integer >= 2 (the paper: 8)")
-    shape.add_argument("--levels", type=int, default=_d("levels"), metavar="L",
-                       help="resolution levels, coarse to fine, 1 to 8 (the paper: 3)")
-    shape.add_argument("--iterations", default=str(DEFAULT_ITERATIONS), metavar="N[,N...]",
-                       help="search + optimisation iterations per level: one number, or one per "
-                            "level (coarsest first)")
-    shape.add_argument("--upsample", default=_d("upsample"), metavar=choices(UPSAMPLING),
-                       help="initialisation of a finer level: trilinear interpolation (the paper), "
-                            "or the project's pyramid (8/8 copies the parent into all children, 1/8 "
-                            "into one and draws the others from the exemplar)")
-    method = kopf.add_argument_group("energy and search")
-    method.add_argument("--r", type=float, default=_d("r"), metavar="R",
-                        help="exponent of the robust energy ||s - e||^r, in (0, 2]")
-    method.add_argument("--eps", type=float, default=_d("eps"), metavar="E",
-                        help="error bound of the approximate nearest-neighbour search "
-                             "(cKDTree eps), >= 0; 0 = exact in the PCA space")
-    method.add_argument("--variance", type=float, default=_d("variance"), metavar="F",
-                        help="fraction of the neighbourhood variance kept by the PCA, in (0, 1]")
-    method.add_argument("--grid", type=int, default=_d("grid"), metavar="M",
-                        help="spacing of the sparse grid of searched neighbourhoods (1 = all)")
-    method.add_argument("--histogram-bins", type=int, default=_d("histogram_bins"), metavar="B",
-                        help="bins of each channel's histogram, >= 2")
-    method.add_argument("--histogram-weight", type=float, default=_d("histogram_weight"), metavar="W",
-                        help="strength of the histogram re-weighting, >= 0 (0 = off, 1 = the "
-                             "paper's formula with histograms as voxel counts)")
-    method.add_argument("--mean-shift", default=",".join(str(h) for h in _d("mean_shift")),
-                        metavar="H0,H1",
-                        help="mean-shift bandwidths at the start and end of each level, as multiples "
-                             "of the exemplar's standard deviation; one number for a fixed "
-                             "bandwidth, 'none' for the plain weighted average")
-    views = kopf.add_argument_group("views, exemplars and constraints")
-    add_exemplar_kind(views)
-    views.add_argument("--views", default=",".join(_d("views")), metavar="V[,V...]",
-                       help=f"comma-separated views in the energy, 1 to 3 distinct names of "
-                            f"{', '.join(VIEWS)}")
-    for view in VIEWS:
-        views.add_argument(f"--exemplar-{view}", default=None, metavar="PATH",
-                           help=f"a different exemplar file (or {BUNDLED_PREFIX}NAME) for the {view} "
-                                f"view (default: none = EXEMPLAR)")
-    views.add_argument("--constraint", default=None, metavar="PATH",
-                       help="voxel constraints: a .npy or .tif volume (N1, N2, N3[, C]) of target "
-                            "values (default: none)")
-    views.add_argument("--constraint-weight", default=None, metavar="W|PATH",
-                       help="constraint weights: a number >= 0 or a .npy/.tif volume (N1, N2, N3) "
-                            "(default: none = 1 everywhere when --constraint is given)")
-    add_run_options(kopf, out="npmrf3d-kopf-out")
-    kopf.set_defaults(handler=_kopf)
 
 
 def _add_chen_wang(commands, formatter_class, name: str = "chen-wang") -> None:
@@ -222,19 +172,12 @@ def _run(args: argparse.Namespace, argv: list[str]) -> int:
     if args.constraint_weight is not None and args.constraint is None:
         raise ParameterError("--constraint-weight needs --constraint (the volume of target values "
                              "it weighs): add --constraint or drop --constraint-weight")
-    if given(args, "histogram_bins") and args.histogram_weight == 0:
-        raise ParameterError("--histogram-bins changes nothing with --histogram-weight 0 (no "
-                             "histogram matching): drop --histogram-bins or set --histogram-weight "
-                             "above 0")
     constraint = io.read_volume(args.constraint) if args.constraint is not None else None
     weight = _constraint_weight(args.constraint_weight)
     config = METHOD.make_config(
-        size=parse_size(args.size), window=args.window, levels=args.levels,
-        views=args.views, iterations=_parse_iterations(args.iterations), r=args.r, eps=args.eps,
-        variance=args.variance, grid=args.grid, histogram_bins=args.histogram_bins,
-        histogram_weight=args.histogram_weight, mean_shift=_parse_mean_shift(args.mean_shift),
-        upsample=args.upsample, constrained=constraint is not None, seed=args.seed,
-    )
+        size=parse_size(args.size), views=args.views, seed=args.seed, constrained=constraint is not None,
+        **{**config_options(args, KopfConfig), "iterations": _parse_iterations(args.iterations),
+           "mean_shift": _parse_mean_shift(args.mean_shift)})
     out, checkpoint, per_view, sources = prepare_run(args, METHOD, config, whole=not zarr_output(args))
     if constraint is not None:  # its checks, before the work (the method repeats them)
         channels = next(iter(per_view.values())).shape[2]

@@ -1,8 +1,9 @@
 """``npmrf3d volume VOLUME`` (``volume-lh``, optionally deformed) and ``npmrf3d volume-npmrf
 VOLUME`` (``npmrf-3d``): synthesise from a 3D exemplar (a scan crop).
 
-Options and defaults come from the methods' config classes
-(:class:`npmrf3d.methods.volume_lh.VolumeConfig`, :class:`npmrf3d.methods.npmrf_3d.NpmrfVolumeConfig`); the run folder
+Options, defaults and help are the fields of the methods' configurations
+(:class:`npmrf3d.methods.volume_lh.VolumeConfig`, :class:`npmrf3d.methods.npmrf_3d.NpmrfVolumeConfig`),
+made options by :func:`npmrf3d.cli._generic.add_method_parser`; the run folder
 is the one ``npmrf3d synth`` writes (its preview shows the exemplar's centre slice).
 """
 
@@ -17,16 +18,16 @@ import numpy as np
 
 from ..analysis.materials import stationarity_warning
 from ..errors import ParameterError
-from ..io.runs import RUN_FILES
 from ..methods import check_resources
 from ..methods.npmrf_3d import METHOD as NPMRF_METHOD
-from ..methods.volume_lh import METHOD
+from ..methods.volume_lh import METHOD, VolumeConfig
+from ..options import options_of
 from ..model.exemplar import exemplar_source
 from ..model.exemplar3d import load_volume_exemplar
 from ..model.fields import FIELDS, field_input
 from ._blocks import run_to_output, zarr_output
+from ._generic import add_method_parser, config_options
 from ._common import (
-    add_run_options,
     check_checkpoint,
     output_folder,
     parse_size,
@@ -34,45 +35,10 @@ from ._common import (
 )
 from ._options import given
 
-__all__ = ["FIELD_HELP", "register"]
+__all__ = ["register"]
 
-#: One line per option taken from :class:`VolumeConfig` (size, vector_field and seed have their own).
-FIELD_HELP = {
-    "levels": "pyramid levels; the coarsest has size / 2**(levels-1) voxels per side",
-    "window": "side of the appearance-space neighbourhoods, odd, 3 to 7 (the paper: 5)",
-    "pca_dims": "appearance-space dimensions kept by PCA (the paper: 8)",
-    "k": "size of the similarity sets (the paper: 3)",
-    "exclude": "later similarity-set members lie farther than this many voxels from earlier ones "
-               "(the paper's 7x7x7 neighbourhood: 3)",
-    "passes": "correction passes per level, each of 8 parity sub-passes",
-    "neighbourhood": "synthesis neighbourhood: diagonal (the paper's 8 diagonal neighbours) or "
-                     "faces (those and the 6 face neighbours)",
-    "jitter": "jitter amplitude at the coarser levels, in units of the level's spacing (the paper: 0.7)",
-    "fine_jitter": "jitter amplitude at the finest level",
-    "start": "the coarsest level: 'blocks' (the exemplar laid out at the level's spacing, every tile "
-             "with its own random offset, and jitter), 'tiled' (one offset for all, as the paper's "
-             "pyramid from one voxel: repeats the exemplar at its period) or 'random' (uniform coordinates)",
-    "usage": "strength of the position histogram: a candidate copying an over-used part of the "
-             "exemplar pays usage x (half the distance of two random neighbourhoods) per excess "
-             "use (0: the paper's rule, which collapses onto one homogeneous region of a "
-             "non-stationary scan)",
-    "balance": "strength of the phase histogram: a candidate whose phase (a segmented scan's "
-               "value, or a side of a grey scan's Otsu threshold) the volume already holds more "
-               "often than the exemplar pays balance x (half the distance of two random "
-               "neighbourhoods) x (its excess share + a price that sums the excess over the "
-               "sub-passes); at the coarse levels a coordinate counts as the phase mix of the "
-               "voxels its descendants copy (0: the phase fractions drift; a thin minority "
-               "phase such as a rock's pores erodes)",
-    "angle": "degrees of rotation of the named fields twist and bend",
-    "adaptive": "Parzen bandwidth: 2h^2 = adaptive * the smallest neighbourhood distance, > 0",
-    "centre_bandwidth": "width of the kernel on candidate centre values, times the exemplar's "
-                        "standard deviation, > 0",
-}
+#: Options the handler reads itself.
 _OWN = ("size", "vector_field", "seed")
-
-
-def _option(name: str) -> str:
-    return "--" + name.replace("_", "-")
 
 
 def register(commands, formatter_class) -> None:
@@ -85,8 +51,8 @@ def register(commands, formatter_class) -> None:
             "(appearance-space coordinate pyramid with k = 3 similarity sets, jitter and\n"
             "correction), optionally turned by a vector field.\n\n"
             "examples:\n"
-            "  npmrf3d volume crop.tif --size 128 --out big\n"
-            "  npmrf3d volume crop.npy --size 64 --vector-field twist --angle 180\n"
+            "  npmrf3d volume bundled:fibres48 --size 64 --out grown\n"
+            "  npmrf3d volume crop.tif --size 64 --vector-field twist --angle 180\n"
             "  npmrf3d volume crop.npy --vector-field directions.npy   # (N1, N2, N3, 3) or (..., 3, 3)"
          ))
     _add(commands, "volume-npmrf", NPMRF_METHOD, formatter_class,
@@ -95,46 +61,40 @@ def register(commands, formatter_class) -> None:
              "The NP-MRF with one 3D view: each voxel copies the coherent candidate whose\n"
              "centre value maximises the Parzen LCPDF of full w^3 neighbourhoods.\n\n"
              "example:\n"
-             "  npmrf3d volume-npmrf crop.tif --size 128 --out big"
+             "  npmrf3d volume-npmrf bundled:fibres48 --size 32 --out vol-npmrf"
          ))
 
 
-def _add(commands, name, method, formatter_class, *, help, description) -> None:
-    parser = commands.add_parser(name, aliases=[method.name], help=help, description=description,
-                                 formatter_class=formatter_class)
-    config_class = method.config_class
+def _volume_inputs(parser: argparse.ArgumentParser, sections: dict) -> None:
+    """A 3D exemplar's inputs: the volume, how it is read and its voxel size."""
     parser.add_argument("exemplar", metavar="VOLUME",
-                        help="3D exemplar: .npy (D, H, W[, C]) or a TIFF stack (ImageJ/Fiji, multi-page)")
-    fields = {f.name: f for f in dataclasses.fields(config_class)}
-    parser.add_argument("--size", default=",".join(map(str, fields["size"].default)), metavar="N",
-                        help="output size in voxels: N for an N^3 cube or N1,N2,N3; each divisible "
-                             "by 2**(levels-1)")
-    group = parser.add_argument_group("method")
-    for field_name, f in fields.items():
-        if field_name in _OWN or field_name in getattr(config_class, "unused", ()):
-            continue
-        kind = {int: int, float: float}.get(type(f.default))
-        if kind is None:
-            group.add_argument(_option(field_name), default=f.default, metavar="NAME",
-                               help=FIELD_HELP[field_name])
-        else:
-            group.add_argument(_option(field_name), type=kind, default=f.default,
-                               metavar="N" if kind is int else "X", help=FIELD_HELP[field_name])
-    if method is METHOD:
-        group.add_argument("--vector-field", default=fields["vector_field"].default,
-                           metavar="{" + ",".join(FIELDS) + "}|FILE.npy",
-                           help="deformation: a named field, or a .npy file of directions (N1, N2, N3, 3) "
-                                "or frames (N1, N2, N3, 3, 3) of the output size")
-    inputs = parser.add_argument_group("exemplar")
+                        help="3D exemplar: .npy (D, H, W[, C]), a TIFF stack (ImageJ/Fiji, multi-page) or "
+                             "bundled:NAME")
+    inputs = sections["views and exemplars"]
     inputs.add_argument("--exemplar-kind", default="auto", choices=("auto", "volume"), metavar="{auto,volume}",
                         help="auto recognises a volume (and refuses an image); volume reads a 3-D "
                              "array whose last axis is at most 4 as a volume")
     inputs.add_argument("--spacing", default=None, metavar="S[,SY,SX]",
-                        help="voxel size of the exemplar, which must be isotropic (default: none = "
-                             "what an ImageJ TIFF records, else isotropic)")
-    add_run_options(parser, out=f"npmrf3d-{name}-out")
-    parser.set_defaults(handler=lambda args, argv: _handler(args, argv, method))
-    parser.epilog = f"Writes {', '.join(RUN_FILES)} into the output folder."
+                        help="voxel size of the exemplar, which must be isotropic (default: what an "
+                             "ImageJ TIFF records, else isotropic)")
+
+
+_volume_inputs.usage = "VOLUME"
+
+
+def _vector_field(parser: argparse.ArgumentParser, sections: dict) -> None:
+    sections["method"].add_argument(
+        "--vector-field", default=options_of(VolumeConfig)["vector_field"][0].default,
+        metavar="{" + ",".join(FIELDS) + "}|FILE.npy",
+        help="deformation: a named field, or a .npy file of directions (N1, N2, N3, 3) or frames "
+             "(N1, N2, N3, 3, 3) of the output size")
+
+
+def _add(commands, name, method, formatter_class, *, help, description) -> None:
+    add_method_parser(commands, name, method, aliases=(method.name,), help=help, description=description,
+                      out=f"npmrf3d-{name}-out", formatter_class=formatter_class, inputs=_volume_inputs,
+                      extra=_vector_field if method is METHOD else None,
+                      handler=lambda args, argv: _handler(args, argv, method))
 
 
 def _spacing(text):
@@ -166,9 +126,7 @@ def _check_angle(args: argparse.Namespace) -> None:
 
 def _handler(args: argparse.Namespace, argv: list[str], method) -> int:
     t_start = time.perf_counter()
-    fields = [f.name for f in dataclasses.fields(method.config_class)
-              if f.name not in _OWN and f.name not in getattr(method.config_class, "unused", ())]
-    options = {name: getattr(args, name) for name in fields}
+    options = config_options(args, method.config_class)
     size = parse_size(args.size)
     extra = {}
     # messages name library parameters; npmrf3d.cli.main turns them into these options

@@ -360,21 +360,23 @@ def chen_wang_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress
     """
     t_start = time.perf_counter()
     config, generator, per_view = prepare(METHOD, exemplar, exemplars, size=size, rng=rng, options=options)
-    return chen_wang_method(per_view, config, generator, progress=progress, checkpoint=checkpoint,
-                            t_start=t_start)
+    return run(per_view, config, generator, progress=progress, checkpoint=checkpoint, t_start=t_start)
 
 
 # --------------------------------------------------------------------------- the method
 
 
-def run(config: ChenWangConfig, per_view_exemplars: Mapping[str, np.ndarray], rng: np.random.Generator, *,
+def run(per_view: Mapping[str, np.ndarray], config: ChenWangConfig, rng: np.random.Generator, *,
         progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
         t_start: float | None = None, region=None) -> SynthesisResult:
-    """Run a validated configuration on validated float32 ``(H, W, C)`` exemplars (one per view):
-    the k-coherence engine (:class:`npmrf3d.model.kcoherence_engine.KCoherenceLevels`) with its
-    own solver. The body of :func:`chen_wang_synthesize`."""
+    """Run a validated configuration on validated float32 ``(H, W, C)`` exemplars (one per view,
+    each checked against every level's window): the k-coherence engine
+    (:class:`npmrf3d.model.kcoherence_engine.KCoherenceLevels`) with its own solver. The body of
+    :func:`chen_wang_synthesize` and the registered method (:data:`npmrf3d.methods.METHODS`);
+    ``region`` (a ``blockwise`` configuration): one block from its dependency cone."""
     t_start = time.perf_counter() if t_start is None else t_start
-    levels = KCoherenceLevels("chen-wang", config, per_view_exemplars)
+    _check_exemplar_levels(config, per_view)
+    levels = KCoherenceLevels("chen-wang", config, per_view)
     out = run_pyramid(levels, rng, progress=progress, checkpoint=checkpoint, t_start=t_start, region=region)
     return SynthesisResult(volume=out.state.volume, history=out.history, config=config,
                            timings=out.timings, labels=levels.labels, stats=out.stats)
@@ -386,16 +388,8 @@ def _fit(config) -> dict:
     return {"window": max(config.window), "levels": config.levels, "toroidal": False}
 
 
-def chen_wang_method(per_view, config: ChenWangConfig, rng: np.random.Generator, *,
-                     progress=None, checkpoint=None, t_start=None, region=None) -> SynthesisResult:
-    """The registered form of :func:`run` (exemplars first, as every method of the registry);
-    ``region`` (a ``blockwise`` configuration): one block from its dependency cone."""
-    _check_exemplar_levels(config, per_view)
-    return run(config, per_view, rng, progress=progress, checkpoint=checkpoint, t_start=t_start, region=region)
-
-
 METHOD = SynthesisMethod(
-    name="chen-wang", run=chen_wang_method, make_config=refusing(make_chen_wang_config, ChenWangConfig),
+    name="chen-wang", run=run, make_config=refusing(make_chen_wang_config, ChenWangConfig),
     config_class=ChenWangConfig, synthesize=chen_wang_synthesize, fit=_fit,
     description="Chen & Wang 2010: k-coherence search, discrete solver, position and index histograms",
     resources=coherent_estimate,

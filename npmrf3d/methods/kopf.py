@@ -73,6 +73,7 @@ from ..resources import kopf_estimate
 
 # The building blocks (search, IRLS optimisation, histograms, up-sampling, constraints) live in
 # _kopf_steps; they are re-exported here, where the tests and docs/kopf.md have always found them.
+from ..options import option, refusing
 from ._api import prepare
 from ._kopf_steps import (
     PatchIndex,
@@ -86,7 +87,7 @@ from ._kopf_steps import (
     search_view,
 )
 
-__all__ = ["METHOD", "KopfConfig", "UPSAMPLING", "kopf_method", "kopf_synthesize", "make_kopf_config"]
+__all__ = ["METHOD", "KopfConfig", "UPSAMPLING", "kopf_synthesize", "make_kopf_config", "run"]
 
 #: Up-sampling between levels: the paper's trilinear interpolation, or the project's pyramid
 #: (names of :data:`npmrf3d.model.pyramid.UPSAMPLERS`, the paper's first).
@@ -106,21 +107,38 @@ ProgressCallback = Callable[[int, int, int, float], None]
 class KopfConfig:
     """A validated NP_K run (see :func:`kopf_synthesize` for the meaning of each field)."""
 
-    size: tuple[int, int, int]
-    window: int = 8
-    levels: int = 3
-    views: tuple[str, ...] = VIEWS
-    iterations: tuple[int, ...] = (DEFAULT_ITERATIONS,) * 3
-    r: float = 0.8
-    eps: float = 2.0
-    variance: float = 0.95
-    grid: int = 2
-    histogram_bins: int = 16
-    histogram_weight: float = DEFAULT_HISTOGRAM_WEIGHT
-    mean_shift: tuple[float, float] | None = DEFAULT_MEAN_SHIFT
-    upsample: str = "trilinear"
-    constrained: bool = False
-    seed: int | None = None
+    size: tuple[int, int, int] = option(help="output size", kind="own")
+    window: int = option(8, "side of the square 2D neighbourhoods (the paper: 8)", kind="int", low=2, high=64,
+                         metavar="W", group="volume and pyramid")
+    levels: int = option(3, "resolution levels, coarse to fine (the paper: 3)", kind="int", low=1, high=8,
+                         metavar="L", group="volume and pyramid")
+    views: tuple[str, ...] = option(VIEWS, "views in the energy", kind="own")
+    iterations: tuple[int, ...] = option((DEFAULT_ITERATIONS,) * 3, "search + optimisation iterations per "
+                                         "level: one number, or one per level (coarsest first)",
+                                         kind="levels", low=1, group="volume and pyramid")
+    r: float = option(0.8, "exponent of the robust energy ||s - e||^r", kind="real", low=0.0, high=2.0,
+                      low_open=True, metavar="R", group="energy and search")
+    eps: float = option(2.0, "error bound of the approximate nearest-neighbour search (0 = exact in the "
+                        "PCA space)", kind="real", low=0.0, metavar="E", group="energy and search")
+    variance: float = option(0.95, "share of the neighbourhood variance the PCA keeps", kind="real", low=0.0,
+                             high=1.0, low_open=True, metavar="F", group="energy and search")
+    grid: int = option(2, "spacing of the sparse grid of searched neighbourhoods (1 = all)", kind="int",
+                       low=1, metavar="M", group="energy and search")
+    histogram_bins: int = option(16, "bins of each channel's histogram", kind="int", low=2, high=4096,
+                                 metavar="B", group="energy and search",
+                                 applies=lambda config: config.histogram_weight > 0,
+                                 needs="histogram_weight is above 0")
+    histogram_weight: float = option(DEFAULT_HISTOGRAM_WEIGHT, "strength of the histogram re-weighting (0 = "
+                                     "off, 1 = the paper's formula)", kind="real", low=0.0, metavar="W",
+                                     group="energy and search")
+    mean_shift: tuple[float, float] | None = option(
+        DEFAULT_MEAN_SHIFT, "mean-shift bandwidths at the start and end of each level, multiples of the "
+        "exemplar's standard deviation; one number: fixed; 'none': the weighted average", kind="own")
+    upsample: str = option("trilinear", "a finer level starts by trilinear interpolation (the paper) or "
+                           "the pyramid's 8/8 or 1/8", kind="choice", choices=UPSAMPLING,
+                           group="volume and pyramid")
+    constrained: bool = option(False, "voxel constraints given", kind="own")
+    seed: int | None = option(None, "random seed", kind="own")
 
     def to_dict(self) -> dict:
         """Plain JSON-able dictionary."""
@@ -267,8 +285,8 @@ def kopf_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress: Pro
     t_start = time.perf_counter()
     config, generator, per_view = prepare(METHOD, exemplar, exemplars, size=size, rng=rng,
                                           options={**options, "constrained": constraint is not None})
-    return kopf_method(per_view, config, generator, constraint=constraint, constraint_weight=constraint_weight,
-                       progress=progress, checkpoint=checkpoint, t_start=t_start)
+    return run(per_view, config, generator, constraint=constraint, constraint_weight=constraint_weight,
+               progress=progress, checkpoint=checkpoint, t_start=t_start)
 
 
 class _KopfLevels(Levels):
@@ -373,16 +391,20 @@ class _KopfLevels(Levels):
         return {"volume": ArraySpec((*shape, self.channels), np.float32)}
 
 
-def run_kopf(config: KopfConfig, per_view: Mapping[str, np.ndarray], rng: np.random.Generator, *,
-             constraint=None, constraint_weight=None, progress: ProgressCallback | None = None,
-             checkpoint=None, t_start: float | None = None) -> SynthesisResult:
-    """Run a validated configuration on validated exemplars (the body of :func:`kopf_synthesize`).
+def run(per_view: Mapping[str, np.ndarray], config: KopfConfig, rng: np.random.Generator, *,
+        progress: ProgressCallback | None = None, checkpoint=None, constraint=None,
+        constraint_weight=None, t_start: float | None = None) -> SynthesisResult:
+    """Run a validated configuration on validated exemplars (the body of :func:`kopf_synthesize`
+    and the registered method, :data:`npmrf3d.methods.METHODS`); ``constraint`` and
+    ``constraint_weight`` are raw arrays, validated here.
 
     ``checkpoint``: a ``.npz`` file written after each level, resumed from when it matches (as
     for :func:`npmrf3d.synthesize`).
     """
     t_start = time.perf_counter() if t_start is None else t_start
-    levels = _KopfLevels(config, per_view, constraint, constraint_weight)
+    channels = next(iter(per_view.values())).shape[2]
+    target, tau = _constraint_arrays(constraint, constraint_weight, config.size, channels)
+    levels = _KopfLevels(config, per_view, target, tau)
     out = run_pyramid(levels, rng, progress=progress, checkpoint=checkpoint,
                       timings={"setup": time.perf_counter() - t_start},
                       stats={"threads": _jit.thread_count()}, t_start=t_start)
@@ -391,20 +413,9 @@ def run_kopf(config: KopfConfig, per_view: Mapping[str, np.ndarray], rng: np.ran
                            stats=out.stats)
 
 
-def kopf_method(per_view: Mapping[str, np.ndarray], config: KopfConfig, rng: np.random.Generator, *,
-                progress: ProgressCallback | None = None, checkpoint=None, constraint=None,
-                constraint_weight=None, t_start: float | None = None) -> SynthesisResult:
-    """NP_K in the common method signature (:data:`npmrf3d.methods.METHODS`); ``constraint``
-    and ``constraint_weight`` are raw arrays, validated here."""
-    channels = next(iter(per_view.values())).shape[2]
-    target, tau = _constraint_arrays(constraint, constraint_weight, config.size, channels)
-    return run_kopf(config, per_view, rng, constraint=target, constraint_weight=tau,
-                    progress=progress, checkpoint=checkpoint, t_start=t_start)
-
-
 #: The registry entry of NP_K.
 METHOD = SynthesisMethod(
-    name="kopf", run=kopf_method, make_config=make_kopf_config, config_class=KopfConfig,
+    name="kopf", run=run, make_config=refusing(make_kopf_config, KopfConfig), config_class=KopfConfig,
     synthesize=kopf_synthesize,
     fit=lambda c: {"window": c.window, "levels": c.levels, "toroidal": False},
     resources=kopf_estimate,

@@ -223,13 +223,12 @@ class _NpmrfLevels(Levels):
                 "temps": ArraySpec(shape, np.float32, 0.0), "inherited": ArraySpec(shape, np.bool_)}
 
 
-def run(config: SynthesisConfig, per_view: dict[str, np.ndarray], rng: np.random.Generator, *,
+def run(per_view: dict[str, np.ndarray], config: SynthesisConfig, rng: np.random.Generator, *,
         progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
         t_start: float | None = None) -> SynthesisResult:
-    """Run a validated configuration on validated exemplars (the body of :func:`synthesize`).
-
-    This is the ``npmrf`` entry of :data:`npmrf3d.methods.METHODS`.
-    """
+    """The full support: run a validated configuration on validated exemplars (the body of
+    :func:`npmrf_synthesize` for ``support="full"``; :func:`npmrf_method`, the registered
+    method, chooses between it and the coherent support)."""
     t_start = time.perf_counter() if t_start is None else t_start
     distinct = {id(a): a for a in per_view.values()}
     labels, images = make_labels(list(distinct.values()), grey_levels=config.grey_levels,
@@ -253,7 +252,8 @@ def _config_key(config: SynthesisConfig) -> str:
 def npmrf_method(per_view: dict[str, np.ndarray], config: SynthesisConfig, rng: np.random.Generator, *,
                  progress: ProgressCallback | None = None, checkpoint: str | Path | None = None,
                  t_start: float | None = None, region=None) -> SynthesisResult:
-    """The NP-MRF sampler in the common method signature (:data:`npmrf3d.methods.METHODS`).
+    """The registered NP-MRF sampler (:data:`npmrf3d.methods.METHODS`): the coherent support
+    (:mod:`npmrf3d.methods.npmrf_coherent`) or the full one (:func:`run`), by ``config.support``.
 
     ``t_start`` (optional, every method accepts it): ``time.perf_counter()`` when the caller
     started, so that ``timings["setup"]`` includes loading the exemplars. ``region`` (a
@@ -263,7 +263,7 @@ def npmrf_method(per_view: dict[str, np.ndarray], config: SynthesisConfig, rng: 
     if config.support == "coherent":
         return _run_coherent(per_view, config, rng, progress=progress, checkpoint=checkpoint,
                              t_start=t_start, region=region)
-    return run(config, per_view, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
+    return run(per_view, config, rng, progress=progress, checkpoint=checkpoint, t_start=t_start)
 
 
 def segmented(config: SynthesisConfig, per_view) -> bool:
@@ -340,8 +340,7 @@ def _run_coherent(per_view, config: SynthesisConfig, rng, *, progress, checkpoin
         per_view = {v: reduced[id(a)] for v, a in per_view.items()}
     runs = _coherent_runs(config, phases)
     if region is not None:
-        result = npmrf_coherent.coherent_method(per_view, runs[0], rng, progress=progress, t_start=t_start,
-                                                region=region)
+        result = npmrf_coherent.run(per_view, runs[0], rng, progress=progress, t_start=t_start, region=region)
     else:
         result = npmrf_coherent.best_of_pyramids(per_view, runs, rng, progress=progress,
                                                  checkpoint=checkpoint, t_start=t_start)

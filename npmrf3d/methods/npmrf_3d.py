@@ -31,8 +31,10 @@ import numpy as np
 
 from .. import _validation as check
 from ..config import DEFAULT_SIZE, SynthesisMethod, SynthesisResult
+from ..options import option
 from ._api import prepare
-from .volume_lh import VolumeConfig, make_volume_config, run, volume_estimate, volume_loader
+from . import volume_lh
+from .volume_lh import VolumeConfig, make_volume_config, volume_estimate, volume_loader
 
 __all__ = ["NpmrfVolumeConfig", "make_npmrf_volume_config", "npmrf_volume_synthesize"]
 
@@ -48,10 +50,13 @@ class NpmrfVolumeConfig(VolumeConfig):
     usage: float = 0.0
     balance: float = 0.0
     start: str = "random"
-    adaptive: float = 0.1
-    centre_bandwidth: float = 0.1
+    angle: float = 180.0
+    adaptive: float = option(0.1, "Parzen bandwidth: 2h^2 = adaptive * the smallest neighbourhood distance",
+                             kind="real", low=0.0, low_open=True)
+    centre_bandwidth: float = option(0.1, "width of the kernel on candidate centre values, times the "
+                                     "exemplar's standard deviation", kind="real", low=0.0, low_open=True)
 
-    #: Fields of the base configuration this method does not use (no command-line option).
+    #: Fields of the base configuration this method does not use (plain fields here: no option).
     unused: ClassVar[tuple[str, ...]] = ("usage", "balance", "start", "angle")
 
 
@@ -102,19 +107,18 @@ def npmrf_volume_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progr
     t_start = time.perf_counter()
     config, generator, per_view = prepare(METHOD, exemplar, exemplars, size=size, rng=rng, options=options,
                                           load=volume_loader(exemplar_kind, spacing))
-    return npmrf_volume_method(per_view, config, generator, progress=progress, checkpoint=checkpoint,
-                               t_start=t_start)
+    return run(per_view, config, generator, progress=progress, checkpoint=checkpoint, t_start=t_start)
 
 
-def npmrf_volume_method(per_view, config: NpmrfVolumeConfig, rng: np.random.Generator, *,
-                        progress=None, checkpoint=None, t_start=None) -> SynthesisResult:
-    """The registered form: :func:`npmrf3d.methods.volume_lh.run` with the Parzen decision."""
-    return run(per_view, config, rng, progress=progress, checkpoint=checkpoint, t_start=t_start,
-               parzen=(config.adaptive, config.centre_bandwidth))
+def run(per_view, config: NpmrfVolumeConfig, rng: np.random.Generator, *,
+        progress=None, checkpoint=None, t_start=None) -> SynthesisResult:
+    """The registered method: :func:`npmrf3d.methods.volume_lh.run` with the Parzen decision."""
+    return volume_lh.run(per_view, config, rng, progress=progress, checkpoint=checkpoint, t_start=t_start,
+                         parzen=(config.adaptive, config.centre_bandwidth))
 
 
 METHOD = SynthesisMethod(
-    name="npmrf-3d", run=npmrf_volume_method, make_config=make_npmrf_volume_config,
+    name="npmrf-3d", run=run, make_config=make_npmrf_volume_config,
     config_class=NpmrfVolumeConfig, synthesize=npmrf_volume_synthesize,
     fit=lambda c: {"window": c.window, "levels": c.levels, "toroidal": False, "kind": "volume"},
     description="NP-MRF with one 3D view: Parzen LCPDF of w^3 neighbourhoods over coherent 3D "

@@ -68,7 +68,7 @@ from ._api import prepare
 
 __all__ = ["CANDIDATE_HEURISTICS", "CANDIDATE_SAMPLERS", "COHERENT_HEURISTICS", "METHOD", "SEGMENTED",
            "SEGMENTED_MAX_VALUES", "CoherentConfig", "SegmentedPreset",
-           "best_of_pyramids", "coherent_synthesize", "icm_schedule", "is_segmented", "make_coherent_config", "run",
+           "best_of_pyramids", "coherent_levels", "coherent_synthesize", "icm_schedule", "is_segmented", "make_coherent_config", "run",
            "temperatures", "trial_checkpoint"]
 
 _CW = chen_wang.DEFAULTS
@@ -297,17 +297,25 @@ def icm_schedule(config: CoherentConfig) -> IcmSchedule | None:
     return IcmSchedule(config.xi, config.stop, config.max_sweeps, config.upsample, config.inherit)
 
 
-def run(config: CoherentConfig, per_view_exemplars: Mapping[str, np.ndarray], rng: np.random.Generator, *,
-        progress=None, checkpoint: str | Path | None = None, t_start: float | None = None,
-        region=None) -> SynthesisResult:
-    """Run a validated configuration on validated float32 ``(H, W, C)`` exemplars (one per view):
-    the k-coherence engine (:class:`npmrf3d.model.kcoherence_engine.KCoherenceLevels`) deciding
-    by the NP-MRF rule; the signature of a registered method."""
-    t_start = time.perf_counter() if t_start is None else t_start
+def coherent_levels(config: CoherentConfig, per_view: Mapping[str, np.ndarray]) -> KCoherenceLevels:
+    """The k-coherence engine of a run: deciding by the NP-MRF rule (annealed by the
+    configuration's temperatures, or ICM's per-voxel temperatures with ``icm``)."""
     decision = CandidateDecision(config.heuristic, config.centre_bandwidth, config.outlier,
                                  None if config.icm else temperatures(config), config.sampler)
-    levels = KCoherenceLevels("coherent", _chen_wang_config(config), per_view_exemplars, decision,
-                              icm_schedule(config))
+    return KCoherenceLevels("coherent", _chen_wang_config(config), per_view, decision, icm_schedule(config))
+
+
+def run(per_view: Mapping[str, np.ndarray], config: CoherentConfig, rng: np.random.Generator, *,
+        progress=None, checkpoint: str | Path | None = None, t_start: float | None = None,
+        region=None) -> SynthesisResult:
+    """Run a validated configuration on validated float32 ``(H, W, C)`` exemplars (one per view,
+    each checked against every level's window): the k-coherence engine
+    (:class:`npmrf3d.model.kcoherence_engine.KCoherenceLevels`) deciding by the NP-MRF rule. The
+    body of :func:`coherent_synthesize` and the registered method (:data:`npmrf3d.methods.METHODS`);
+    ``region`` (a ``blockwise`` configuration): one block from its dependency cone."""
+    t_start = time.perf_counter() if t_start is None else t_start
+    chen_wang._check_exemplar_levels(_chen_wang_config(config), per_view)
+    levels = coherent_levels(config, per_view)
     out = run_pyramid(levels, rng, progress=progress, checkpoint=checkpoint, t_start=t_start, region=region)
     return SynthesisResult(volume=out.state.volume, history=out.history, config=config,
                            timings=out.timings, labels=levels.labels, stats=out.stats)
@@ -333,16 +341,7 @@ def coherent_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress=
     """
     t_start = time.perf_counter()
     config, generator, per_view = prepare(METHOD, exemplar, exemplars, size=size, rng=rng, options=options)
-    return coherent_method(per_view, config, generator, progress=progress, checkpoint=checkpoint,
-                           t_start=t_start)
-
-
-def coherent_method(per_view, config: CoherentConfig, rng: np.random.Generator, *,
-                    progress=None, checkpoint=None, t_start=None, region=None) -> SynthesisResult:
-    """The registered form of :func:`run` (exemplars first, as every method of the registry);
-    ``region`` (a ``blockwise`` configuration): one block from its dependency cone."""
-    chen_wang._check_exemplar_levels(_chen_wang_config(config), per_view)
-    return run(config, per_view, rng, progress=progress, checkpoint=checkpoint, t_start=t_start, region=region)
+    return run(per_view, config, generator, progress=progress, checkpoint=checkpoint, t_start=t_start)
 
 
 def coherent_aprons(config: CoherentConfig, per_view=None) -> tuple[int, ...] | None:
@@ -366,7 +365,7 @@ def trial_checkpoint(checkpoint: str | Path | None, index: int, levels: int) -> 
 
 def best_of_pyramids(per_view, configs, rng: np.random.Generator, *, progress=None, checkpoint=None,
                      t_start=None) -> SynthesisResult:
-    """Run :func:`coherent_method` with each configuration in turn (pyramids of different depth:
+    """Run :func:`run` with each configuration in turn (pyramids of different depth:
     the segmented preset's ``levels`` and ``levels - SEGMENTED.fewer_levels``) and keep the
     volume whose :func:`npmrf3d.analysis.metrics.two_point_shape_error` against the exemplars is lowest
     (the first on ties; the isotropic reference, since a scanned material is judged by its 3D
@@ -386,8 +385,8 @@ def best_of_pyramids(per_view, configs, rng: np.random.Generator, *, progress=No
         if note is not None:
             note(f"segmented exemplar: pyramid {index + 1} of {len(configs)}, "
                  f"{config.levels} level{'s' * (config.levels != 1)}")
-        results.append(coherent_method(per_view, config, rng, progress=progress, t_start=t_start,
-                                       checkpoint=trial_checkpoint(checkpoint, index, config.levels)))
+        results.append(run(per_view, config, rng, progress=progress, t_start=t_start,
+                           checkpoint=trial_checkpoint(checkpoint, index, config.levels)))
         if several:
             errors.append(two_point_shape_error({v: per_view[v] for v in config.views},
                                                 results[-1].volume, reference="isotropic"))
@@ -408,7 +407,7 @@ def best_of_pyramids(per_view, configs, rng: np.random.Generator, *, progress=No
 
 
 METHOD = SynthesisMethod(
-    name="coherent", run=coherent_method, make_config=refusing(make_coherent_config, CoherentConfig),
+    name="coherent", run=run, make_config=refusing(make_coherent_config, CoherentConfig),
     config_class=CoherentConfig, synthesize=coherent_synthesize, fit=chen_wang._fit,
     description="the coherent NP-MRF sampler: the NP-MRF likelihood over k-coherent candidates",
     resources=coherent_estimate,

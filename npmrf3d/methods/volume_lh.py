@@ -69,6 +69,7 @@ from ..model.phases import (
 )
 from ..model.pyramid import ArraySpec, Levels, run_pyramid
 from ..resources import Estimate
+from ..options import option
 from ._api import prepare
 
 __all__ = ["VolumeConfig", "appearance_space", "make_volume_config", "run", "similarity_sets",
@@ -92,24 +93,37 @@ NEIGHBOURHOODS = {"diagonal": _k.DIAGONALS, "faces": np.concatenate([_k.DIAGONAL
 class VolumeConfig:
     """A validated run of the 3D-exemplar method; every default lives here."""
 
-    size: tuple[int, int, int] = (DEFAULT_SIZE,) * 3
-    levels: int = 4
-    window: int = 5
-    pca_dims: int = 8
-    k: int = 3
-    exclude: int = 3
-    passes: int = 4
-    neighbourhood: str = "faces"
-    jitter: float = 0.7
-    fine_jitter: float = 0.0
-    usage: float = 1.0
-    balance: float = 4.0
+    size: tuple[int, int, int] = option((DEFAULT_SIZE,) * 3, "output size", kind="own")
+    levels: int = option(4, "pyramid levels; the coarsest has size / 2**(levels-1) voxels per side", kind="int",
+                         low=1, high=6, metavar="L")
+    window: int = option(5, "side of the appearance-space neighbourhoods, odd, 3 to 7 (the paper: 5)",
+                         kind="int", metavar="W")
+    pca_dims: int = option(8, "appearance-space dimensions kept by PCA (the paper: 8)", kind="int", low=1,
+                           high=64)
+    k: int = option(3, "size of the similarity sets (the paper: 3)", kind="int", low=1, high=16)
+    exclude: int = option(3, "later similarity-set members lie farther than this many voxels from earlier "
+                          "ones (the paper: 3)", kind="int", low=0, high=16)
+    passes: int = option(4, "correction passes per level, each of 8 parity sub-passes", kind="int", low=0,
+                         high=16)
+    neighbourhood: str = option("faces", "synthesis neighbourhood: diagonal (the paper's 8 diagonal "
+                                "neighbours) or faces (those and the 6 face neighbours)", kind="choice",
+                                choices=lambda: tuple(NEIGHBOURHOODS))
+    jitter: float = option(0.7, "jitter at the coarser levels, in units of the level's spacing (the paper: "
+                           "0.7)", kind="real", low=0.0, high=4.0)
+    fine_jitter: float = option(0.0, "jitter at the finest level", kind="real", low=0.0, high=4.0)
+    usage: float = option(1.0, "position histogram: a candidate copying an over-used part of the exemplar "
+                          "pays per excess use (0: the paper's rule)", kind="real", low=0.0, high=100.0)
+    balance: float = option(4.0, "phase histogram: a candidate of a phase the volume over-holds pays per "
+                            "excess share (0: the phase fractions drift)", kind="real", low=0.0, high=100.0)
     # docs/volume.md, "The coarsest level's start": the tiled start repeats 8-22 % of a 128^3 volume at the
     # exemplar's period; blocks keeps the statistics of 6 scans x 3 seeds but one surface area
-    start: str = "blocks"
-    vector_field: str = "none"
-    angle: float = 180.0
-    seed: int | None = None
+    start: str = option("blocks", "the coarsest level: blocks (the exemplar tiled, each tile offset), tiled "
+                        "(one offset: repeats at the exemplar's period) or random", kind="choice",
+                        choices=STARTS)
+    vector_field: str = option("none", "deformation", kind="own")
+    angle: float = option(180.0, "degrees of rotation of the named fields twist and bend", kind="real",
+                          low=-3600.0, high=3600.0)
+    seed: int | None = option(None, "random seed", kind="own")
 
     def to_dict(self) -> dict:
         """Plain JSON-able dictionary."""
@@ -640,15 +654,8 @@ def _fit(config: VolumeConfig) -> dict:
     return {"window": config.window, "levels": config.levels, "toroidal": False, "kind": "volume"}
 
 
-def volume_method(per_view, config: VolumeConfig, rng: np.random.Generator, *, progress=None,
-                  checkpoint=None, t_start=None, vector_field=None) -> SynthesisResult:
-    """The registered form of :func:`run` (exemplars first, as every method of the registry)."""
-    return run(per_view, config, rng, progress=progress, checkpoint=checkpoint, t_start=t_start,
-               vector_field=vector_field)
-
-
 METHOD = SynthesisMethod(
-    name="volume-lh", run=volume_method, make_config=make_volume_config, config_class=VolumeConfig,
+    name="volume-lh", run=run, make_config=make_volume_config, config_class=VolumeConfig,
     synthesize=volume_synthesize, fit=_fit,
     description="from a 3D exemplar, after the vector-field deformation method (IET Image Processing 2012): "
                 "appearance-space coordinate pyramid, k = 3 similarity "
