@@ -27,6 +27,7 @@ COMMAND_PAGES = {
     "volume": "npmrf3d volume bundled:fibres48 --size 64 --out grown",
     "volume-npmrf": "npmrf3d volume-npmrf bundled:fibres48 --size 16 --levels 2 --out vol-npmrf",
     "metrics": "npmrf3d metrics bundled:wood wood/volume.npy --out scores",
+    "materials": "npmrf3d materials bundled:phase_bands --size 32 --out bands",
 }
 
 
