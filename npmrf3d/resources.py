@@ -210,8 +210,11 @@ def generic_estimate(config, exemplars) -> Estimate:
     return Estimate({"volume": volume, "work arrays": volume})
 
 
-#: Coherent search sites (voxel x view) per second on the 2-core machine (Chen–Wang benchmark).
-COHERENT_SITES = 2.5e5
+#: Coherent search sites (site x view x iteration) per second on 2 cores: the idle wall times of
+#: Chen–Wang's 64^3 colour run (3.4 s, 2.8 million sites) and of the default ``synth`` at 128^3
+#: (10.0 s, 5.6 million sites at every second site) over their site counts, 0.82 and 0.56 million
+#: per second (docs/benchmarks.md); the estimate is meant to within a factor of 1.5.
+COHERENT_SITES = 7.0e5
 #: Resident memory of a synthesis process before its arrays: the interpreter, numpy, scipy,
 #: numba and the loaded kernels. Peak RSS measured (``benchmarks/bench_memory_estimate.py``,
 #: ``os.wait4`` on the child): a 8^3 run 220-225 MiB, the imports alone 157 MiB; 211 MiB is
@@ -280,7 +283,7 @@ def coherent_estimate(config, exemplars) -> Estimate:
             tree_work += p * math.log2(max(p, 2)) * min(dims, window * window * ch)
         tables += biggest + h * w_ * (16 * ch + 16)
     sites = sum(config.iterations[config.levels - 1 - level] * views * (n / 8 ** level)
-                for level in range(config.levels))
+                for level in range(config.levels)) / getattr(config, "grid", 1) ** 2
     return Estimate({"runtime": RUNTIME_BYTES, "volume": volume, "work arrays": max(0, work),
                      "exemplar patch tables": tables},
                     seconds=sites / COHERENT_SITES + tree_work / TREE_RATE)
