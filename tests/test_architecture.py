@@ -9,12 +9,18 @@
 * only the torch modules of ``npmrf3d/methods/neural/`` import torch, and they are reached only through
   the one documented lazy import, ``npmrf3d/methods/neural/_extra.py`` (torch is an optional
   extra, so the function-level-import rule above cannot hold for them: ``importlib`` does it);
-* every library module stays under ~400 lines or says at its top why not.
+* every library module stays under ~400 lines or says at its top why not;
+* no function outside ``npmrf3d/_kernels/`` is longer than 120 lines (a compiled kernel may be:
+  numba inlines nothing across modules, and each helper is another compile);
+* every registered method and every method module's ``run`` take ``(per_view, config, rng, *,
+  progress=None, checkpoint=None, ...)``.
 """
 
 from __future__ import annotations
 
 import ast
+import importlib
+import inspect
 import pathlib
 
 import npmrf3d
@@ -191,3 +197,54 @@ def test_the_registry_is_what_the_studies_and_the_cli_offer():
     from npmrf3d.studies.grid import ALGORITHMS, STUDY_ONLY
 
     assert ALGORITHMS == (*METHODS, *STUDY_ONLY)
+
+
+#: The most lines a function outside the compiled kernels may span (decorators and docstring included).
+MAX_FUNCTION_LINES = 120
+
+
+def _long_functions(path: pathlib.Path, most: int) -> list[str]:
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    return [f"{path.relative_to(PACKAGE.parent)}:{node.lineno} {node.name} ({node.end_lineno - node.lineno + 1} lines)"
+            for node in ast.walk(tree) if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+            and node.end_lineno - node.lineno + 1 > most]
+
+
+def test_no_function_outside_the_kernels_is_over_120_lines():
+    kernels = PACKAGE / "_kernels"
+    long = [found for f in sorted(PACKAGE.rglob("*.py")) if kernels not in f.parents
+            for found in _long_functions(f, MAX_FUNCTION_LINES)]
+    assert long == []
+
+
+def test_the_line_count_sees_a_long_function(tmp_path):
+    source = tmp_path / "npmrf3d" / "long.py"
+    source.parent.mkdir()
+    source.write_text("def f():\n" + "    x = 1\n" * 125, encoding="utf-8")
+    global PACKAGE
+    saved, PACKAGE = PACKAGE, tmp_path / "npmrf3d"
+    try:
+        assert _long_functions(source, MAX_FUNCTION_LINES) == ["npmrf3d/long.py:1 f (126 lines)"]
+        assert _long_functions(source, 126) == []
+    finally:
+        PACKAGE = saved
+
+
+def _has_the_method_shape(function) -> bool:
+    params = list(inspect.signature(function).parameters.values())
+    leading = [p.name for p in params[:3]]
+    keywords = {p.name for p in params if p.kind is inspect.Parameter.KEYWORD_ONLY}
+    positional = [p for p in params if p.kind is inspect.Parameter.POSITIONAL_OR_KEYWORD]
+    return leading == ["per_view", "config", "rng"] and len(positional) == 3 and {"progress", "checkpoint"} <= keywords
+
+
+def test_every_method_runs_with_one_signature():
+    from npmrf3d.methods import METHODS
+
+    wrong = [name for name, method in METHODS.items() if not _has_the_method_shape(method.run)]
+    for f in sorted((PACKAGE / "methods").glob("*.py")):
+        module = importlib.import_module(f"npmrf3d.methods.{f.stem}")
+        if callable(getattr(module, "run", None)) and not _has_the_method_shape(module.run):
+            wrong.append(f"npmrf3d.methods.{f.stem}.run")
+    assert wrong == []
+    assert not _has_the_method_shape(lambda config, per_view, rng, *, progress=None, checkpoint=None: None)

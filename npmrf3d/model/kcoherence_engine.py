@@ -18,9 +18,8 @@ matched) and solves every voxel (copy one voted texel under the position and val
 histograms). The random numbers, per iteration: one salt per view's search, the solver's voxel
 order, and a salt for an annealed decision.
 
-Why one module of ~550 lines: :class:`KCoherenceLevels` is one level's search and solve, whole
-or on a block's region (``blockwise``, :func:`block_aprons`), and the decision types it passes
-to the kernels belong with it; the histograms live in
+Each level's iterations are a :class:`npmrf3d.model.kcoherence_pass.LevelPass` (search, voxel
+order, histogram target, solve, phase control, one method each); the histograms live in
 :mod:`npmrf3d.model.kcoherence_histograms`, the ICM schedule (per-voxel temperatures) in
 :mod:`npmrf3d.model.kcoherence_icm`.
 
@@ -34,20 +33,15 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import math
-import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from .._kernels import candidate_decision as _decide
 from .._kernels import kcoherence as _search
-from .._kernels import kcoherence_solver as _solver
 from ..io.checkpoints import run_key
 from . import kcoherence as coh
-from .exemplar import pack_rows
 from .kcoherence_histograms import (
     PilotHistograms,
     ValueHistogram,
@@ -58,33 +52,29 @@ from .kcoherence_histograms import (
     value_counts,
     value_scale,
 )
-from .kcoherence_icm import IcmLevel, IcmSchedule, inherited_mask
+from .kcoherence_icm import IcmSchedule, inherited_mask
+from .kcoherence_pass import (
+    CANDIDATE_HEURISTICS,
+    CANDIDATE_SAMPLERS,
+    COHERENT_HEURISTICS,
+    KERNEL_TABLE_COLOURS,
+    MEDOID_CANDIDATES,
+    PER_VIEW_HEURISTICS,
+    SOLVE_CHUNK,
+    LevelPass,
+    active_box,
+    kernel_table,
+    pack_exemplars,
+)
 from .neighbourhood import VIEW_AXES
-from .phases import PhaseControl, bin_phase_error, bin_phases, phase_prior_target
+from .phases import PhaseControl, bin_phases
 from .pyramid import ArraySpec, Levels, run_pyramid
 from .regions import plan_region
 
-__all__ = ["active_box", "block_aprons", "PilotHistograms", "CANDIDATE_HEURISTICS", "CANDIDATE_SAMPLERS", "COHERENT_HEURISTICS", "PER_VIEW_HEURISTICS",
-           "CandidateDecision", "CoherentState", "KCoherenceLevels", "ValueHistogram",
-           "initial_colours", "kernel_table", "pack_exemplars", "position_histogram", "value_counts", "value_scale"]
-
-#: The NP-MRF heuristics with an objective, which rank candidates by a score and can be
-#: annealed (docs/model.md, section 3), and the solver kernel's code of each
-#: (:mod:`npmrf3d._kernels.candidate_decision`).
-CANDIDATE_HEURISTICS = {"ML_H2b": _decide.ML_H2B, "ML_H2a": _decide.ML_H2A}
-#: Urs et al. 2014's per-view argmax heuristics over the candidates: no objective, ICM only.
-PER_VIEW_HEURISTICS = {"ML_H1a": _decide.ML_H1A, "ML_H1b": _decide.ML_H1B}
-#: Every heuristic the solver decides among candidates by.
-COHERENT_HEURISTICS = {**CANDIDATE_HEURISTICS, **PER_VIEW_HEURISTICS}
-#: The annealed draws among the candidates, and the solver kernel's code of each.
-CANDIDATE_SAMPLERS = {"heat-bath": _decide.HEAT_BATH, "metropolis": _decide.METROPOLIS}
-#: The medoid solver tries the texels of the heaviest votes only; the energy sums over all votes.
-MEDOID_CANDIDATES = 8
-#: Voxels per parallel work item of the solver (any value gives the same result).
-SOLVE_CHUNK = 512
-#: The most distinct colours of a level's exemplars for which the NP-MRF rule's kernel is looked
-#: up in a table (n * n float64, 8 MiB at 1024) instead of computed per vote (:func:`kernel_table`).
-KERNEL_TABLE_COLOURS = 1024
+__all__ = ["CANDIDATE_HEURISTICS", "CANDIDATE_SAMPLERS", "COHERENT_HEURISTICS", "KERNEL_TABLE_COLOURS",
+           "MEDOID_CANDIDATES", "PER_VIEW_HEURISTICS", "SOLVE_CHUNK", "CandidateDecision", "CoherentState",
+           "KCoherenceLevels", "PilotHistograms", "ValueHistogram", "active_box", "block_aprons", "initial_colours",
+           "kernel_table", "pack_exemplars", "position_histogram", "value_counts", "value_scale"]
 
 
 @dataclass(frozen=True)
@@ -165,28 +155,6 @@ def initial_colours(src: np.ndarray, exemplars) -> np.ndarray:
     return out
 
 
-def kernel_table(ex_flat: np.ndarray, h2c: float, most: int = KERNEL_TABLE_COLOURS) -> tuple[np.ndarray, np.ndarray]:
-    """The NP-MRF rule's kernel between the distinct colours of the packed texels ``ex_flat``
-    (:func:`npmrf3d._kernels.candidate_decision.kernel_table`) and every texel's colour index:
-    ``(G,)`` int64 and ``(n, n)`` float64; both empty when there are more than ``most`` colours
-    (the solver then computes the kernel per vote, with the same result)."""
-    _, reps, ids = np.unique(ex_flat, axis=0, return_index=True, return_inverse=True)
-    if len(reps) > most:
-        return np.zeros(0, dtype=np.int64), np.zeros((0, 0), dtype=np.float64)
-    table = np.empty((len(reps), len(reps)), dtype=np.float64)
-    _decide.kernel_table(ex_flat, reps.astype(np.int64), float(h2c), table)
-    return np.ascontiguousarray(ids.reshape(-1), dtype=np.int64), table
-
-
-def pack_exemplars(models) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The views' exemplars packed as rows of one array (an exemplar shared by views once,
-    :func:`npmrf3d.model.exemplar.pack_rows`), each view's first row in it, and each view's first
-    entry in the packed position histograms."""
-    texels, offsets = pack_rows([m.exemplar for m in models])
-    pixels = np.array([m.pixels for m in models], dtype=np.int64)
-    return texels, offsets, np.cumsum(pixels) - pixels
-
-
 # --------------------------------------------------------------------------- the level loop's side
 
 
@@ -216,32 +184,6 @@ def block_aprons(config, icm: IcmSchedule | None = None) -> tuple[int, ...] | No
              for level in range(config.levels)]
     return tuple(None if whole[level] else config.iterations[last - level] * reach[last - level]
                  for level in range(config.levels))
-
-
-def active_box(frame, window: int, iteration: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The part of a block's region that pass ``iteration`` (1 for the first) of a level must get
-    exact (:func:`block_aprons`): the region shrunk by ``iteration`` reaches of one pass along
-    every axis it does not wrap whole. Returns the sites to search, ``search_lo <= index <
-    search_hi`` per axis (the voxels' box grown by one reach: every site whose votes the voxels
-    take), and the voxels to decide, ``lo <= index < hi``.
-
-    The region starts exact (up-sampled from the coarser level's exact core), and a voxel after
-    one pass depends on voxels at most a reach away, so pass ``t`` is exact on the region shrunk
-    by ``t`` reaches from exact inputs alone; the last pass's box still holds the block (the
-    region is the block grown by the level's apron, iterations times the reach).
-
-    >>> from npmrf3d.model.regions import Frame
-    >>> box = active_box(Frame((0, 0, 0), (40, 64, 40), (128, 64, 128)), 7, 2)
-    >>> [b.tolist() for b in box]
-    [[6, 0, 6], [34, 64, 34], [12, 0, 12], [28, 64, 28]]
-    """
-    reach = window - 1 + (window < 3)
-    shape = np.array(frame.shape, dtype=np.int64)
-    whole = np.array([n == e for n, e in zip(frame.shape, frame.extent)])
-    shrink = np.where(whole, 0, np.minimum(iteration * reach, shape // 2))
-    lo, hi = shrink, shape - shrink
-    grow = np.where(whole, 0, reach)
-    return np.maximum(lo - grow, 0), np.minimum(hi + grow, shape), lo, hi
 
 
 def crop_box(array: np.ndarray, index, first: int = 0) -> np.ndarray:
@@ -363,18 +305,6 @@ class KCoherenceLevels(Levels):
         """The current frame's origin and extent as the kernels take them."""
         return np.array(self.frame.origin, dtype=np.int64), np.array(self.frame.extent, dtype=np.int64)
 
-    @staticmethod
-    def _hashed_batches(shape, origin, extent, salt, batches, lo, hi):
-        """A block-local pass's voxel order and batch bounds: the voxels of the box ``lo <= p <
-        hi`` of each batch (:func:`npmrf3d._kernels.kcoherence.voxel_batches`, a hash of their
-        grid positions) in memory order, batch after batch."""
-        ids = np.empty(shape, dtype=np.int16)
-        _search.voxel_batches(np.array(shape, dtype=np.int64), origin, extent, salt, batches, lo, hi, ids)
-        order = np.empty(int(np.prod(hi - lo)), dtype=np.int64)
-        bounds = np.empty(batches + 1, dtype=np.int64)
-        _search.group_by_batch(ids.ravel(), batches, order, bounds)
-        return order, bounds
-
     def prepare(self, level, shape):
         window = self.config.window[self.config.levels - 1 - level]
         self.level_ex = {id(a): coh.downsample_exemplar(a, level) for a in self.distinct}
@@ -414,182 +344,8 @@ class KCoherenceLevels(Levels):
         return self.config.iterations[self.config.levels - 1 - level], float("nan")
 
     def relax(self, level, state, rng, on_step):
-        config, views, vmodels, decision = self.config, self.views, self.vmodels, self.decision
-        control, phases = self.control, self.phases
-        volume, src, widths = state.volume, state.sources, state.widths
-        li = config.levels - 1 - level
-        window = config.window[li]
-        shape = volume.shape[:3]
-        n_views = len(views)
-        ex_flat, ex_off, hist_off = pack_exemplars(vmodels)
-        values = ValueHistogram.build([m.exemplar for m in vmodels], ex_flat, volume,
-                                          bins=config.value_bins, lo=self.value_lo, span=self.value_span)
-        packed = _solver.PackedViews(self.view_axes, ex_flat, ex_off, np.array(widths, dtype=np.int64), window,
-                                     int(vmodels[0].anchor), config.grid)
-        # blockwise below the coarsest level: batches hashed from grid positions, no index
-        # histogram; the pilot keeps its own histograms live, every other run reads the pilot's
-        local = self.blockwise and level < self.lowest_whole
-        replay = self.pilot[level] if local and self.recording is None else None
-        grid_voxels = float(np.prod(self.frame.extent)) if replay is not None else float(np.prod(shape))
-        if replay is not None:
-            values = values._replace(unit=grid_voxels / config.value_bins)
-        if local and replay is None:
-            layout = {lev: shape_of for lev, *shape_of in self._pilot_layout()}
-            record = self.recording[level] = PilotHistograms.empty(*layout[level])
-        # a block reads the pilot's position histograms before each batch
-        pos_hist = np.zeros(sum(m.pixels for m in vmodels)) if replay is not None else np.concatenate(
-            [position_histogram(src[vi], m.pixels) for vi, m in enumerate(vmodels)])
-        theta = np.array([grid_voxels / m.pixels for m in vmodels])
-        histograms = _solver.SolverHistograms(
-            pos_hist, hist_off, theta, config.position_weight, config.position_boost, values.ex_bins,
-            values.hist, values.target, config.value_weight, config.value_prior, values.lo, values.scale,
-            values.unit, follow=replay is None)
-        exemplars = [coh.search_exemplar(m) for m in vmodels]
-        assign = np.full((n_views, *shape), -1, dtype=np.int32)
-        fresh = np.empty(shape, dtype=np.int32)
-        omega = np.zeros((n_views, *shape), dtype=np.float32)
-        index_hist = [np.zeros(m.pixels, dtype=np.float64) for m in vmodels]
-        d = window * window * volume.shape[3]
-        floor = 1e-3 * self.sigma * math.sqrt(d)
-        n_vox = shape[0] * shape[1] * shape[2]
-        icm = None if self.icm is None else IcmLevel(self.icm, state.temps, state.inherited, self.view_axes,
-                                                       window, int(vmodels[0].anchor))
-        n_iter = config.iterations[li] if icm is None else self.icm.max_sweeps
-        origin, extent = self._grid() if local else (np.zeros(3, dtype=np.int64), np.zeros(3, dtype=np.int64))
-        # a block (not the pilot, whose histograms count every voxel of its region) decides at
-        # each pass only the voxels the next pass still needs exact
-        shrinking = replay is not None and config.global_share == 0.0 and self.frame.shape != self.frame.extent
-        batches = config.batches if local else min(config.batches, n_vox)
-        bounds = np.linspace(0, n_vox, batches + 1).astype(np.int64)
-        index_weight = 0.0 if local else config.index_weight
-        likelihood = _decide.OWN_SOLVER if decision.heuristic is None else COHERENT_HEURISTICS[decision.heuristic]
-        medoid = MEDOID_CANDIDATES if config.solver == "medoid" or decision.heuristic is not None else 0
-        h2c = 2.0 * (decision.centre_bandwidth * self.sigma) ** 2 or 1.0
-        colour_ids, kernel = (kernel_table(ex_flat, h2c) if likelihood != _decide.OWN_SOLVER
-                              else (np.zeros(0, dtype=np.int64), np.zeros((0, 0), dtype=np.float64)))
-        level_history, changed, global_counts = [], [], []
-        t_search = t_solve = 0.0
-        sites = decided = 0
-        it = 0
-        while it < n_iter if icm is None else icm.warm(it):
-            ts = time.perf_counter()
-            trust = _search.NO_TRUST if icm is None else icm.search_trust()
-            if shrinking:
-                box_lo, box_hi, decide_lo, decide_hi = active_box(self.frame, window, it + 1)
-            else:  # every site searched, every voxel decided
-                box_lo = decide_lo = np.zeros(3, dtype=np.int64)
-                box_hi = decide_hi = np.array(shape, dtype=np.int64)
-            energy_sum = 0.0
-            sites = 0
-            global_count = 0
-            for vi, v in enumerate(views):
-                m = vmodels[vi]
-                ra, ca = VIEW_AXES[v]
-                na = 3 - ra - ca
-                energy = np.zeros(shape[na], dtype=np.float64)
-                # the sites this pass searches (a block's pass: those of its box; phi, the index
-                # histogram's share, then matters to nothing: a block has no index histogram)
-                n_sites = int(box_hi[na] - box_lo[na])
-                for axis in (ra, ca):
-                    first = _search.first_site(origin, extent, axis, config.grid)
-                    lo, hi = _search.lattice_span(box_lo[axis], box_hi[axis], first, config.grid,
-                                                   len(range(first, shape[axis], config.grid)))
-                    n_sites *= max(0, hi - lo)
-                phi = n_sites / m.centres
-                rule = _search.SearchRule(config.grid, min(config.batches, shape[na]), phi, index_weight,
-                                          config.r, floor, config.random_candidates, int(rng.integers(0, 2**31)),
-                                          origin, extent, box_lo, box_hi,
-                                          follow=index_weight > 0.0 or config.global_share > 0.0)
-                _search.search_view(volume, src[vi], ra, ca, exemplars[vi], rule, index_hist[vi], assign[vi],
-                                    fresh, omega[vi], energy, trust)
-                energy_sum += float(energy.sum())
-                if config.global_share > 0.0:
-                    n_global, change = coh.global_matches(
-                        volume, v, m, assign[vi], omega[vi], index_hist[vi], share=config.global_share,
-                        bias=config.coherence_bias, phi=phi, index_weight=config.index_weight,
-                        r=config.r, floor=floor)
-                    energy_sum += change
-                    global_count += n_global
-                sites += n_sites
-            global_counts.append(global_count)
-            t_search += time.perf_counter() - ts
-            ts = time.perf_counter()
-            if local:
-                order, bounds = self._hashed_batches(shape, origin, extent, int(rng.integers(0, 2**31)), batches,
-                                                    decide_lo, decide_hi)
-            else:
-                order = rng.permutation(n_vox).astype(np.int64)
-            if icm is not None:
-                order = icm.visit(order)
-                bounds = np.linspace(0, len(order), min(config.batches, len(order)) + 1).astype(np.int64)
-            temperature = decision.temperature(li, it)
-            if replay is not None:
-                target = replay.targets[it]
-            else:
-                target = values.target if control is None else phase_prior_target(
-                    values.target, phases, np.stack([c.phase_costs(config.phase_weight) for c in control]),
-                    config.value_prior)
-            if local and replay is None:
-                record.targets[it] = target
-            salt = int(rng.integers(0, 2**31)) if temperature > 0.0 else 0
-            if not local:  # hashed batches come in memory order
-                # within a batch the histograms are frozen and every voxel depends only on them
-                # and the votes, so visiting a batch in memory order gives the same volume faster
-                _search.sort_within_batches(order, bounds, n_vox)
-            rule = _solver.SolverRule(medoid, config.balance_views, likelihood, h2c, decision.outlier,
-                                      temperature, salt, CANDIDATE_SAMPLERS[decision.sampler], origin, extent,
-                                      colour_ids, kernel)
-            votes_trust = _solver.NO_TRUST if icm is None else icm.vote_trust()
-            histograms = histograms._replace(value_target=target)
-            if not local:
-                decided += len(order)
-                changed.append(int(_solver.solve(volume, src, assign, omega, packed, histograms, votes_trust, rule,
-                                                 order, bounds, SOLVE_CHUNK)))
-            else:  # one batch at a time: the pilot records its histograms, a block reads them
-                n_changed = 0
-                for b in range(batches):
-                    if replay is None:
-                        record.positions[it, b] = histograms.positions / grid_voxels
-                        record.values[it, b] = histograms.values
-                    else:
-                        histograms.positions[:] = replay.positions[it, b] * grid_voxels
-                        histograms.values[:] = replay.values[it, b]
-                    part = order[bounds[b]:bounds[b + 1]]
-                    decided += len(part)
-                    n_changed += int(_solver.solve(volume, src, assign, omega, packed, histograms, votes_trust,
-                                                   rule, part, np.array([0, len(part)], dtype=np.int64),
-                                                   SOLVE_CHUNK))
-                changed.append(n_changed)
-            t_solve += time.perf_counter() - ts
-            if control is not None and replay is None:
-                for c, e in zip(control, bin_phase_error(values.hist, values.target, phases)):
-                    c.step(e)
-            level_history.append(energy_sum / max(1, sites))
-            it += 1
-            if icm is None:
-                on_step(it, level_history[-1])
-            else:
-                icm.cool()
-                on_step(it, level_history[-1], icm.expected() if icm.warm(it) else it)
-        # a block's share of the exemplar says nothing of the volume's: not counted
-        used = [None if replay is not None else float((position_histogram(src[vi], m.pixels) > 0).mean())
-                for vi, m in enumerate(vmodels)]
-        stats = {
-            "shape": list(shape), "window": window, "grid": config.grid, "iterations": it,
-            "candidates_per_site": 9 * (1 + config.k) + config.random_candidates, "sites_per_iteration": sites,
-            "voxels_decided": decided,
-            "pca_dims": {v: int(vmodels[vi].basis.shape[1]) for vi, v in enumerate(views)},
-            "centres": {v: int(vmodels[vi].centres) for vi, v in enumerate(views)},
-            "search_seconds": t_search, "solve_seconds": t_solve, "changed": changed,
-            "global_matches": global_counts,
-            "exemplar_pixels_used": {v: used[vi] for vi, v in enumerate(views)},
-        }
-        if icm is not None:
-            stats["temperature"], stats["updates"] = icm.history, icm.updates
-        if control is not None:
-            stats["phase_error"] = [c.last_error.tolist() for c in control]
-            stats["phase_gain"] = [c.gain for c in control]
-        return state, level_history, stats
+        history, stats = LevelPass(self, level, state).run(rng, on_step)
+        return state, history, stats
 
     def to_arrays(self, state):
         control = {} if self.control is None else {"phase_control": np.stack([c.to_array() for c in self.control])}
