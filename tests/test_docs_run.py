@@ -37,7 +37,7 @@ NOT_RUN_HERE = {
 
 _FENCE = re.compile(r"^```(bash|console|sh|python)[^\n]*\n(.*?)^```", re.MULTILINE | re.DOTALL)
 _LONG = re.compile(r"<!--\s*long:\s*(\d+(?:\.\d+)?)\s*(?:min|h)\b[^>]*-->")
-_TWO_D = {"synth", "npmrf", "coherent", "kopf", "chen-wang", "baseline"}
+_TWO_D = {"synth", "npmrf", "coherent", "kopf", "chen-wang", "baseline", "materials"}
 
 
 @dataclass(frozen=True)
