@@ -1,9 +1,11 @@
 """Compiled discrete solver of the k-coherence engine (Chen & Wang 2010, section 4.2).
 
-Why one module of ~520 lines: one kernel, :func:`solve`, whose decision rules (weighted mean,
+Why one module of ~680 lines: one kernel, :func:`solve`, whose decision rules (weighted mean,
 weighted medoid, the NP-MRF rules and their annealed draws, the latter's helpers in
 :mod:`npmrf3d._kernels.candidate_decision`) share the votes and their buffers (trusted or not),
-with its vote helpers and the four bundles of its arguments.
+with its helpers (the votes, the candidates' scores, the copy of a texel and its sources, the
+histograms' update after a batch; compiled functions that :func:`solve` calls) and the four
+bundles of its arguments.
 
 Private: called by :mod:`npmrf3d.model.kcoherence_engine` with validated arrays only; nothing
 here raises a user-facing error. :func:`solve` (parallel over the voxels of a batch): every voxel
@@ -309,6 +311,183 @@ def _top_votes(vg, vv, vw, count, n_views, most, tops, keys, weights):
     return n
 
 
+@jit
+def _view_sums(vv, vw, count, vsum):
+    """Per view, the sum of its votes' weights (``vsum``, one entry per view)."""
+    for v in range(vsum.shape[0]):
+        vsum[v] = 0.0
+    for q in range(count):
+        vsum[vv[q]] += vw[q]
+
+
+@jit
+def _nearest_to_mean(ex_flat, vg, vw, count, mean):
+    """The vote whose texel is nearest to the votes' weighted mean colour (``mean``, a buffer of
+    one colour), the first on ties: Chen–Wang's mean solver."""
+    channels = mean.shape[0]
+    total = 0.0
+    for ch in range(channels):
+        mean[ch] = 0.0
+    for q in range(count):
+        total += vw[q]
+        for ch in range(channels):
+            mean[ch] += vw[q] * ex_flat[vg[q], ch]
+    for ch in range(channels):
+        mean[ch] /= total
+    best = 0
+    best_d = np.inf
+    for q in range(count):
+        dd = 0.0
+        for ch in range(channels):
+            diff = ex_flat[vg[q], ch] - mean[ch]
+            dd += diff * diff
+        if dd < best_d:
+            best_d = dd
+            best = q
+    return best
+
+
+@jit
+def _medoid_energy(ex_flat, ga, vg, vw, count):
+    """``sum_q w_q ||e_ga - e_q||`` over the votes: the weighted medoid's energy of texel ``ga``."""
+    e_sum = 0.0
+    for q2 in range(count):
+        dd = 0.0
+        for ch in range(ex_flat.shape[1]):
+            diff = ex_flat[ga, ch] - ex_flat[vg[q2], ch]
+            dd += diff * diff
+        e_sum += vw[q2] * np.sqrt(dd)
+    return e_sum
+
+
+@jit
+def _score_candidates(ex_flat, vg, vv, vw, count, vsum, tops, n_try, likelihood, ranked, tabled, h2c, outlier,
+                      priors, exp_priors, val_prior, lik, liks, products, prior_of, table, scores):
+    """Judge the ``n_try`` candidates ``tops`` (votes, heaviest first): the NP-MRF rule's view
+    estimates (``liks`` already filled when ``tabled``) into ``products`` and ``prior_of``
+    (``ranked``), ``table`` (the per-view rules) or ``scores`` (annealed objectives); without a
+    rule the weighted medoid's energy. Returns the vote of the lowest energy or highest
+    objective (the first on ties; 0 when the rule decides later)."""
+    best = 0
+    best_e = np.inf
+    for a in range(n_try):
+        ga = vg[tops[a]]
+        if likelihood:
+            if tabled:
+                for v in range(lik.shape[0]):
+                    lik[v] = liks[a, v]
+            else:
+                _decide.view_likelihoods(ex_flat[ga], ex_flat, vg, vv, vw, count, vsum, h2c, outlier, lik)
+            prior = 0.0
+            if val_prior > 0.0:
+                prior = priors[ga]
+            if ranked:
+                products[a] = _decide.objective_product(lik, likelihood, exp_priors[ga])
+                prior_of[a] = prior
+                if not tabled:
+                    for v in range(lik.shape[0]):
+                        liks[a, v] = lik[v]
+                continue
+            if likelihood >= ML_H1A:
+                # per-view rules: each view's estimate, times the prior's factor
+                for v in range(lik.shape[0]):
+                    table[a, v] = lik[v] * np.exp(prior)
+                continue
+            score = _decide.objective(lik, likelihood, prior)
+            scores[a] = score if likelihood == ML_H2B else np.log(score)
+            if -score < best_e:
+                best_e = -score
+                best = tops[a]
+            continue
+        e_sum = _medoid_energy(ex_flat, ga, vg, vw, count)
+        if val_prior > 0.0:
+            e_sum *= np.exp(-priors[ga])
+        if e_sum < best_e:
+            best_e = e_sum
+            best = tops[a]
+    return best
+
+
+@jit
+def _heat_bath(scores, n_try, temperature, key):
+    """The candidate drawn with probability proportional to ``exp(score / temperature)`` from the
+    uniform of the hash ``key``; -1 when every score is -inf (the voxel keeps the best)."""
+    top_l = scores[0]
+    for a in range(1, n_try):
+        top_l = max(top_l, scores[a])
+    if not top_l > -np.inf:
+        return -1
+    total = 0.0
+    for a in range(n_try):
+        total += np.exp((scores[a] - top_l) / temperature)
+    x = (mix(key) + 0.5) / 2147483648.0 * total
+    acc = 0.0
+    for a in range(n_try):
+        acc += np.exp((scores[a] - top_l) / temperature)
+        if x < acc:
+            return a
+    return n_try - 1
+
+
+@jit
+def _copy_texel(volume, p0, p1, p2, texel, texel_bins, val_lo, val_scale, n_bins, old_bins_t, new_bins_t):
+    """Give voxel ``(p0, p1, p2)`` the colour of ``texel`` (its value bins ``texel_bins``); when it
+    changes, its old and new bins go to ``old_bins_t`` and ``new_bins_t``. Returns 1 if the
+    colour changed, else 0."""
+    flag = 0
+    for ch in range(texel.shape[0]):
+        if volume[p0, p1, p2, ch] != texel[ch]:
+            flag = 1
+    if flag:
+        for ch in range(texel.shape[0]):
+            old_bins_t[ch] = value_bin(volume[p0, p1, p2, ch], val_lo[ch], val_scale[ch], n_bins)
+            new_bins_t[ch] = texel_bins[ch]
+    for ch in range(texel.shape[0]):
+        volume[p0, p1, p2, ch] = texel[ch]
+    return flag
+
+
+@jit
+def _copied_sources(best, vg, vv, view_starts, ex_flat, ex_off, new_src_t):
+    """Each view's new source after copying vote ``best``'s texel: the texel itself for its own
+    view, for every other view its voted texel nearest to the copied colour (unchanged without
+    votes)."""
+    g = vg[best]
+    for v in range(new_src_t.shape[0]):
+        if v == vv[best]:
+            new_src_t[v] = g - ex_off[v]
+            continue
+        near = _decide.nearest_in(view_starts[v], view_starts[v + 1], g, vg, ex_flat)
+        if near >= 0:
+            new_src_t[v] = vg[near] - ex_off[v]
+
+
+@jit
+def _follow_histograms(src, hist, order, start, flags, old_bins, new_bins, new_src):
+    """After a batch, in one thread and in a fixed order: the value histograms follow the changed
+    voxels, the position histograms and ``src`` the new sources. Returns the voxels changed."""
+    pos_hist, hist_off, val_hist, val_unit = hist.positions, hist.position_offsets, hist.values, hist.value_unit
+    n1, n2 = src.shape[2], src.shape[3]
+    changed = 0
+    for t in range(flags.shape[0]):
+        flat = order[start + t]
+        p0 = flat // (n1 * n2)
+        p1 = (flat // n2) % n1
+        p2 = flat % n2
+        changed += flags[t]
+        if flags[t]:
+            for ch in range(old_bins.shape[1]):
+                val_hist[ch, old_bins[t, ch]] -= 1.0 / val_unit
+                val_hist[ch, new_bins[t, ch]] += 1.0 / val_unit
+        for v in range(src.shape[0]):
+            old = src[v, p0, p1, p2]
+            new = new_src[t, v]
+            pos_hist[hist_off[v] + old] -= 1.0
+            pos_hist[hist_off[v] + new] += 1.0
+            src[v, p0, p1, p2] = new
+    return changed
+
+
 @jit_parallel
 def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bounds, chunk):
     """Discrete solver (paper section 4.2 with eq. 4), one pass over all voxels.
@@ -368,21 +547,21 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
     a rejected voxel keeps its colour and sources.
     """
     ex_flat, ex_off = views.texels, views.offsets
-    pos_hist, hist_off = hist.positions, hist.position_offsets
-    ex_bins, val_hist, val_target, val_unit = hist.texel_bins, hist.values, hist.value_target, hist.value_unit
-    val_prior, val_lo, val_scale = hist.value_prior, hist.value_lo, hist.value_scale
+    ex_bins, val_hist, val_prior = hist.texel_bins, hist.values, hist.value_prior
+    val_lo, val_scale, n_bins = hist.value_lo, hist.value_scale, hist.values.shape[1]
     medoid, balance, likelihood, h2c = rule.medoid, rule.balance, rule.likelihood, rule.h2c
     outlier, temperature, salt, sampler = rule.outlier, rule.temperature, rule.salt, rule.sampler
-    hist_args = (val_hist, val_target, val_unit, val_prior, val_lo, val_scale)
+    hist_args = (val_hist, hist.value_target, hist.value_unit, val_prior, val_lo, val_scale)
     colour_ids, kernel = rule.colour_ids, rule.kernel
     tabled = kernel.shape[0] > 0
     n_views = assign.shape[0]
     n0, n1, n2, channels = volume.shape
     n_vox = grid_voxels(volume.shape, rule.extent)
     cap = n_views * views.window * views.window
+    tried = max(medoid, 1)
     changed = 0
-    div = np.empty(pos_hist.shape[0], dtype=np.float64)
-    mul = np.empty(pos_hist.shape[0], dtype=np.float64)
+    div = np.empty(hist.positions.shape[0], dtype=np.float64)
+    mul = np.empty(hist.positions.shape[0], dtype=np.float64)
     vdiv = np.empty(ex_flat.shape[0], dtype=np.float64)
     priors = np.zeros(ex_flat.shape[0], dtype=np.float64)
     exp_priors = np.ones(ex_flat.shape[0], dtype=np.float64)
@@ -411,16 +590,16 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
             vsum = np.empty(n_views, dtype=np.float64)
             uid = np.empty(cap, dtype=np.int64)
             view_starts = np.empty(n_views + 1, dtype=np.int64)
-            rows = np.empty(max(medoid, 1), dtype=np.int64)
-            liks = np.empty((max(medoid, 1), n_views), dtype=np.float64)
-            tops = np.empty(max(medoid, 1), dtype=np.int64)
-            top_keys = np.empty(max(medoid, 1), dtype=np.int64)
-            top_weights = np.empty(max(medoid, 1), dtype=np.float64)
+            rows = np.empty(tried, dtype=np.int64)
+            liks = np.empty((tried, n_views), dtype=np.float64)
+            tops = np.empty(tried, dtype=np.int64)
+            top_keys = np.empty(tried, dtype=np.int64)
+            top_weights = np.empty(tried, dtype=np.float64)
             lik = np.empty(n_views, dtype=np.float64)
-            scores = np.empty(max(medoid, 1), dtype=np.float64)
-            products = np.empty(max(medoid, 1), dtype=np.float64)
-            prior_of = np.zeros(max(medoid, 1), dtype=np.float64)
-            table = np.empty((max(medoid, 1), n_views), dtype=np.float64)
+            scores = np.empty(tried, dtype=np.float64)
+            products = np.empty(tried, dtype=np.float64)
+            prior_of = np.zeros(tried, dtype=np.float64)
+            table = np.empty((tried, n_views), dtype=np.float64)
             winners = np.empty(n_views, dtype=np.int64)
             colour = np.empty(channels, dtype=np.float32)
             bins = np.empty(channels, dtype=np.int64)
@@ -437,70 +616,26 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                     continue
                 if balance:
                     # every view gets the same total say: its votes' weights sum to 1
-                    for v in range(n_views):
-                        vsum[v] = 0.0
-                    for q in range(count):
-                        vsum[vv[q]] += vw[q]
+                    _view_sums(vv, vw, count, vsum)
                     for q in range(count):
                         vw[q] /= vsum[vv[q]]
-                best = 0
-                if medoid:
+                if not medoid:
+                    best = _nearest_to_mean(ex_flat, vg, vw, count, mean)
+                else:
                     # candidates: the votes of the `medoid` heaviest distinct (texel, view), heaviest
                     # first (ties: the earlier vote)
                     n_try = _top_votes(vg, vv, vw, count, n_views, medoid, tops, top_keys, top_weights)
-                    best_e = np.inf
                     if likelihood:
-                        for v in range(n_views):
-                            vsum[v] = 0.0
-                        for q in range(count):
-                            vsum[vv[q]] += vw[q]
+                        _view_sums(vv, vw, count, vsum)
                         if tabled:
                             for q in range(count):
                                 uid[q] = colour_ids[vg[q]]
                             for a in range(n_try):
                                 rows[a] = colour_ids[vg[tops[a]]]
                             _decide.candidate_likelihoods(kernel, rows, n_try, uid, vv, vw, count, vsum, outlier, liks)
-                    for a in range(n_try):
-                        ga = vg[tops[a]]
-                        if likelihood:
-                            if tabled:
-                                for v in range(n_views):
-                                    lik[v] = liks[a, v]
-                            else:
-                                _decide.view_likelihoods(ex_flat[ga], ex_flat, vg, vv, vw, count, vsum, h2c, outlier, lik)
-                            prior = 0.0
-                            if val_prior > 0.0:
-                                prior = priors[ga]
-                            if ranked:
-                                products[a] = _decide.objective_product(lik, likelihood, exp_priors[ga])
-                                prior_of[a] = prior
-                                if not tabled:
-                                    for v in range(n_views):
-                                        liks[a, v] = lik[v]
-                                continue
-                            if likelihood >= ML_H1A:
-                                # per-view rules: each view's estimate, times the prior's factor
-                                for v in range(n_views):
-                                    table[a, v] = lik[v] * np.exp(prior)
-                                continue
-                            score = _decide.objective(lik, likelihood, prior)
-                            scores[a] = score if likelihood == ML_H2B else np.log(score)
-                            if -score < best_e:
-                                best_e = -score
-                                best = tops[a]
-                            continue
-                        e_sum = 0.0
-                        for q2 in range(count):
-                            dd = 0.0
-                            for ch in range(channels):
-                                diff = ex_flat[ga, ch] - ex_flat[vg[q2], ch]
-                                dd += diff * diff
-                            e_sum += vw[q2] * np.sqrt(dd)
-                        if val_prior > 0.0:
-                            e_sum *= np.exp(-priors[ga])
-                        if e_sum < best_e:
-                            best_e = e_sum
-                            best = tops[a]
+                    best = _score_candidates(ex_flat, vg, vv, vw, count, vsum, tops, n_try, likelihood, ranked, tabled,
+                                             h2c, outlier, priors, exp_priors, val_prior, lik, liks, products, prior_of,
+                                             table, scores)
                     if ranked:
                         win = _decide.highest_objective(products, n_try, liks, likelihood, prior_of, -1)
                         best = tops[win] if win >= 0 else 0
@@ -524,60 +659,14 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                             continue
                         best = tops[pick]
                     elif likelihood and temperature > 0.0 and n_try > 1:
-                        top_l = scores[0]
-                        for a in range(1, n_try):
-                            top_l = max(top_l, scores[a])
-                        if top_l > -np.inf:
-                            total = 0.0
-                            for a in range(n_try):
-                                total += np.exp((scores[a] - top_l) / temperature)
-                            key = salt * n_vox + global_flat(p0, p1, p2, volume.shape, rule.origin, rule.extent)
-                            x = (mix(key) + 0.5) / 2147483648.0 * total
-                            acc = 0.0
-                            pick = n_try - 1
-                            for a in range(n_try):
-                                acc += np.exp((scores[a] - top_l) / temperature)
-                                if x < acc:
-                                    pick = a
-                                    break
+                        key = salt * n_vox + global_flat(p0, p1, p2, volume.shape, rule.origin, rule.extent)
+                        pick = _heat_bath(scores, n_try, temperature, key)
+                        if pick >= 0:
                             best = tops[pick]
-                else:
-                    total = 0.0
-                    for ch in range(channels):
-                        mean[ch] = 0.0
-                    for q in range(count):
-                        total += vw[q]
-                        for ch in range(channels):
-                            mean[ch] += vw[q] * ex_flat[vg[q], ch]
-                    for ch in range(channels):
-                        mean[ch] /= total
-                    best_d = np.inf
-                    for q in range(count):
-                        dd = 0.0
-                        for ch in range(channels):
-                            diff = ex_flat[vg[q], ch] - mean[ch]
-                            dd += diff * diff
-                        if dd < best_d:
-                            best_d = dd
-                            best = q
                 g = vg[best]
-                for ch in range(channels):
-                    if volume[p0, p1, p2, ch] != ex_flat[g, ch]:
-                        flags[t] = 1
-                if flags[t]:
-                    for ch in range(channels):
-                        old_bins[t, ch] = value_bin(volume[p0, p1, p2, ch], val_lo[ch], val_scale[ch],
-                                                    val_hist.shape[1])
-                        new_bins[t, ch] = ex_bins[g, ch]
-                for ch in range(channels):
-                    volume[p0, p1, p2, ch] = ex_flat[g, ch]
-                for v in range(n_views):
-                    if v == vv[best]:
-                        new_src[t, v] = g - ex_off[v]
-                        continue
-                    near = _decide.nearest_in(view_starts[v], view_starts[v + 1], g, vg, ex_flat)
-                    if near >= 0:
-                        new_src[t, v] = vg[near] - ex_off[v]
+                flags[t] = _copy_texel(volume, p0, p1, p2, ex_flat[g], ex_bins[g], val_lo, val_scale, n_bins,
+                                       old_bins[t], new_bins[t])
+                _copied_sources(best, vg, vv, view_starts, ex_flat, ex_off, new_src[t])
         if not hist.follow:
             # no histogram to move: every voxel's own sources, in parallel (a voxel reads only its own)
             for t in prange(m):
@@ -586,21 +675,5 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                     src[v, flat // (n1 * n2), (flat // n2) % n1, flat % n2] = new_src[t, v]
             changed += flags.sum()
             continue
-        # sequential, fixed order: histograms follow the new sources
-        for t in range(m):
-            flat = order[start + t]
-            p0 = flat // (n1 * n2)
-            p1 = (flat // n2) % n1
-            p2 = flat % n2
-            changed += flags[t]
-            if flags[t]:
-                for ch in range(channels):
-                    val_hist[ch, old_bins[t, ch]] -= 1.0 / val_unit
-                    val_hist[ch, new_bins[t, ch]] += 1.0 / val_unit
-            for v in range(n_views):
-                old = src[v, p0, p1, p2]
-                new = new_src[t, v]
-                pos_hist[hist_off[v] + old] -= 1.0
-                pos_hist[hist_off[v] + new] += 1.0
-                src[v, p0, p1, p2] = new
+        changed += _follow_histograms(src, hist, order, start, flags, old_bins, new_bins, new_src)
     return changed
