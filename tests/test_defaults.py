@@ -207,3 +207,15 @@ def test_the_default_site_spacing_follows_the_run():
     assert coherent_grid(make_config(size=36), False, 2) == 2
     assert coherent_grid(make_config(size=64, grid=1), False, 3) == 1
     assert coherent_grid(make_config(size=64, grid=2), True, 3) == 2
+
+
+@pytest.mark.parametrize("name", ["npmrf", "kopf", "chen-wang", "coherent", "volume-lh", "npmrf-3d"])
+@pytest.mark.parametrize("keyword, value, words", [("progress", 5, "progress must be a callable"),
+                                                   ("checkpoint", 5, "checkpoint must be a file path")])
+def test_every_method_refuses_a_bad_progress_or_checkpoint_before_any_work(name, keyword, value, words):
+    from npmrf3d import data
+    from npmrf3d.errors import ParameterError
+
+    exemplar = data.path("fibres48") if name in ("volume-lh", "npmrf-3d") else None
+    with pytest.raises(ParameterError, match=words):
+        METHODS[name].synthesize(exemplar, size=16, **{keyword: value})

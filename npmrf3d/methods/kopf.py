@@ -284,6 +284,7 @@ def kopf_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress: Pro
     """
     t_start = time.perf_counter()
     config, generator, per_view = prepare(METHOD, exemplar, exemplars, size=size, rng=rng,
+                                          progress=progress, checkpoint=checkpoint,
                                           options={**options, "constrained": constraint is not None})
     return run(per_view, config, generator, constraint=constraint, constraint_weight=constraint_weight,
                progress=progress, checkpoint=checkpoint, t_start=t_start)

@@ -142,7 +142,8 @@ def npmrf_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress: Pr
     (8, 8, 8, 1)
     """
     t_start = time.perf_counter()
-    config, generator, per_view = prepare(METHOD, exemplar, exemplars, size=size, rng=rng, options=options)
+    config, generator, per_view = prepare(METHOD, exemplar, exemplars, size=size, rng=rng,
+                                          progress=progress, checkpoint=checkpoint, options=options)
     return npmrf_method(per_view, config, generator, progress=progress, checkpoint=checkpoint,
                         t_start=t_start)
 

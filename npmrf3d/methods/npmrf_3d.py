@@ -105,7 +105,8 @@ def npmrf_volume_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progr
     ((16, 16, 16, 1), [0.0, 1.0])
     """
     t_start = time.perf_counter()
-    config, generator, per_view = prepare(METHOD, exemplar, exemplars, size=size, rng=rng, options=options,
+    config, generator, per_view = prepare(METHOD, exemplar, exemplars, size=size, rng=rng,
+                                          progress=progress, checkpoint=checkpoint, options=options,
                                           load=volume_loader(exemplar_kind, spacing))
     return run(per_view, config, generator, progress=progress, checkpoint=checkpoint, t_start=t_start)
 

@@ -340,7 +340,8 @@ def coherent_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress=
     ((8, 8, 8, 1), [0.0, 1.0])
     """
     t_start = time.perf_counter()
-    config, generator, per_view = prepare(METHOD, exemplar, exemplars, size=size, rng=rng, options=options)
+    config, generator, per_view = prepare(METHOD, exemplar, exemplars, size=size, rng=rng,
+                                          progress=progress, checkpoint=checkpoint, options=options)
     return run(per_view, config, generator, progress=progress, checkpoint=checkpoint, t_start=t_start)
 
 

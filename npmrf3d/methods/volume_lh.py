@@ -483,6 +483,7 @@ def volume_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress: P
     field_name, field_array = field_input(options.get("vector_field", DEFAULTS.vector_field),
                                           check.size(size, levels=levels, coarsest=2))
     config, generator, per_view = prepare(METHOD, exemplar, exemplars, size=size, rng=rng,
+                                          progress=progress, checkpoint=checkpoint,
                                           options={**options, "vector_field": field_name},
                                           load=volume_loader(exemplar_kind, spacing))
     return run(per_view, config, generator, progress=progress, checkpoint=checkpoint,

@@ -195,7 +195,8 @@ def neural_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress=No
     """Train and generate in one call: ``options`` as :func:`train`, ``size`` the volume made;
     ``rng`` seeds everything (an integer is also the model's seed: weights, filter bank, noise)."""
     t_start = time.perf_counter()
-    config, generator, per_view = prepare(METHOD, exemplar, exemplars, size=size, rng=rng, options=options)
+    config, generator, per_view = prepare(METHOD, exemplar, exemplars, size=size, rng=rng,
+                                          progress=progress, checkpoint=checkpoint, options=options)
     return neural_method(per_view, config, generator, progress=progress, checkpoint=checkpoint,
                          t_start=t_start)
 
