@@ -26,25 +26,38 @@ def fail(message: str):
     raise ParameterError(message)
 
 
+def shown(value, limit: int = 80) -> str:
+    """``repr(value)`` on one line (its runs of white space made one space), at most ``limit``
+    characters (cut with ``...``): how a message quotes a value received, whatever its type.
+
+    >>> shown("a")
+    "'a'"
+    >>> shown(np.arange(100).reshape(10, 10))[:30]
+    'array([[ 0, 1, 2, 3, 4, 5, 6, '
+    """
+    text = " ".join(repr(value).split())
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
 def choice(parameter: str, value, valid: Iterable[str]) -> str:
     """Return the canonical spelling of ``value`` among ``valid`` (case-insensitive)."""
     valid = list(valid)
     lookup = {v.lower(): v for v in valid}
     if not isinstance(value, str) or value.lower() not in lookup:
-        fail(f"{parameter} must be one of {', '.join(valid)}; got {value!r}")
+        fail(f"{parameter} must be one of {', '.join(valid)}; got {shown(value)}")
     return lookup[value.lower()]
 
 
 def boolean(parameter: str, value) -> bool:
     """``True`` or ``False`` (numpy booleans accepted; nothing else)."""
     if not isinstance(value, (bool, np.bool_)):
-        fail(f"{parameter} must be True or False; got {value!r}")
+        fail(f"{parameter} must be True or False; got {shown(value)}")
     return bool(value)
 
 
 def integer(parameter: str, value, *, low: int | None = None, high: int | None = None) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        fail(f"{parameter} must be an integer; got {value!r}")
+        fail(f"{parameter} must be an integer; got {shown(value)}")
     value = int(value)
     if (low is not None and value < low) or (high is not None and value > high):
         bounds = f"between {low} and {high}" if high is not None else f">= {low}"
@@ -57,7 +70,7 @@ def real(parameter: str, value, *, low: float | None = None, high: float | None 
     """A finite float in [low, high] (open ends where asked): a Python or numpy integer or
     float; a bool or a string is refused, as :func:`integer` refuses them."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        fail(f"{parameter} must be a number; got {value!r}")
+        fail(f"{parameter} must be a number; got {shown(value)}")
     value = float(value)
     bad = not math.isfinite(value)
     if low is not None:
@@ -80,12 +93,12 @@ def per_level(name: str, value, levels: int, *, low: int | None = None,
     try:
         value = tuple(value)
     except TypeError:
-        fail(f"{name} must be a positive integer or one per level; got {value!r}")
+        fail(f"{name} must be a positive integer or one per level; got {shown(value)}")
     if len(value) != levels:
         if levels == 1:
-            fail(f"{name} must be one integer (one level); got {len(value)}: {value!r}")
+            fail(f"{name} must be one integer (one level); got {len(value)}: {shown(value)}")
         fail(f"{name} must be one integer or {levels} integers (one per level, coarsest "
-             f"first); got {len(value)}: {value!r}")
+             f"first); got {len(value)}: {shown(value)}")
     return tuple(integer(name, v, low=low, high=high) for v in value)
 
 
@@ -191,14 +204,14 @@ def size(value, *, levels: int, window: int | None = None,
         try:
             dims = tuple(int(integer("size", v)) for v in value)
         except TypeError:
-            fail(f"size must be an integer or three integers; got {value!r}")
+            fail(f"size must be an integer or three integers; got {shown(value)}")
         if len(dims) != 3:
-            fail(f"size must be an integer or three integers; got {value!r}")
+            fail(f"size must be an integer or three integers; got {shown(value)}")
     f = 2 ** (levels - 1)
     need = coarsest if coarsest is not None else window // 2 + 1
     for n in dims:
         if n < 1:
-            fail(f"size must be positive; got {value!r}")
+            fail(f"size must be positive; got {shown(value)}")
         if n % f:
             fail(f"size {n} is not divisible by 2**(levels-1) = {f} (levels={levels}); "
                  f"choose a multiple of {f} or fewer levels")
@@ -212,6 +225,9 @@ def size(value, *, levels: int, window: int | None = None,
 def views(value, valid: tuple[str, ...]) -> tuple[str, ...]:
     if isinstance(value, str):
         value = [v.strip() for v in value.split(",") if v.strip()]
+    if not isinstance(value, Iterable):
+        fail(f"views must be view names ({', '.join(valid)}), as a list or a comma-separated "
+             f"string; got {shown(value)}")
     value = list(value)
     if not value:
         fail(f"views must name 1 to 3 of {', '.join(valid)}; got an empty list")
@@ -226,13 +242,13 @@ def rng(value) -> np.random.Generator:
         if isinstance(value, (int, np.integer)) and value < 0:
             fail(f"seed must be a non-negative integer; got {value}")
         return np.random.default_rng(value)
-    fail(f"rng must be None, an integer seed or a numpy Generator; got {value!r}")
+    fail(f"rng must be None, an integer seed or a numpy Generator; got {shown(value)}")
 
 
 def progress(value):
     """None or a callable (called as the run goes)."""
     if value is not None and not callable(value):
-        fail(f"progress must be a callable or None; got {value!r}")
+        fail(f"progress must be a callable or None; got {shown(value)}")
     return value
 
 
@@ -241,7 +257,7 @@ def checkpoint(value):
     if value is None:
         return None
     if not isinstance(value, (str, os.PathLike)) or isinstance(os.fspath(value), bytes):
-        fail(f"checkpoint must be a file path (str or pathlib.Path) or None; got {value!r}")
+        fail(f"checkpoint must be a file path (str or pathlib.Path) or None; got {shown(value)}")
     if not str(value).strip():
         fail("checkpoint must name a file; got an empty string")
     return value
@@ -254,7 +270,7 @@ def triple(parameter: str, value, *, low: int | None = None) -> tuple[int, int, 
     try:
         items = tuple(value)
     except TypeError:
-        fail(f"{parameter} must be an integer or three integers; got {value!r}")
+        fail(f"{parameter} must be an integer or three integers; got {shown(value)}")
     if len(items) != 3:
-        fail(f"{parameter} must be an integer or three integers; got {value!r}")
+        fail(f"{parameter} must be an integer or three integers; got {shown(value)}")
     return tuple(integer(parameter, v, low=low) for v in items)

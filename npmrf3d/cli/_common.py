@@ -16,6 +16,7 @@ import sys
 
 from ..errors import ParameterError
 from ..io.checkpoints import is_checkpoint_file
+from ..io.files import broken_link
 from ..io.runs import (
     RUN_DERIVED,
     RUN_FILES,
@@ -186,8 +187,12 @@ def check_out(out: pathlib.Path, overwrite: bool, files: tuple[str, ...] = RUN_F
     """The output folder must be usable (checked before the work; the writers check again).
 
     It may exist if it holds none of ``files`` (or ``overwrite`` is set) and is writable, or
-    be creatable under its nearest existing ancestor. ``what`` names ``files`` in the message.
+    be creatable under its nearest existing ancestor (never through a symbolic link that
+    leads nowhere). ``what`` names ``files`` in the message.
     """
+    link = broken_link(out)
+    if link is not None:
+        raise ParameterError(f"output folder '{out}' {link}; remove the link or choose another --out")
     if out.exists():
         if not out.is_dir():
             raise ParameterError(f"output folder '{out}' exists and is not a folder")

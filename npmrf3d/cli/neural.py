@@ -42,6 +42,7 @@ from ._common import (
     view_sources,
 )
 from ._blocks import kept_on_interrupt
+from ._options import given
 from ._progress import CountProgress
 
 __all__ = ["register"]
@@ -72,15 +73,21 @@ def _threads(value: int | None) -> None:
         _extra.require("torch", "the neural commands").set_num_threads(value)
 
 
-def _check_new_file(path: pathlib.Path, overwrite: bool, what: str) -> None:
+def _check_new_file(text: str, overwrite: bool, what: str) -> pathlib.Path:
+    """The ``--out`` file ``text`` names, checked: a file that may be written (a Zarr volume: a
+    folder)."""
+    if not text.strip():
+        raise ParameterError("--out must name a file; got an empty string")
+    path = pathlib.Path(text)
+    if path.exists() and path.is_dir() and path.suffix.lower() != ".zarr":
+        raise ParameterError(f"{what} '{path}' is a folder; give a file name")
     if path.exists() and not overwrite:
         raise ParameterError(f"{what} '{path}' already exists; pass --overwrite or choose another --out")
-    if path.exists() and path.is_dir() and path.suffix != ".zarr":
-        raise ParameterError(f"{what} '{path}' is a folder")
     if not path.absolute().parent.is_dir():
         raise ParameterError(f"folder of {what} '{path}' does not exist")
     if not os.access(path.absolute().parent, os.W_OK | os.X_OK):
         raise ParameterError(f"folder of {what} '{path}' is not writable; choose another --out")
+    return path
 
 
 def _train(args: argparse.Namespace, argv) -> int:
@@ -95,8 +102,10 @@ def _train(args: argparse.Namespace, argv) -> int:
                                            vgg19_weights=args.vgg19, **options)
     except ParameterError as exc:
         raise _rename(exc) from None
-    out = pathlib.Path(args.out)
-    _check_new_file(out, args.overwrite, "model file")
+    out = _check_new_file(args.out, args.overwrite, "model file")
+    if args.checkpoint is None and given(args, "checkpoint_every"):
+        raise ParameterError("--checkpoint-every changes nothing without --checkpoint PATH; add it "
+                             "or drop --checkpoint-every")
     checkpoint = None if args.checkpoint is None else pathlib.Path(args.checkpoint)
     check_checkpoint(checkpoint, out, out_file=True)
     exemplar, per_view_sources, _names = view_sources(args)
@@ -137,7 +146,11 @@ def _generate(args: argparse.Namespace, argv) -> int:
     except ParameterError as exc:
         raise ParameterError("--" + str(exc)) from None
     zarr_out = out.suffix.lower() == ".zarr"
-    _check_new_file(out, args.overwrite or zarr_out, "output")
+    unread = [name for name in ("block", "workers", "scheduler") if given(args, name)]
+    if unread and not zarr_out:
+        raise ParameterError(f"--{unread[0]} applies to a Zarr volume, made block by block; it "
+                             f"changes nothing with --out {out.suffix}: drop it or write .zarr")
+    _check_new_file(args.out, args.overwrite or zarr_out, "output")
     if zarr_out and any(origin):
         raise ParameterError(f"--origin must be 0,0,0 for a Zarr volume (it holds [0, size)); got {args.origin}")
     if zarr_out and args.seed is not None:

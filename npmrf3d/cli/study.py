@@ -24,6 +24,7 @@ from ._common import (
     positive_int,
     say,
 )
+from ._options import given, given_options
 from ._progress import RunsProgress
 from ._streams import guard_streams
 from .synth import OPTION_NAMES
@@ -81,10 +82,27 @@ def _add_study_options(parser: argparse.ArgumentParser) -> None:
                         help="no progress bar and no messages, only errors")
 
 
+def _refuse_unread(args: argparse.Namespace, study) -> None:
+    """One line for an option written on the command line that this study run would not read
+    (the written value may be the default: the library sees only values)."""
+    if given(args, "workers") and args.scheduler != "local":
+        raise ParameterError(f"--workers sizes a local cluster and changes nothing with --scheduler "
+                             f"{args.scheduler}; drop it or use --scheduler local")
+    if not study.needs_volume:
+        for name in ("volume", "slice_axis", "slice_index", "slices"):
+            if given(args, name):
+                raise ParameterError(f"--{name.replace('_', '-')} changes nothing in study "
+                                     f"{study.name}, which compares with no real volume; drop it")
+    elif given(args, "slice_axis") and args.slices == 3:
+        raise ParameterError("--slice-axis picks the axis of one slice; with --slices 3 each view "
+                             "takes the middle slice in its own plane: drop it")
+
+
 def _run(args: argparse.Namespace, name: str | None = None) -> int:
     study = get_study(name or args.name)
     if not str(args.out).strip():
         raise ParameterError("--out must name a folder; got an empty string")
+    _refuse_unread(args, study)
     echo = None if args.quiet else say
     progress = RunsProgress(study.name, enabled=not args.quiet)
     try:
@@ -172,6 +190,9 @@ def study_main(name: str, argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+    fresh = Parser(formatter_class=HelpFormatter)
+    _add_study_options(fresh)
+    args.given = given_options(fresh, list(sys.argv[1:] if argv is None else argv))
     with guard_streams():  # stdout or stderr closed or full: the study still runs
         try:
             return guarded(lambda a, _: _run(a, name), args, argv, OPTION_NAMES)

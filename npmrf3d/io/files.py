@@ -86,9 +86,32 @@ def _reason(exc: BaseException) -> str:
     return text.splitlines()[0] if text else type(exc).__name__
 
 
+def broken_link(path: str | os.PathLike[str]) -> str | None:
+    """Why ``path`` is a symbolic link that leads nowhere (its target missing, or a loop of
+    links), as words to follow the path's name in a message; None when it is not one.
+
+    >>> broken_link("/") is None
+    True
+    """
+    path = pathlib.Path(path)
+    if not path.is_symlink() or path.exists():
+        return None
+    try:
+        path.resolve(strict=True)
+    except RuntimeError:  # a loop of links (Python before 3.13)
+        return "is a symbolic link in a loop of links"
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            return "is a symbolic link in a loop of links"
+    return f"is a symbolic link to '{os.readlink(path)}', which does not exist"
+
+
 def _existing_file(path: str | os.PathLike[str], what: str) -> pathlib.Path:
     """Return ``path`` as a Path, or raise ParameterError if it is not an existing file."""
     path = pathlib.Path(path)
+    link = broken_link(path)
+    if link is not None:
+        raise ParameterError(f"{what} '{path}' {link}")
     if not path.exists():
         hint = (f" (the bundled exemplar of that name is 'bundled:{path}')"
                 if str(path) in data.available() else "")

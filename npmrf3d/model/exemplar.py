@@ -268,6 +268,10 @@ def resolve_exemplars(exemplar, exemplars: Mapping | None, views: tuple[str, ...
         check.fail(f"exemplars must be a dict view -> array or path (e.g. {{'top': 'top.png'}}); "
                    f"got a {type(exemplars).__name__}")
     exemplars = dict(exemplars or {})
+    named = [key for key in exemplars if not isinstance(key, str)]
+    if named:
+        check.fail(f"exemplars must be keyed by view names ({', '.join(views)}); got the key "
+                   f"{check.shown(named[0])}")
     unknown = set(exemplars) - set(views)
     if unknown:
         check.fail(f"exemplars given for views that are not constrained: {', '.join(sorted(unknown))}; "

@@ -252,6 +252,27 @@ class Study:
             raise ParameterError(f"mode must be one of {', '.join(MODES)}; got {mode!r}")
         return self.quick if mode == "quick" else self.full
 
+    def check_volume_options(self, reference, *, slice_axis: int = 0, slice_index: int | None = None,
+                             slices: int = 1) -> None:
+        """Refuse the real volume's options where the study reads none of them (it does not
+        compare with a real volume), and a slice index beside three slices (one line each)."""
+        if slices not in (1, 3):
+            raise ParameterError(f"--slices must be 1 or 3; got {slices!r}")
+        if not self.needs_volume:
+            unread = [flag for flag, used in (("--volume", reference is not None),
+                                              ("--slice-axis", slice_axis != 0),
+                                              ("--slice-index", slice_index is not None),
+                                              ("--slices", slices != 1)) if used]
+            if unread:
+                raise ParameterError(f"{unread[0]} changes nothing in study {self.name}, which "
+                                     "compares with no real volume; drop it")
+        if slices == 3 and slice_index is not None:
+            raise ParameterError("--slice-index picks one slice; with --slices 3 each view takes "
+                                 "its own middle slice")
+        if slices == 3 and slice_axis != 0:
+            raise ParameterError("--slice-axis picks the axis of one slice; with --slices 3 each "
+                                 "view takes the middle slice in its own plane: drop it")
+
     def runs(self, mode: str = "full", *, seeds=None, exemplars=None, sizes=None,
              levels: int | None = None, reference: str | None = None, slice_axis: int = 0,
              slice_index: int | None = None, slices: int = 1) -> tuple[RunSpec, ...]:
@@ -261,11 +282,8 @@ class Study:
         ``reference`` (a real volume) is required when :attr:`needs_volume`; ``slices`` (1 or 3)
         says how many of its slices the methods see.
         """
-        if slices not in (1, 3):
-            raise ParameterError(f"--slices must be 1 or 3; got {slices!r}")
-        if slices == 3 and slice_index is not None:
-            raise ParameterError("--slice-index picks one slice; with --slices 3 each view takes "
-                                 "its own middle slice")
+        self.check_volume_options(reference, slice_axis=slice_axis, slice_index=slice_index,
+                                  slices=slices)
         scale = self.scale(mode)
         seeds = tuple(int(s) for s in (scale.seeds if seeds is None else seeds))
         sizes = tuple(int(s) for s in (scale.sizes if sizes is None else sizes))

@@ -252,7 +252,11 @@ def write_report(results_dir, out=None, *, overwrite: bool = False, warn=None) -
 
     An existing ``out`` is refused unless ``overwrite``; ``warn`` as in :func:`build_report`.
     """
+    if not str(results_dir).strip():
+        raise ParameterError("RESULTS_DIR must name a folder; got an empty string")
     find_studies(results_dir)
+    if out is not None and not str(out).strip():
+        raise ParameterError("--out must name a file; got an empty string")
     out = pathlib.Path(results_dir) / "report.html" if out is None else pathlib.Path(out)
     if out.is_dir():
         raise ParameterError(f"report file '{out}' is a folder; give a file name")

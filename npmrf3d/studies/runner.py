@@ -226,6 +226,7 @@ def run_study(study: Study, *, mode: str = "quick", out="study-results", schedul
     scheduler = check_scheduler(scheduler)
     if scheduler in (None, "local"):
         plan_workers(workers, threads)  # refused here, before any folder exists
+    study.check_volume_options(volume, slice_axis=slice_axis, slice_index=slice_index, slices=slices)
     study_dir = check_study_dir(out, study.name)
     reference = real = None
     if volume is not None:
