@@ -527,6 +527,18 @@ def test_an_exception_of_the_progress_callback_propagates_as_it_was(exemplar, me
     assert caught.value.__cause__ is None
 
 
+@pytest.mark.parametrize("extra, word", [(dict(progress=3), "progress"), (dict(checkpoint=3), "checkpoint"),
+                                         (dict(checkpoint=b"c.npz"), "checkpoint")])
+@pytest.mark.parametrize("exemplar, method, keywords", METHOD_CALLS,
+                         ids=[f"{m}-{sorted(k)}" for _, m, k in METHOD_CALLS])
+def test_a_bad_progress_or_checkpoint_is_refused_before_the_run(exemplar, method, keywords, extra, word,
+                                                                tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ParameterError, match=word):
+        npmrf3d.synthesize(exemplar, method=method, **keywords, **extra)
+    assert not list(tmp_path.iterdir())
+
+
 @pytest.mark.parametrize("exemplar, method, keywords", METHOD_CALLS,
                          ids=[f"{m}-{sorted(k)}" for _, m, k in METHOD_CALLS])
 def test_a_wrong_exemplar_kind_for_the_method_is_refused(exemplar, method, keywords):
@@ -636,5 +648,5 @@ NEURAL_CASES = 17
 def test_the_round_counts_at_least_three_hundred_cases():
     cases = (len(ODD_VALUES) + len(UNREAD) + len(INPUTS) + len(READABLE) + len(OUTPUTS)
              + len(CORRUPT_CHECKPOINT) + 3 + 1 + 4 + 4 + 2 + 1 + 3 + len(API_REFUSALS)
-             + len(API_ACCEPTS) + 2 * len(METHOD_CALLS) + 15 + len(OTHERS) + 2 + NEURAL_CASES)
+             + len(API_ACCEPTS) + 5 * len(METHOD_CALLS) + 15 + len(OTHERS) + 2 + NEURAL_CASES)
     assert cases >= 300, cases
