@@ -118,6 +118,12 @@ ERRORS = [
                             (["--stop", "0.5"], "--icm is set"), (["--max-sweeps", "3"], "--icm is set"),
                             (["--inherit", "fixed"], "--icm is set"), (["--upsample", "1/8"], "--icm is set"),
                             (["--iterations", "2", "--icm"], "--icm is not set"))],
+    # written at their default value, they are still written: refused all the same
+    (["coherent", "seg.png", *TINY, "--xi", "-1"], ["--xi", "--icm is set"], []),
+    (["coherent", "seg.png", *TINY, "--icm", "--sampler", "heat-bath"], ["--sampler", "--t0 is above 0"], []),
+    (["synth", "seg.png", *TINY, "--stop", "0.95"], ["--stop", "--temperatures is set"], []),
+    (["kopf", "seg.png", *KTINY, "--histogram-weight", "0", "--histogram-bins", "16"],
+     ["--histogram-bins", "--histogram-weight is above 0"], []),
     *[([command, "seg.png", *TINY, *option], [option[0], needs], [])
       for command in ("coherent", "chen-wang")
       for option, needs in ((["--pilot", "32"], "--blockwise is set"),

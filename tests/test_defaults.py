@@ -219,3 +219,13 @@ def test_every_method_refuses_a_bad_progress_or_checkpoint_before_any_work(name,
     exemplar = data.path("fibres48") if name in ("volume-lh", "npmrf-3d") else None
     with pytest.raises(ParameterError, match=words):
         METHODS[name].synthesize(exemplar, size=16, **{keyword: value})
+
+
+@pytest.mark.parametrize("name, options", [("volume-lh", {"angle": 90}), ("volume-lh", {"angle": 90, "vector_field": "radial"}),
+                                           ("npmrf-3d", {"angle": 90})])
+def test_an_angle_that_turns_no_field_is_refused(name, options):
+    from npmrf3d import data
+    from npmrf3d.errors import ParameterError
+
+    with pytest.raises(ParameterError, match="angle"):
+        METHODS[name].synthesize(data.path("fibres48"), size=16, levels=2, rng=0, **options)

@@ -20,7 +20,7 @@ from ..config import DEFAULT_SIZE
 from ..io.runs import RUN_FILES
 from ..model.exemplar import BUNDLED_PREFIX
 from ..model.neighbourhood import VIEWS
-from ..options import default_text, field_default, flag_name, options_of
+from ..options import default_text, field_default, flag_name, options_of, refuse_inapplicable
 from ._common import (
     add_exemplar_kind,
     add_run_options,
@@ -29,8 +29,9 @@ from ._common import (
     prepare_run,
 )
 from ._blocks import add_block_options, blockwise_requested, run_to_output, zarr_output
+from ._options import given
 
-__all__ = ["add_method_parser", "config_options", "method_options"]
+__all__ = ["add_method_parser", "config_options", "method_options", "refuse_written"]
 
 #: The order of the sections of ``--help``; a field's ``group`` names one.
 SECTIONS = ("volume and pyramid", "method", "energy and search", "relaxation", "views and exemplars", "blocks")
@@ -103,6 +104,12 @@ def _exemplar_inputs(parser: argparse.ArgumentParser, sections: dict) -> None:
     add_exemplar_kind(views)
 
 
+def refuse_written(args: argparse.Namespace, config) -> None:
+    """Refuse an option written on the command line that a run of ``config`` would not read, also
+    when its value is the default (the API, which cannot tell, refuses values set away from it)."""
+    refuse_inapplicable(config, [name for name in options_of(type(config)) if given(args, name)])
+
+
 def add_method_parser(commands, name: str, method, *, help: str, description: str,
                       out: str, formatter_class, refuse=None, handler=None, aliases=(),
                       extra=None, inputs=None) -> argparse.ArgumentParser:
@@ -138,6 +145,7 @@ def add_method_parser(commands, name: str, method, *, help: str, description: st
             blockwise_requested(args)
         # messages name library parameters; npmrf3d.cli.main turns them into these options
         config = method.make_config(size=parse_size(args.size), views=args.views, seed=args.seed, **options)
+        refuse_written(args, config)
         out_dir, checkpoint, per_view, sources = prepare_run(args, method, config, whole=not zarr_output(args))
         if refuse is not None:
             refuse(args, config, per_view)

@@ -24,7 +24,7 @@ from ..methods.kopf import DEFAULT_ITERATIONS, METHOD, KopfConfig
 from ..options import options_of
 from ._blocks import run_to_output, zarr_output
 from ._common import parse_size, prepare_run
-from ._generic import add_method_parser, config_options
+from ._generic import add_method_parser, config_options, refuse_written
 from ._options import given
 
 __all__ = ["register"]
@@ -178,6 +178,7 @@ def _run(args: argparse.Namespace, argv: list[str]) -> int:
         size=parse_size(args.size), views=args.views, seed=args.seed, constrained=constraint is not None,
         **{**config_options(args, KopfConfig), "iterations": _parse_iterations(args.iterations),
            "mean_shift": _parse_mean_shift(args.mean_shift)})
+    refuse_written(args, config)
     out, checkpoint, per_view, sources = prepare_run(args, METHOD, config, whole=not zarr_output(args))
     if constraint is not None:  # its checks, before the work (the method repeats them)
         channels = next(iter(per_view.values())).shape[2]

@@ -20,7 +20,7 @@ from ..methods.npmrf import METHOD, segmented
 from ..methods.npmrf_coherent import SEGMENTED, SEGMENTED_MAX_VALUES
 from ._blocks import add_block_options, blockwise_requested, run_zarr, zarr_output
 from ._common import PROG, claim_output, dry_run, parse_size, prepare_run, say, write_result
-from ._generic import add_method_parser, config_options
+from ._generic import add_method_parser, config_options, refuse_written
 from ._options import given
 from ._progress import run_method
 
@@ -93,6 +93,7 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
     config = METHOD.make_config(size=parse_size(args.size), views=args.views, seed=args.seed,
                                 variant=args.variant, **{**config_options(args, SynthesisConfig),
                                                          "blockwise": blockwise_requested(args)})
+    refuse_written(args, config)
     out, checkpoint, per_view, sources = prepare_run(args, METHOD, config, whole=not zarr_output(args))
 
     _check_segmented_window(args, config, per_view)

@@ -70,6 +70,8 @@ def make_npmrf_volume_config(*, size=DEFAULTS.size, levels=DEFAULTS.levels, wind
                              adaptive=DEFAULTS.adaptive, centre_bandwidth=DEFAULTS.centre_bandwidth,
                              seed=None, vector_field="none", angle=DEFAULTS.angle) -> NpmrfVolumeConfig:
     """Validate plain keyword arguments into a frozen :class:`NpmrfVolumeConfig`."""
+    if angle != DEFAULTS.angle:
+        check.fail(f"angle turns a vector field, which npmrf-3d does not take; got angle={angle!r}: drop it")
     if vector_field != "none":
         check.fail(f"vector_field must be 'none' for npmrf-3d (use volume-lh for deformations); "
                    f"got {vector_field!r}")

@@ -69,7 +69,7 @@ from ..model.phases import (
 )
 from ..model.pyramid import ArraySpec, Levels, run_pyramid
 from ..resources import Estimate
-from ..options import option
+from ..options import given_options, option, refuse_inapplicable
 from ._api import prepare
 
 __all__ = ["VolumeConfig", "appearance_space", "make_volume_config", "run", "similarity_sets",
@@ -122,7 +122,9 @@ class VolumeConfig:
                         choices=STARTS)
     vector_field: str = option("none", "deformation", kind="own")
     angle: float = option(180.0, "degrees of rotation of the named fields twist and bend", kind="real",
-                          low=-3600.0, high=3600.0)
+                          low=-3600.0, high=3600.0,
+                          applies=lambda config: config.vector_field in ("twist", "bend"),
+                          needs="vector_field is twist or bend")
     seed: int | None = option(None, "random seed", kind="own")
 
     def to_dict(self) -> dict:
@@ -486,6 +488,7 @@ def volume_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress: P
                                           progress=progress, checkpoint=checkpoint,
                                           options={**options, "vector_field": field_name},
                                           load=volume_loader(exemplar_kind, spacing))
+    refuse_inapplicable(config, given_options(VolumeConfig, options))
     return run(per_view, config, generator, progress=progress, checkpoint=checkpoint,
                t_start=t_start, vector_field=field_array)
 
