@@ -150,10 +150,10 @@ def _refuse_relaxation_mismatch(given: dict, support: str, relaxation: str, temp
         for name in TEMPERATURE_OPTIONS:
             if not _unset(name, given[name]):
                 check.fail(f"option {name} needs per-voxel temperatures with support 'coherent': "
-                           f"add temperatures=True (--temperatures), or drop it")
+                           f"add temperatures=True (command line: --temperatures), or drop it")
         if upsample == "1/8":
             check.fail("upsample '1/8' needs per-voxel temperatures with support 'coherent': add "
-                       "temperatures=True (--temperatures), or drop it")
+                       "temperatures=True (command line: --temperatures), or drop it")
     if support == "coherent" and relaxation == "anneal" and upsample != "8/8":
         check.fail(f"support 'coherent' anneals with 8/8 up-sampling (every child copies its "
                    f"parent's shifted sources); upsample {upsample!r} runs with support 'full'")
@@ -258,7 +258,7 @@ def make_config(
                    "read the whole exemplar and its ICM stop rule the whole volume)")
     if blockwise and temperatures:
         check.fail("blockwise runs cannot use per-voxel temperatures (their stop rule reads the "
-                   "whole volume); drop temperatures=True (--temperatures)")
+                   "whole volume); drop temperatures=True (command line: --temperatures)")
     return SynthesisConfig(
         size=dims, window=window, levels=levels, heuristic=heuristic, relaxation=relaxation,
         views=views, upsample=upsample, inherit=inherit, xi=xi, stop=stop, max_sweeps=max_sweeps,
