@@ -38,12 +38,15 @@ def neural_place(place, model_file) -> pathlib.Path:  # noqa: F811 (the imported
     torch.save({k: v for k, v in payload.items() if k != "state"}, place / "nostate.pt")
     torch.save({**payload, "config": "{not json"}, place / "badconfig.pt")
     torch.save({**payload, "out_channels": 7}, place / "badchannels.pt")
+    torch.save({"folder": pathlib.Path("x")}, place / "objects.pt")  # a Python object, never unpickled
     (place / "trunc.pt").write_bytes(model_file.read_bytes()[:2000])
     return place
 
 
 NEURAL = [
     (["neural", "generate", "good.png", "--size", "8", "--out", "g.npy"],
+     ["cannot be read as a neural model", "not a file written by torch"], ["weights_only", "Python objects"]),
+    (["neural", "generate", "objects.pt", "--size", "8", "--out", "g.npy"],
      ["cannot be read as a neural model", "Python objects"], ["weights_only"]),
     (["neural", "generate", "trunc.pt", "--size", "8", "--out", "g.npy"],
      ["cannot be read as a neural model"], ["If you are seeing"]),

@@ -84,11 +84,29 @@ def _first_line(exc: BaseException) -> str:
     return text.splitlines()[0] if text else type(exc).__name__
 
 
-def torch_load_failure(exc: BaseException) -> str:
-    """Why ``torch.load(..., weights_only=True)`` refused a file, in one short clause: a file
+#: How a file written by ``torch.save`` begins: a zip archive, or a pickle (the legacy format).
+TORCH_FILE_HEADS = (b"PK\x03\x04", b"\x80")
+
+
+def file_head(source) -> bytes | None:
+    """The first bytes of a file (a path) or of bytes; None when the file cannot be read."""
+    if isinstance(source, (bytes, bytearray)):
+        return bytes(source[:4])
+    try:
+        with open(source, "rb") as handle:
+            return handle.read(4)
+    except OSError:
+        return None
+
+
+def torch_load_failure(exc: BaseException, head: bytes | None = None) -> str:
+    """Why ``torch.load(..., weights_only=True)`` refused a file, in one short clause: a file that
+    does not begin as ``torch.save`` writes (``head``, its first bytes) is no torch file; a file
     with pickled objects besides tensors is refused as such (torch's own text would suggest
     loading it with ``weights_only=False``, which runs code from the file); other reasons keep
     their first sentence."""
+    if head is not None and not head.startswith(TORCH_FILE_HEADS):
+        return "it is not a file written by torch (no zip archive, no pickle)"
     if isinstance(exc, pickle.UnpicklingError):
         return "it holds Python objects besides tensors, which are never loaded"
     return _first_line(exc).split(". ", 1)[0]

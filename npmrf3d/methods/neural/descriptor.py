@@ -37,7 +37,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from ...errors import ParameterError
-from .checkpoint import torch_load_failure
+from .checkpoint import file_head, torch_load_failure
 
 __all__ = ["RandomFilterDescriptor", "VGG19Descriptor", "gram", "gram_loss", "histogram_loss", "histogram_target",
            "make_descriptor"]
@@ -94,7 +94,7 @@ def _vgg_state(path: str) -> dict:
         state = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # any unreadable file is a user-facing error
         raise ParameterError(f"vgg19_weights '{path}' cannot be read as a torch state_dict: "
-                             f"{torch_load_failure(exc)}") from exc
+                             f"{torch_load_failure(exc, file_head(path))}") from exc
     if not isinstance(state, dict):
         raise ParameterError(f"vgg19_weights '{path}' must hold a state_dict (a dict of tensors); "
                              f"got {type(state).__name__}")

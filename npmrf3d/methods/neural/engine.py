@@ -32,6 +32,7 @@ from ...errors import ParameterError
 from ...io.files import atomic_write
 from ...model.neighbourhood import VIEW_AXES
 from .checkpoint import (
+    file_head,
     load_training_state,
     restore_torch_state,
     save_training_state,
@@ -358,7 +359,7 @@ def load_model(source) -> NeuralModel:
                              map_location="cpu", weights_only=True)
     except Exception as exc:
         raise ParameterError(f"{what} cannot be read as a neural model: "
-                             f"{torch_load_failure(exc)}") from exc
+                             f"{torch_load_failure(exc, file_head(source))}") from exc
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
         raise ParameterError(f"{what} is not an npmrf3d neural model (written by 'npmrf3d neural train')")
     try:
