@@ -48,7 +48,7 @@ class Option:
     choices : tuple of str or callable, optional
         The valid names (a callable is asked when first needed, so registries stay lazy).
     metavar : str, optional
-        The command line's placeholder (default: from the kind).
+        The command line's metavar (default: one for the kind, ``N``, ``X``, ``N[,N..]``).
     group : str
         The ``--help`` section.
     decided : str, optional

@@ -13,6 +13,7 @@ import argparse
 import pathlib
 import sys
 
+from ._common import say
 from .main import build_parser
 
 __all__ = ["COMMAND_PAGES", "command_page", "write_pages"]
@@ -93,4 +94,4 @@ def write_pages(folder: str | pathlib.Path) -> list[pathlib.Path]:
 
 if __name__ == "__main__":  # pragma: no cover - the docs' writer
     for written in write_pages(sys.argv[1] if len(sys.argv) > 1 else "docs/commands"):
-        print(written)
+        say(str(written))
