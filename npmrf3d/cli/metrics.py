@@ -6,9 +6,12 @@ the output folder, each atomically and only after every number was computed, so 
 leaves no file behind. See ``docs/metrics.md`` for the definitions.
 
 Besides ``.npy`` and TIFF files it reads a Zarr volume folder (``--out VOL.zarr`` of the
-commands that make volumes), refusing one whose blocks are not all made. Each metric is also
-reported as a ratio to the structureless control, beside the floor
-(:mod:`npmrf3d.analysis.metrics.references`).
+commands that make volumes), refusing one whose blocks are not all made or whose made blocks'
+chunk files are gone. Each metric is also reported as a ratio to the structureless control,
+beside the floor (:mod:`npmrf3d.analysis.metrics.references`). ``--structure`` adds the
+slice-by-slice structure judge per view as ratios to its floor
+(:mod:`npmrf3d.analysis.metrics.layout`); the views the volume's run constrained are named
+when its ``run.json`` (or the Zarr volume's record) says which.
 
 A run folder it reads or writes (one holding a run's files), or a Zarr volume it reads, is
 locked for the whole command
@@ -21,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import json
 import os
 import pathlib
 import shutil
@@ -34,12 +38,12 @@ from matplotlib.lines import Line2D
 
 from .. import _validation as check
 from .. import io
-from ..analysis import metrics
-from ..analysis.metrics import METRICS
+from ..analysis import metrics, structure
+from ..analysis.metrics import METRICS, layout
 from ..analysis.metrics.references import RATIO_METRICS, against_controls, floor
 from ..errors import ParameterError
 from ..io.runs import RUN_FILES, OutputLock
-from ..io.zarr_blocks import block_indices, finished_blocks
+from ..io.zarr_blocks import block_indices, blocks_without_chunks, finished_blocks
 from ..model.exemplar import BUNDLED_PREFIX, exemplar_source, load_exemplar
 from ..model.neighbourhood import VIEWS
 from ..plotting import save_figure
@@ -66,12 +70,18 @@ def register(commands: argparse._SubParsersAction, formatter_class: type) -> Non
             "shape: 1 = no structure), beside the floor (the exemplar's right half measured\n"
             "against its left half: another crop of the same texture, about what a perfect volume\n"
             "scores). Definitions and settings: docs/metrics.md.\n"
+            "--structure adds the structure judge: each view's sampled slices compared one by\n"
+            "one with the exemplar (docs/structure.md), per view and for the worst view, as\n"
+            "ratios to the same floor (1 = as good as another crop). When the volume's run.json\n"
+            "(or the Zarr volume's record) names the views the run constrained, the output says\n"
+            "which were constrained and which free.\n"
             f"Writes {' and '.join(OUT_FILES)} into the output folder.\n\n"
             "Integer images are scaled as synth does (uint8 / 255, uint16 / 65535), so a\n"
             "float volume written by synth compares with the 8-bit exemplar it came from.\n\n"
             "examples:\n"
             "  npmrf3d metrics bundled:gravel64 npmrf3d-out/volume.npy\n"
             "  npmrf3d metrics bundled:gravel64 big.zarr\n"
+            "  npmrf3d metrics bundled:brick layered/volume.npy --structure\n"
             "  npmrf3d metrics wood.png wood/volume.tif --views front,top --out wood/metrics"
         ),
         formatter_class=formatter_class,
@@ -96,6 +106,11 @@ def register(commands: argparse._SubParsersAction, formatter_class: type) -> Non
             help=f"a different exemplar file (or {BUNDLED_PREFIX}NAME) for the {view} view "
                  f"(default: none = EXEMPLAR)",
         )
+    parser.add_argument(
+        "--structure", action="store_true",
+        help="add the slice-by-slice structure judge per view and its worst view, as ratios to "
+             "the floor (needs the extra: pip install 'npmrf3d[structure]')",
+    )
     parser.add_argument(
         "--out", default=None, metavar="DIR",
         help="folder for metrics.json and histograms.png; created if missing "
@@ -124,8 +139,10 @@ def _stored_dtype(path: pathlib.Path) -> np.dtype | None:
         return None
 
 
-def _zarr_volume(path: pathlib.Path) -> np.ndarray:
-    """The float32 (N1, N2, N3, C) array of a Zarr volume folder; a volume whose blocks are not
+def _zarr_volume(path: pathlib.Path) -> tuple[np.ndarray, dict[str, Any] | None]:
+    """The float32 (N1, N2, N3, C) array of a Zarr volume folder, and its made blocks that hold
+    no chunk file (``blocks``, ``block``, ``total``; None when there are none), which
+    :func:`_check_chunks` judges once the exemplars are read. A volume whose blocks are not
     all made, or a folder that is no Zarr volume, is refused in one line."""
     try:
         array = zarr.open_array(path, mode="r")
@@ -135,26 +152,60 @@ def _zarr_volume(path: pathlib.Path) -> np.ndarray:
                 "; give a .npy or .tif volume file, or a Zarr volume folder made with --out VOL.zarr")
         raise ParameterError(f"volume '{path}' is a folder and not a Zarr volume{hint}") from None
     size, block = array.attrs.get("npmrf3d_size"), array.attrs.get("npmrf3d_block")
+    without = None
     if size is not None and block is not None:
-        total = len(block_indices(size, int(block)))
-        done = len(finished_blocks(path))
-        if done < total:
-            raise ParameterError(f"Zarr volume '{path}' is not complete ({done} of {total} blocks "
-                                 "made); run the command that makes it again to finish it")
+        indices = block_indices(size, int(block))
+        done = len(finished_blocks(path) & set(indices))
+        if done < len(indices):
+            missing = len(indices) - done
+            raise ParameterError(f"Zarr volume '{path}' is not complete ({done} of {len(indices)} "
+                                 f"blocks made): {_blocks(missing)} missing; run the command that "
+                                 "makes it again to finish it")
+        gone = blocks_without_chunks(path)
+        without = {"blocks": gone, "block": int(block), "total": len(indices)} if gone else None
     if array.ndim not in (3, 4):
         raise ParameterError(f"Zarr volume '{path}' must hold an array of shape (N1, N2, N3) or "
                              f"(N1, N2, N3, C); got shape {array.shape}")
     data = np.asarray(array[...])
-    return io.as_volume(data if data.ndim == 4 else data[..., np.newaxis], name=f"Zarr volume '{path}'")
+    volume = io.as_volume(data if data.ndim == 4 else data[..., np.newaxis], name=f"Zarr volume '{path}'")
+    return volume, without
 
 
-def _read_volume(text: str) -> tuple[np.ndarray, str]:
-    """The volume as float (N1, N2, N3, C), integers scaled like exemplars; and its stored dtype."""
+def _blocks(count: int) -> str:
+    return f"{count} block{'s' if count != 1 else ''}"
+
+
+def _check_chunks(path: str, volume: np.ndarray, without: dict[str, Any] | None,
+                  exemplars: dict[str, np.ndarray]) -> str | None:
+    """Refuse a Zarr volume whose made blocks hold no chunk file (read as zeros), unless zeros
+    are a value of this volume: Zarr stores no chunk whose values are all 0, so a block of
+    zeros is told from a deleted chunk only by zeros found elsewhere, in the rest of the volume
+    or in an exemplar. Then the note returned says the blocks were read as zeros."""
+    if without is None:
+        return None
+    block, count = without["block"], len(without["blocks"])
+    zero = ~np.any(volume != 0, axis=-1)
+    for index in without["blocks"]:
+        zero[tuple(slice(i * block, (i + 1) * block) for i in index)] = False
+    if zero.any() or any((~np.any(e != 0, axis=-1)).any() for e in exemplars.values()):
+        return (f"{_blocks(count)} of Zarr volume '{path}' hold no chunk file and were read as "
+                "zeros (Zarr stores no chunk of zeros, and zeros occur elsewhere in the volume or "
+                "its exemplar)")
+    raise ParameterError(
+        f"Zarr volume '{path}' is missing {count} of {without['total']} blocks: they are marked "
+        "as made but their chunk files are gone (read as zeros, a value found nowhere else in "
+        "the volume or its exemplar); make it again with --overwrite")
+
+
+def _read_volume(text: str) -> tuple[np.ndarray, str, dict[str, Any] | None]:
+    """The volume as float (N1, N2, N3, C), integers scaled like exemplars; its stored dtype;
+    and a Zarr volume's made blocks without chunk files (:func:`_zarr_volume`)."""
     if not text.strip():
         raise ParameterError("volume file name is empty")
     path = pathlib.Path(text)
+    without = None
     if path.is_dir():
-        volume = _zarr_volume(path)
+        volume, without = _zarr_volume(path)
         dtype = np.dtype(np.float32)
     else:
         volume = io.read_volume(path)
@@ -167,7 +218,7 @@ def _read_volume(text: str) -> tuple[np.ndarray, str]:
         volume = volume / np.float32(255.0)
     elif dtype == np.uint16:
         volume = volume / np.float32(65535.0)
-    return volume, str(dtype) if dtype is not None else "unknown"
+    return volume, str(dtype) if dtype is not None else "unknown", without
 
 
 def _read_exemplars(args: argparse.Namespace, views: tuple[str, ...]
@@ -231,6 +282,79 @@ def _table(result: dict[str, Any], references: dict[str, Any]) -> str:
         h, w = floor["half_shape"]
         lines.append(f"floor: another crop of the same texture, {floor['exemplar']} right half "
                      f"against its left half ({h}x{w} pixels each; about what a perfect volume scores)")
+    return "\n".join(lines)
+
+
+def _run_views(text: str) -> dict[str, Any] | None:
+    """The views the volume's run constrained and those it left free, from the ``run.json``
+    beside a run folder's volume file or a Zarr volume's record; None when neither says."""
+    path = pathlib.Path(text)
+    try:
+        if path.is_dir():
+            source = f"the record of '{path}'"
+            record = zarr.open_array(path, mode="r").attrs.get("npmrf3d_record")
+        elif path.name in RUN_FILES:
+            source = str(path.parent / "run.json")
+            record = json.loads((path.parent / "run.json").read_text(encoding="utf-8"))
+        else:
+            return None
+        named = record["config"]["views"]
+    except Exception:  # no record, or not one of a run: nothing to say
+        return None
+    if not isinstance(named, list) or not named or not set(named) <= set(VIEWS):
+        return None
+    return {"constrained": [v for v in VIEWS if v in named],
+            "free": [v for v in VIEWS if v not in named], "source": source}
+
+
+def _views_line(run_views: dict[str, Any]) -> str:
+    free = run_views["free"]
+    said = f"; {', '.join(free)} {'was' if len(free) == 1 else 'were'} free" if free else ""
+    return (f"views: the run constrained {', '.join(run_views['constrained'])}{said} "
+            f"({run_views['source']})")
+
+
+def _layout(volume: np.ndarray, exemplars: dict[str, np.ndarray]) -> dict[str, Any]:
+    """The structure judge per view as ratios to the floor of each view's exemplar (its right
+    half against its left half), :func:`npmrf3d.analysis.metrics.layout.view_scores`."""
+    seed = metrics.DEFAULT_SETTINGS.seed
+    floors: dict[int, dict[str, float]] = {}
+    for view, e in exemplars.items():
+        if id(e) not in floors:
+            try:
+                floors[id(e)] = layout.half_floor(e, rng=seed)
+            except ValueError:
+                raise ParameterError(
+                    f"--structure needs exemplars at least 16 pixels wide and 8 high (its floor is "
+                    f"the right half against the left half); the {view} view's is "
+                    f"{e.shape[0]} x {e.shape[1]}") from None
+    return layout.view_scores(volume, exemplars, {v: floors[id(e)] for v, e in exemplars.items()},
+                              rng=seed)
+
+
+def _structure_table(judged: dict[str, Any], run_views: dict[str, Any] | None) -> str:
+    """The judge's ratios to the floor per view and the worst view, then the floor's ratios to
+    the control, then what they are."""
+    views = list(judged["per_view"])
+    free = set(run_views["free"]) if run_views else set()
+    heads = [f"{v} (free)" if v in free else v for v in views]
+    title = "structure judge, ratio to the floor"
+    cells = [max(len(h), 8) for h in heads]
+    lines = [f"{title}  " + "  ".join(f"{h:>{n}}" for h, n in zip(heads, cells)) + "     worst"]
+    for k in ("pyramid", "continuity"):
+        values = "  ".join(f"{judged['per_view'][v]['to_floor'][k]:>{n}.3f}" for v, n in zip(views, cells))
+        lines.append(f"{k:<{len(title)}}  {values}  {judged['worst'][k]:>8.3f} "
+                     f"{judged['worst_view'][k]}")
+    floors = {json.dumps(f, sort_keys=True): f for f in judged["floor"].values()}
+    for view, f in judged["floor"].items():
+        if len(floors) == 1 and view != views[0]:
+            break
+        whose = "the exemplar's" if len(floors) == 1 else f"the {view} view's exemplar's"
+        lines.append(f"floor, ratio to the control: pyramid {f['pyramid']:.3f}, continuity "
+                     f"{f['continuity']:.3f} ({whose} right half against its left half)")
+    lines.append(f"structure judge: {judged['settings']['slices']} slices a view, each compared with "
+                 "the exemplar on its own (docs/structure.md); 1 = as good as another crop, lower "
+                 "is better; pyramid is the estimator to judge by")
     return "\n".join(lines)
 
 
@@ -318,6 +442,8 @@ def _run_folders(*folders: pathlib.Path) -> list[pathlib.Path]:
 def run(args: argparse.Namespace, argv: list[str]) -> int:
     """Handler of ``npmrf3d metrics``; returns the exit code (errors raise ParameterError)."""
     views = check.views(args.views, VIEWS)
+    if args.structure:
+        structure.check_installed()
     if args.out is not None and not args.out.strip():
         raise ParameterError("--out must name a folder; got an empty string")
     if not args.volume.strip():
@@ -336,8 +462,11 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
 
 def _measure(args: argparse.Namespace, argv: list[str], views: tuple[str, ...], out: pathlib.Path) -> int:
     """Read, compare, write: the body of :func:`run`, under the locks of the run folders."""
-    volume, stored = _read_volume(args.volume)
+    volume, stored, without = _read_volume(args.volume)
     exemplars, sources = _read_exemplars(args, views)
+    note = _check_chunks(args.volume, volume, without, exemplars)
+    run_views = _run_views(args.volume)
+    judged = _layout(volume, exemplars) if args.structure else None
     result = metrics.evaluate(volume, exemplars, views=views)
     references = _references(result, volume.shape, exemplars, sources)
     histograms = {view: metrics.view_histograms(volume, exemplars[view], view) for view in views}
@@ -360,6 +489,8 @@ def _measure(args: argparse.Namespace, argv: list[str], views: tuple[str, ...], 
         "control": references["control"],
         "ratio": references["ratio"],
         "floor": references["floor"],
+        "structure": judged,
+        "run_views": run_views,
         "settings": result["settings"],
         "details": result["details"],
         "versions": io.package_versions(),
@@ -371,5 +502,11 @@ def _measure(args: argparse.Namespace, argv: list[str], views: tuple[str, ...], 
         raise ParameterError(
             f"cannot write into output folder '{out}': {exc.strerror or exc}") from exc
     say(_table(result, references))
+    if judged is not None:
+        say("\n" + _structure_table(judged, run_views))
+    if run_views is not None:
+        say(_views_line(run_views))
     say(f"wrote {out}{os.sep}: {', '.join(OUT_FILES)}")
+    if note is not None:
+        say(f"{PROG}: note: {note}", error=True)
     return 0

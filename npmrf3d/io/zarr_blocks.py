@@ -270,6 +270,21 @@ def finished_blocks(out) -> set[tuple[int, int, int]]:
     return found
 
 
+def blocks_without_chunks(out) -> list[tuple[int, int, int]]:
+    """The blocks of the volume at ``out`` that have their marker but no chunk file, sorted:
+    read, they hold Zarr's fill value (0). A chunk deleted after its block was made is one;
+    a block whose values were all 0 is another, since Zarr stores no chunk that holds only
+    the fill value. A volume whose chunks are not its blocks has none."""
+    array = zarr.open_array(pathlib.Path(out), mode="r")
+    block = array.attrs.get("npmrf3d_block")
+    if block is None or tuple(array.chunks[:3]) != (int(block),) * 3:
+        return []
+    separator = getattr(array.metadata, "dimension_separator", ".") or "."
+    tail = [separator + "0"] * (array.ndim - 3)    # the one chunk along the channels
+    return sorted(index for index in finished_blocks(out)
+                  if not pathlib.Path(out, separator.join(map(str, index)) + "".join(tail)).is_file())
+
+
 def write_block(out, index, block: int, values: np.ndarray) -> None:
     """Write block ``index`` (``values`` of its :func:`block_box` shape, with channels) into the
     array ``out``, then its marker."""
