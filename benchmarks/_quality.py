@@ -27,6 +27,13 @@ galaxy).
   spots as the exemplar; a volume whose bright voxels clump into a few blobs scores low even
   when ``bright`` is right (the control's isolated bright voxels score high).
 
+Beside them, the **layout** (:func:`layout_scores`): the structure judge
+(docs/structure.md) compares 8 sampled slices of each view one by one with the exemplar; its
+``pyramid`` ratio to the control, divided by the floor's (the crops B judged against crop A),
+averaged over the three views (``layout``) and for the worst view (``layout_worst``): 1 = as
+good as crop B. ``continuity`` the same way is in the record. It needs the structure extra
+(``pip install 'npmrf3d[structure]'``).
+
 The ratio of ``hist_kl`` to the control is recorded but says little (the control draws from
 the exemplar's own histogram, so its KL is only sampling noise); the targets use the value.
 
@@ -52,7 +59,8 @@ import numpy as np
 from scipy import ndimage
 
 import npmrf3d
-from npmrf3d.analysis import metrics
+from npmrf3d.analysis import metrics, structure
+from npmrf3d.analysis.metrics import layout
 from npmrf3d.studies.catalog import ETR_DIR, load_exemplar
 
 VIEWS = ("front", "right", "top")
@@ -62,7 +70,7 @@ SW_SCALES = (1, 2, 4)
 SW_PATCH = 7
 CROP = 64
 #: Bump when the references (controls, floor) change, so cached ones are recomputed.
-REFERENCE_VERSION = 3
+REFERENCE_VERSION = 4
 ETR_HINT = ("the etr: exemplars are terrain photographs of Debian's extremetuxracer-data package "
             "(GPL-2+, not bundled): apt-get install -y extremetuxracer-data")
 
@@ -340,6 +348,19 @@ def measure(exemplar: np.ndarray, volume: np.ndarray, views=VIEWS) -> dict[str, 
     }
 
 
+def layout_scores(exemplar: np.ndarray, volume: np.ndarray, floor: dict[str, float],
+                  seed: int = 0) -> dict:
+    """The structure judge on every view of ``volume`` against ``exemplar``, as ratios to
+    ``floor`` (the judge's ratios of the crops B, :func:`references`): ``layout`` (the mean
+    ``pyramid`` over the views), ``layout_worst`` and its view, ``continuity`` (its mean) and
+    the judge's whole result (``judge``)."""
+    judged = layout.view_scores(volume, {v: exemplar for v in VIEWS}, {v: floor for v in VIEWS},
+                                rng=seed)
+    return {"layout": judged["mean"]["pyramid"], "layout_worst": judged["worst"]["pyramid"],
+            "layout_worst_view": judged["worst_view"]["pyramid"],
+            "continuity": judged["mean"]["continuity"], "judge": judged}
+
+
 def spot_density(grey_e: np.ndarray, grey_v: np.ndarray, threshold: float, view: str) -> float:
     """Bright connected regions per slice of ``view``, relative to the exemplar's per area."""
     eight = np.ones((3, 3), dtype=bool)
@@ -362,9 +383,13 @@ def references(exemplar: Exemplar, size: int, seed: int) -> dict[str, dict]:
     a, b = exemplar.crops()
     rng = np.random.default_rng(seed)
     control = structureless(a, size, rng)
-    rows = {"control": measure(a, control), "blurred": measure(a, blurred(a, control)),
+    smooth = blurred(a, control)
+    rows = {"control": measure(a, control), "blurred": measure(a, smooth),
             "floor": measure(a, floor_volume(b, size), views=("front",))}
     out = {name: {"raw": row, "ratio": ratios(row, rows["control"])} for name, row in rows.items()}
+    judge_floor = structure.image_scores(np.stack(b), a, rng=seed).ratio["images"]
+    out["floor"]["judge"] = judge_floor
+    out["blurred"]["layout"] = layout_scores(a, smooth, judge_floor, seed)
     out["version"] = REFERENCE_VERSION
     return out
 
@@ -417,15 +442,19 @@ def run_all(methods, names, seeds, size, levels, palette, results, cache_dir: Pa
     def store(key, method, name, seed, p, volume, seconds):
         a, _ = BY_NAME[name].crops()
         raw = measure(a, volume)
-        control = results["references"][f"{name}|seed{seed}|size{size}"]["control"]["raw"]
+        refs = results["references"][f"{name}|seed{seed}|size{size}"]
         results["runs"][key] = {"method": method, "exemplar": name, "seed": seed, "size": size,
                                 "levels": levels, "palette": p, "seconds": seconds,
-                                "version": _version(), "raw": raw, "ratio": ratios(raw, control)}
+                                "version": _version(), "raw": raw,
+                                "ratio": ratios(raw, refs["control"]["raw"]),
+                                "layout": layout_scores(a, volume, refs["floor"]["judge"], seed)}
         np.save(cache_dir / (key.replace("|", "__") + ".npy"), volume)
-        r = results["runs"][key]["ratio"]
+        r, lay = results["runs"][key]["ratio"], results["runs"][key]["layout"]
         echo(f"  {method:16s} {name:18s} seed {seed}: ac {r['ac']:.3f} hist_kl {raw['hist_kl']:.3f} "
              f"orient {r['orient_kl']:.3f} sw {r['sw']:.3f} top {raw['top']:.3f} "
-             f"bright {raw['bright']:.4f} spots {raw['spots']:.2f}  {seconds:.1f} s" + (f" (palette {p})" if p else ""))
+             f"bright {raw['bright']:.4f} spots {raw['spots']:.2f} layout {lay['layout']:.2f} "
+             f"(worst {lay['layout_worst']:.2f} {lay['layout_worst_view']})  {seconds:.1f} s"
+             + (f" (palette {p})" if p else ""))
 
     if jobs <= 1:
         for key, method, name, seed, p in todo:
@@ -451,6 +480,7 @@ def remeasure(results: dict, cache_dir: Path, keys, size: int, echo=print) -> No
         control = results["references"][f"{run['exemplar']}|seed{run['seed']}|size{size}"]
         run["raw"] = measure(a, volume)
         run["ratio"] = ratios(run["raw"], control["control"]["raw"])
+        run["layout"] = layout_scores(a, volume, control["floor"]["judge"], run["seed"])
     echo(f"re-measured {len(list(keys))} cached run(s)")
 
 
@@ -476,6 +506,8 @@ def summarise(results: dict, methods, names, seeds, size, palette) -> dict:
                              for k in MEASURES},
                  "floor_hist_kl": float(np.mean([r["floor"]["raw"]["hist_kl"] for r in refs])),
                  "blurred_hist_kl": float(np.mean([r["blurred"]["raw"]["hist_kl"] for r in refs])),
+                 "blurred_layout": {k: float(np.mean([r["blurred"]["layout"][k] for r in refs]))
+                                    for k in ("layout", "layout_worst")},
                  "methods": {}}
         for method in methods:
             rows = []
@@ -492,6 +524,11 @@ def summarise(results: dict, methods, names, seeds, size, palette) -> dict:
             for k in MEASURES:
                 values = [r["ratio"].get(k, np.nan) for r in rows]
                 stats[f"{k}_mean"], stats[f"{k}_worst"] = float(np.mean(values)), float(np.max(values))
+            # the layout: runs cached before it was measured have none (--remeasure adds it)
+            lay = [r["layout"] for r in rows if "layout" in r]
+            stats["layout_count"] = len(lay)
+            stats["layout_mean"] = float(np.mean([x["layout"] for x in lay])) if lay else float("nan")
+            stats["layout_worst"] = float(np.max([x["layout_worst"] for x in lay])) if lay else float("nan")
             for k in ("hist_kl", "top", "bright", "spots"):
                 values = [r["raw"].get(k, np.nan) for r in rows]
                 stats[f"{k}_raw_mean"], stats[f"{k}_raw_worst"] = float(np.mean(values)), float(np.max(values))
@@ -553,22 +590,28 @@ def format_summary(summary: dict) -> str:
         lines.append("runs per method: " + ", ".join(f"{m} {st['count']}"
                                                      for m, st in block["methods"].items()))
         lines.append("ac, okl (orientation KL), sw: ratios to the structureless control "
-                     "(1 = no structure); hkl (histogram KL), top and spots: raw values")
+                     "(1 = no structure); hkl (histogram KL), top and spots: raw values; lay: "
+                     "the structure judge's layout, a ratio to the floor (1 = as good as crop B), "
+                     "mean over the views and the worst view")
         head = (f"{'':16s} {'ac mean':>8s} {'ac worst':>8s} {'okl mean':>8s} {'okl wrst':>8s} "
                 f"{'sw mean':>8s} {'sw worst':>8s} {'hkl mean':>8s} {'hkl wrst':>8s} "
-                f"{'top max':>8s} {'spot min':>8s} {'sec':>6s}")
+                f"{'top max':>8s} {'spot min':>8s} {'lay mean':>8s} {'lay wrst':>8s} {'sec':>6s}")
         lines.append(head)
-        for label in ("floor", "blurred"):
+        blurred_layout = block["blurred_layout"]
+        for label, lay in (("floor", (1.0, 1.0)),
+                           ("blurred", (blurred_layout["layout"], blurred_layout["layout_worst"]))):
             r = block[label]
             lines.append(f"{label:16s} {r['ac']:8.3f} {'':8s} {r['orient_kl']:8.3f} {'':8s} "
                          f"{r['sw']:8.3f} {'':8s} "
-                         f"{block[label + '_hist_kl']:8.3f}")
+                         f"{block[label + '_hist_kl']:8.3f} {'':8s} {'':8s} {'':8s} "
+                         f"{lay[0]:8.3f} {lay[1]:8.3f}")
         for method, s in block["methods"].items():
             lines.append(f"{method:16s} {s['ac_mean']:8.3f} {s['ac_worst']:8.3f} "
                          f"{s['orient_kl_mean']:8.3f} {s['orient_kl_worst']:8.3f} "
                          f"{s['sw_mean']:8.3f} {s['sw_worst']:8.3f} {s['hist_kl_raw_mean']:8.3f} "
                          f"{s['hist_kl_raw_worst']:8.3f} {s['top_raw_worst']:8.3f} "
-                         f"{s['spots_raw_min']:8.2f} {s['seconds']:6.1f}")
+                         f"{s['spots_raw_min']:8.2f} {s['layout_mean']:8.3f} {s['layout_worst']:8.3f} "
+                         f"{s['seconds']:6.1f}")
         for method, s in block["methods"].items():
             lines.append(f"verdict {method} ({set_name}, the targets of docs/quality.md):")
             lines.extend(f"    {k}: {v}" for k, v in s["verdict"].items())

@@ -172,8 +172,10 @@ def main(argv=None) -> int:
 def _draw_run(q, out: Path, method: str, name: str, volume: np.ndarray, run: dict) -> None:
     a, _ = q.BY_NAME[name].crops()
     r = run["ratio"]
+    layout = run.get("layout", {}).get("layout", float("nan"))
     title = (f"{name} {method} seed {run['seed']}: ac {r['ac']:.2f} sw {r['sw']:.2f} "
-             f"orient {r['orient_kl']:.2f} (x control), hist KL {run['raw']['hist_kl']:.2f}"
+             f"orient {r['orient_kl']:.2f} (x control), layout {layout:.2f} (x floor), "
+             f"hist KL {run['raw']['hist_kl']:.2f}"
              + (f", palette {run['palette']}" if run["palette"] else ""))
     fig = preview_figure(volume, {"front": a}, title=title)
     (out / method).mkdir(parents=True, exist_ok=True)
@@ -251,6 +253,15 @@ def paper_main(argv: list[str]) -> int:
     import _quality as q
     from _common import hardware
 
+    from npmrf3d.analysis.structure import check_installed
+    from npmrf3d.errors import ParameterError
+
+    try:
+        check_installed()   # the layout columns need the structure judge's extra
+    except ParameterError as exc:
+        print(f"bench_quality.py: {exc}")
+        return 2
+
     parser = argparse.ArgumentParser(prog="bench_quality.py --suite paper",
                                      description=q.__doc__.split("\n")[0],
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
@@ -304,7 +315,9 @@ def paper_main(argv: list[str]) -> int:
           f"autocorrelation lags <= {q.MAX_LAG}; sliced Wasserstein {q.SW_PATCH}x{q.SW_PATCH} "
           f"patches at scales {q.SW_SCALES}")
     print("references (ratio to the structureless control): floor = crop B as the slices, "
-          "blurred = control smoothed to the exemplar's grain")
+          "blurred = control smoothed to the exemplar's grain; judge = the structure judge's "
+          "pyramid ratio of the crops B against crop A (the floor of the layout), layout = "
+          "the blurred control's, a ratio to that floor")
     for name in names:
         for seed in seeds:
             key = f"{name}|seed{seed}|size{size}"
@@ -314,8 +327,9 @@ def paper_main(argv: list[str]) -> int:
             f, bl = ref["floor"], ref["blurred"]
             print(f"  {name:18s} seed {seed}: floor ac {f['ratio']['ac']:.3f} sw "
                   f"{f['ratio']['sw']:.3f} orient {f['ratio']['orient_kl']:.3f} hist_kl "
-                  f"{f['raw']['hist_kl']:.3f} | blurred ac {bl['ratio']['ac']:.3f} sw "
-                  f"{bl['ratio']['sw']:.3f} orient {bl['ratio']['orient_kl']:.3f}")
+                  f"{f['raw']['hist_kl']:.3f} judge {f['judge']['pyramid']:.3f} | blurred ac "
+                  f"{bl['ratio']['ac']:.3f} sw {bl['ratio']['sw']:.3f} orient "
+                  f"{bl['ratio']['orient_kl']:.3f} layout {bl['layout']['layout']:.2f}")
     q.save_json(path, results)
 
     def echo(line):
