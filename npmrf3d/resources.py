@@ -2,8 +2,8 @@
 
 Every method of :data:`npmrf3d.methods.METHODS` has a ``resources(config, exemplars)``
 hook that returns an :class:`Estimate`: the peak memory of the run, split into named parts, and
-where it can be guessed a rough wall time. The formulas of the two built-in methods are here, in
-one place, counted from the arrays their code allocates (numbers of bytes per voxel of the
+where it can be guessed a rough wall time. The formulas of every built-in method are here, in
+one place (why this module is over 400 lines), counted from the arrays their code allocates (numbers of bytes per voxel of the
 finest level and per exemplar patch) and checked against measured peaks
 (``tests/test_resources.py``: the arrays within a factor of 2 of ``tracemalloc``'s peak). The
 default ``synth``'s estimate also counts the process itself and is fitted to the peak resident
@@ -25,10 +25,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import ParameterError
+from .model.kopf_optimise import SWEEP_CHUNK as KOPF_SWEEP_CHUNK
+from .model.kopf_search import CHUNK_BYTES as KOPF_CHUNK_BYTES
 from .model.parzen import KERNEL_TABLE_BYTES
+from .model.phases import MAX_PHASES
 
 __all__ = ["Estimate", "ResourceError", "available_memory", "check_memory", "coherent_patch_bytes",
-           "format_bytes", "generic_estimate", "kopf_estimate", "npmrf_estimate", "one_after_another", "patch_count"]
+           "format_bytes", "generate_estimate", "generic_estimate", "kopf_estimate", "neural_estimate",
+           "npmrf_estimate", "one_after_another", "patch_count", "tile_bytes", "volume_estimate"]
 
 #: Bytes per voxel of the finest level that the NP-MRF sampler keeps or builds: the level state
 #: (volume 4C, labels 4, temperatures 4, inherited 1), the parent level (1/8 of that), the colour
@@ -38,10 +42,6 @@ NPMRF_CLASS_BUILD = 64
 NPMRF_CLASSES = 24
 #: Bytes of one float32 value.
 F4 = 4
-#: NP_K: neighbourhood vectors gathered per KD-tree batch (mirrors _kopf_steps._CHUNK_BYTES).
-KOPF_CHUNK_BYTES = 48 * 2**20
-#: NP_K: voxels gathered per optimisation batch (mirrors _kopf_steps._SWEEP_CHUNK).
-KOPF_SWEEP_CHUNK = 1 << 15
 #: Rough throughputs on this project's 2-core machine (README, Performance), for time guesses:
 #: NP-MRF multiply-adds of the patch-distance loop per second; NP_K kd-tree queries per second
 #: of wall time with the optimisation phase included (the README's jobs: 64^3 ICM 89 s, guessed
@@ -372,3 +372,59 @@ def kopf_estimate(config, exemplars) -> Estimate:
     return Estimate({"volume": volume, "work arrays": work + volume_extra,
                      "exemplar patch tables": patches + 8 * pixels * c},
                     seconds=queries / KOPF_QUERIES)
+
+
+def volume_estimate(config, exemplars) -> Estimate:
+    """Peak memory of a run of the 3D-exemplar methods (``volume-lh``, ``npmrf-3d``): per output
+    voxel the coordinates (int64 x 3, two copies while a sub-pass runs, three while up-sampling),
+    the frames (9 float32, when a field is used) and the jitter (3 float32); per exemplar voxel
+    the appearance space (float64 x dims, twice while it is built), the similarity sets (int64 x
+    k, and as positions int64 x 3k) and the smoothed exemplar (float64 x C), and with the phase
+    histogram the phases (int64), the cost (float64) and the phase mix (float32 x phases,
+    counted as ``MAX_PHASES``, twice while it is built)."""
+    n = int(np.prod(config.size))
+    shape = next(iter(dict(exemplars).values()))
+    shape = tuple(np.shape(shape)) if not isinstance(shape, tuple) else shape
+    m = int(np.prod(shape[:3]))
+    c = shape[3] if len(shape) > 3 else 1
+    field = 0 if config.vector_field == "none" else 36 * n
+    return Estimate({"coordinates": 3 * 24 * n + 12 * n + 4 * c * n, "vector field": field,
+                     "exemplar model": m * (16 * config.pca_dims + 32 * config.k + 16 * c),
+                     "phase histogram": m * (16 + 8 * MAX_PHASES) if config.balance else 0},
+                    seconds=n / 2.0e5)
+
+
+#: The neural generator: live float32 tensors of the finest scale's channel count while one tile
+#: is computed (the block input, its convolution, normalisation and activation, the
+#: concatenation; measured peak of a 64^3 tile: about 5 such tensors).
+TILE_TENSORS = 6
+#: The neural generator's throughput (output voxels per second) on this project's 2-core
+#: machine, for time guesses.
+VOXELS_PER_SECOND = 2.5e5
+
+
+def tile_bytes(config) -> int:
+    """Working memory of the neural generator's generation (``config`` a
+    :class:`npmrf3d.methods.neural.NeuralConfig`): the finest scale's activations of one tile
+    with its margins, times the tiles computed at once (one per core)."""
+    side = config.tile + 8
+    return TILE_TENSORS * F4 * config.channel_step * config.scales * side ** 3 * (os.cpu_count() or 1)
+
+
+def neural_estimate(config, exemplars) -> Estimate:
+    """Peak memory (and a time guess) of the neural method: the volume, one tile's work, the
+    training slices (``batch`` per view, forward and backward; their side
+    ``config.slice_side(exemplar shape)``)."""
+    shapes = [tuple(getattr(a, "shape", a)) for a in exemplars.values()]
+    channels = shapes[0][2] if shapes and len(shapes[0]) > 2 else 1
+    voxels = math.prod(config.size)
+    side = config.slice_side(shapes[0] if shapes else None) + 8
+    train = 3 * 3 * F4 * config.channel_step * config.scales * side * side * 9 * config.batch
+    return Estimate({"volume": F4 * channels * voxels, "work arrays": tile_bytes(config) + train},
+                    seconds=voxels / VOXELS_PER_SECOND)
+
+
+def generate_estimate(model, shape) -> Estimate:
+    """Memory of one block of a trained neural generator (``model.channels``, ``model.config``):
+    the float32 block and one tile's work."""
+    return Estimate({"volume": F4 * model.channels * math.prod(shape), "work arrays": tile_bytes(model.config)})

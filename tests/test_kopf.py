@@ -22,9 +22,9 @@ from npmrf3d import cli
 from npmrf3d.analysis.metrics import histogram_kl
 from npmrf3d.config import SynthesisResult
 from npmrf3d.errors import ParameterError
-from npmrf3d.methods import _kopf_steps as steps
 from npmrf3d.methods import kopf as K
 from npmrf3d.methods.kopf import KopfConfig, kopf_synthesize
+from npmrf3d.model import kopf_levels, kopf_optimise, kopf_search
 from npmrf3d.model.kcoherence import centre_patches
 from tests.naive import (
     NAIVE_VIEW_AXES,
@@ -66,7 +66,7 @@ def test_patches_and_neighbourhoods_match_naive(rng, channels):
     np.testing.assert_array_equal(centre_patches(ex, 3), naive_kopf_patches(ex, 3).astype(np.float32))
     vol = rng.random((6, 5, 4, channels), dtype=np.float32)
     for view in VIEWS3:
-        got = steps.volume_neighbourhoods(vol, view, 4, 2)
+        got = kopf_search.volume_neighbourhoods(vol, view, 4, 2)
         ra, ca = NAIVE_VIEW_AXES[view]
         na = 3 - ra - ca
         expected = []
@@ -85,7 +85,7 @@ def test_pca_keeps_the_variance_with_the_fewest_components(rng, channels):
     ex = (ex + np.roll(ex, 1, axis=0) + np.roll(ex, 1, axis=1)) / 3  # correlated texels
     patches = centre_patches(ex, 4)
     for variance in (0.5, 0.8, 0.95, 0.99):
-        mean, basis, kept = steps.pca_basis(patches, variance)
+        mean, basis, kept = kopf_search.pca_basis(patches, variance)
         centred = patches.astype(np.float64) - patches.mean(axis=0)
         eig = np.sort(np.linalg.eigvalsh(centred.T @ centred))[::-1]
         total = eig.sum()
@@ -101,14 +101,14 @@ def test_pca_keeps_the_variance_with_the_fewest_components(rng, channels):
 
 
 def test_pca_of_constant_patches_keeps_one_component():
-    _, basis, kept = steps.pca_basis(np.ones((10, 12), dtype=np.float32), 0.95)
+    _, basis, kept = kopf_search.pca_basis(np.ones((10, 12), dtype=np.float32), 0.95)
     assert basis.shape == (12, 1) and kept == 1.0
 
 
 @pytest.mark.parametrize("channels,variance", [(1, 1.0), (3, 1.0), (1, 0.9), (3, 0.95)])
 def test_exact_search_equals_brute_force(rng, channels, variance):
     ex = rng.random((14, 13, channels), dtype=np.float32)
-    index = steps.PatchIndex(ex, 3, variance)
+    index = kopf_search.PatchIndex(ex, 3, variance)
     queries = rng.random((200, 9 * channels), dtype=np.float32)
     got, dist = index.query(queries, eps=0.0)
     patches = naive_kopf_patches(ex, 3)
@@ -126,7 +126,7 @@ def test_exact_search_equals_brute_force(rng, channels, variance):
 def test_approximate_search_is_within_one_plus_eps(rng):
     ex = rng.random((32, 32, 3), dtype=np.float32)
     ex = (ex + np.roll(ex, 1, axis=0) + np.roll(ex, 1, axis=1)) / 3
-    index = steps.PatchIndex(ex, 4, 0.95)
+    index = kopf_search.PatchIndex(ex, 4, 0.95)
     queries = rng.random((400, 48), dtype=np.float32) * 0.6 + 0.2
     eps = 2.0
     got, _ = index.query(queries, eps=eps)
@@ -139,10 +139,10 @@ def test_approximate_search_is_within_one_plus_eps(rng):
 @pytest.mark.kernels
 def test_search_view_assigns_the_sparse_grid(rng):
     ex = rng.random((12, 12, 1), dtype=np.float32)
-    index = steps.PatchIndex(ex, 3, 1.0)
+    index = kopf_search.PatchIndex(ex, 3, 1.0)
     vol = rng.random((6, 8, 4, 1), dtype=np.float32)
     for view in VIEWS3:
-        assign, omega, energy, queries = steps.search_view(vol, view, index, grid=2, eps=0.0, r=0.8,
+        assign, omega, energy, queries = kopf_search.search_view(vol, view, index, grid=2, eps=0.0, r=0.8,
                                                        floor=1e-6)
         ra, ca = NAIVE_VIEW_AXES[view]
         sites = np.argwhere(assign >= 0)
@@ -164,7 +164,7 @@ def test_search_view_assigns_the_sparse_grid(rng):
 
 def _tiny_problem(rng, channels, views=VIEWS3, shape=(4, 6, 4), window=3, grid=2):
     exemplars = [rng.random((7, 8, channels), dtype=np.float32) for _ in views]
-    indices = [steps.PatchIndex(ex, window, 1.0) for ex in exemplars]
+    indices = [kopf_search.PatchIndex(ex, window, 1.0) for ex in exemplars]
     npatch = [(ex.shape[0] - window + 1) * (ex.shape[1] - window + 1) for ex in exemplars]
     assign = np.full((len(views), *shape), -1, dtype=np.int32)
     omega = np.zeros((len(views), *shape), dtype=np.float32)
@@ -183,21 +183,21 @@ def _kernel_update(volume, assign, omega, views, indices, window, grid, order, *
     channels = volume.shape[3]
     if lo is None:
         lo, scale = np.zeros(channels), np.full(channels, bins / 1.0)
-    packed = steps._pack_exemplars(indices, lo, scale, bins)
+    packed = kopf_optimise.pack_exemplars(indices, lo, scale, bins)
     rows = np.empty_like(assign)
     for vi, idx in enumerate(indices):
         p = assign[vi].astype(np.int64)
         base = packed.offsets[vi] + (p // idx.pwidth) * idx.exemplar.shape[1] + p % idx.pwidth
         rows[vi] = np.where(assign[vi] >= 0, base, -1)
     vol = volume.copy()
-    hist = steps.channel_histograms(vol, lo, scale, bins)
+    hist = kopf_optimise.channel_histograms(vol, lo, scale, bins)
     target = kw.get("target_hist", np.full((channels, bins), 1.0 / bins))
     view_axes = np.array([NAIVE_VIEW_AXES[v] for v in views], dtype=np.int64)
-    steps.optimisation_phase(vol, rows, omega, view_axes, packed, window=window, grid=grid, order=order,
+    kopf_optimise.optimisation_phase(vol, rows, omega, view_axes, packed, window=window, grid=grid, order=order,
                          hist=hist, hist_target=target, histogram_weight=kw.get("hist_weight", 0.0),
                          lo=lo, scale=scale, bins=bins, constraint=kw.get("constraint"),
                          tau=kw.get("tau"))
-    np.testing.assert_array_equal(hist, steps.channel_histograms(vol, lo, scale, bins))
+    np.testing.assert_array_equal(hist, kopf_optimise.channel_histograms(vol, lo, scale, bins))
     return vol
 
 
@@ -235,24 +235,24 @@ def test_histogram_reweighting_moves_a_skewed_volume_towards_the_exemplar(rng):
 
     ex = ndimage.uniform_filter(rng.random((32, 32)), 2, mode="wrap")
     ex = ((ex - ex.min()) / np.ptp(ex)).astype(np.float32)[..., None]
-    index = steps.PatchIndex(ex, 4, 0.95)
+    index = kopf_search.PatchIndex(ex, 4, 0.95)
     # exemplar texels cubed: a deliberately dark, skewed volume
     vol = np.ascontiguousarray(ex.reshape(-1)[rng.integers(0, ex.size, (16, 16, 16))][..., None] ** 3)
     lo, scale, bins = np.zeros(1), np.full(1, 16.0), 16
-    packed = steps._pack_exemplars([index] * 3, lo, scale, bins)
+    packed = kopf_optimise.pack_exemplars([index] * 3, lo, scale, bins)
     view_axes = np.array([NAIVE_VIEW_AXES[v] for v in VIEWS3], dtype=np.int64)
     assign = np.empty((3, 16, 16, 16), dtype=np.int32)
     omega = np.empty((3, 16, 16, 16), dtype=np.float32)
     for vi, view in enumerate(VIEWS3):
-        assign[vi], omega[vi], _, _ = steps.search_view(vol, view, index, grid=2, eps=0.0, r=0.8,
+        assign[vi], omega[vi], _, _ = kopf_search.search_view(vol, view, index, grid=2, eps=0.0, r=0.8,
                                                     floor=1e-3, offset=0)
-    target = steps.channel_histograms(ex, lo, scale, bins) / ex.size
+    target = kopf_optimise.channel_histograms(ex, lo, scale, bins) / ex.size
     order = rng.permutation(16 ** 3)
     kl, mean = {"before": histogram_kl(ex, vol)}, {}
     for name, weight in (("plain", 0.0), ("fractions", 1.0 / 16 ** 3), ("paper", 1.0)):
         out = vol.copy()
-        steps.optimisation_phase(out, assign, omega, view_axes, packed, window=4, grid=2, order=order,
-                             hist=steps.channel_histograms(out, lo, scale, bins), hist_target=target,
+        kopf_optimise.optimisation_phase(out, assign, omega, view_axes, packed, window=4, grid=2, order=order,
+                             hist=kopf_optimise.channel_histograms(out, lo, scale, bins), hist_target=target,
                              histogram_weight=weight, lo=lo, scale=scale, bins=bins)
         kl[name], mean[name] = histogram_kl(ex, out), float(out.mean())
     assert kl["paper"] < kl["before"]
@@ -308,7 +308,7 @@ def test_result_object_and_config(rng):
 @pytest.mark.parametrize("upsample", ["trilinear", "8/8", "1/8"])
 def test_upsampling_modes(rng, upsample):
     coarse = rng.random((4, 4, 4, 2), dtype=np.float32)
-    fine = steps._upsample(coarse, upsample, rng.random((10, 2), dtype=np.float32), np.random.default_rng(0))
+    fine = kopf_levels.upsample_volume(coarse, upsample, rng.random((10, 2), dtype=np.float32), np.random.default_rng(0))
     assert fine.shape == (8, 8, 8, 2)
     if upsample == "8/8":
         np.testing.assert_array_equal(fine, coarse.repeat(2, 0).repeat(2, 1).repeat(2, 2))
@@ -316,7 +316,7 @@ def test_upsampling_modes(rng, upsample):
         np.testing.assert_array_equal(fine[::2, ::2, ::2], coarse)
     else:  # trilinear on a torus: the mean is kept, a constant stays constant, a ramp's average
         np.testing.assert_allclose(fine.mean(axis=(0, 1, 2)), coarse.mean(axis=(0, 1, 2)), rtol=1e-5)
-        const = steps._upsample(np.ones((4, 4, 4, 1), np.float32), upsample, None, None)
+        const = kopf_levels.upsample_volume(np.ones((4, 4, 4, 1), np.float32), upsample, None, None)
         np.testing.assert_allclose(const, 1.0, rtol=1e-6)
         # child at 2x + 1 lies a quarter of the way from parent x to parent x + 1
         np.testing.assert_allclose(fine[1, 0, 0], 0.75 * (0.75 * (0.75 * coarse[0, 0, 0] + 0.25 * coarse[0, 0, 3])

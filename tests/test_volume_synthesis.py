@@ -12,16 +12,10 @@ import pytest
 from npmrf3d._kernels import volume_lh as _k
 from npmrf3d.errors import ParameterError
 from npmrf3d.methods import get_method
-from npmrf3d.methods.volume_lh import (
-    NEIGHBOURHOODS,
-    appearance_space,
-    cell_usage,
-    initial_coordinates,
-    make_volume_config,
-    set_positions,
-    upsample,
-    volume_synthesize,
-)
+from npmrf3d.methods.volume_lh import make_volume_config, volume_synthesize
+from npmrf3d.model.volume_appearance import appearance_space
+from npmrf3d.model.volume_coordinates import initial_coordinates, upsample
+from npmrf3d.model.volume_correction import NEIGHBOURHOODS, cell_usage, set_positions, window_offsets
 from npmrf3d.model import fields
 from npmrf3d.model.otsu import otsu_threshold
 from npmrf3d.model.phases import (
@@ -381,8 +375,6 @@ def test_cli_writes_a_run_and_refuses_an_image(tmp_path):
 @pytest.mark.kernels
 @pytest.mark.parametrize(("window", "channels", "twisted"), [(3, 1, False), (3, 2, True), (5, 1, False)])
 def test_correct_parzen_matches_naive(rng, window, channels, twisted):
-    from npmrf3d.methods.volume_lh import window_offsets
-
     shape, n, h = (7, 6, 8), (4, 4, 6), 1
     values = rng.random(shape + (channels,))
     feat = rng.normal(size=shape + (2,))

@@ -19,7 +19,7 @@ from .. import io
 from ..errors import ParameterError
 from ..io.runs import RUN_FILES
 from ..methods import chen_wang
-from ..methods._kopf_steps import _constraint_arrays
+from ..model.kopf_constraints import constraint_arrays
 from ..methods.kopf import DEFAULT_ITERATIONS, METHOD, KopfConfig
 from ..options import options_of
 from ._blocks import run_to_output, zarr_output
@@ -182,7 +182,7 @@ def _run(args: argparse.Namespace, argv: list[str]) -> int:
     out, checkpoint, per_view, sources = prepare_run(args, METHOD, config, whole=not zarr_output(args))
     if constraint is not None:  # its checks, before the work (the method repeats them)
         channels = next(iter(per_view.values())).shape[2]
-        _constraint_arrays(constraint, weight, config.size, channels)
+        constraint_arrays(constraint, weight, config.size, channels)
     title = f"NP_K (Kopf et al. 2007), window {config.window}, {config.levels} levels, seed {config.seed}"
     return run_to_output(args, argv, "baseline kopf", METHOD, config, per_view, sources, title, out=out,
                          checkpoint=checkpoint, record={"constraint": args.constraint,

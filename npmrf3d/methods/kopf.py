@@ -1,7 +1,11 @@
 """NP_K: solid texture synthesis by texture optimisation with histogram matching.
 
-(Slightly over 400 lines because this docstring is the method's documentation: the paper's
-equations and every choice where the paper is silent. The steps are in ``_kopf_steps``.)
+This module is the method's documentation (the paper's equations and every choice where the
+paper is silent), configuration, validation and registry entry. The steps are in
+:mod:`npmrf3d.model`: the search (:mod:`~npmrf3d.model.kopf_search`), the optimisation
+(:mod:`~npmrf3d.model.kopf_optimise`), the voxel constraints
+(:mod:`~npmrf3d.model.kopf_constraints`) and the level loop's side
+(:mod:`~npmrf3d.model.kopf_levels`).
 
 The baseline the NP-MRF paper compares with (Kopf et al. 2007, "Solid texture synthesis from
 2D exemplars"; docs/kopf.md). The volume minimises
@@ -56,8 +60,6 @@ Choices where the paper is silent (also in ``docs/kopf.md``)
 
 from __future__ import annotations
 
-import json
-import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
@@ -67,25 +69,13 @@ import numpy as np
 from .. import _validation as check
 from .._kernels import _jit
 from ..config import DEFAULT_SIZE, SynthesisMethod, SynthesisResult
-from ..model.neighbourhood import VIEW_AXES, VIEWS
-from ..model.pyramid import ArraySpec, Levels, run_pyramid
-from ..resources import kopf_estimate
-
-# The building blocks (search, IRLS optimisation, histograms, up-sampling, constraints) live in
-# _kopf_steps; they are re-exported here, where the tests and docs/kopf.md have always found them.
+from ..model.kopf_constraints import constraint_arrays
+from ..model.kopf_levels import KopfLevels
+from ..model.neighbourhood import VIEWS
+from ..model.pyramid import run_pyramid
 from ..options import option, refusing
+from ..resources import kopf_estimate
 from ._api import prepare
-from ._kopf_steps import (
-    PatchIndex,
-    _coarsen_constraint,
-    _constraint_arrays,
-    _pack_exemplars,
-    _upsample,
-    channel_histograms,
-    downsample_exemplar,
-    optimisation_phase,
-    search_view,
-)
 
 __all__ = ["METHOD", "KopfConfig", "UPSAMPLING", "kopf_synthesize", "make_kopf_config", "run"]
 
@@ -290,108 +280,6 @@ def kopf_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress: Pro
                progress=progress, checkpoint=checkpoint, t_start=t_start)
 
 
-class _KopfLevels(Levels):
-    """NP_K's side of :func:`npmrf3d.model.pyramid.run_pyramid`; the state is the volume itself."""
-
-    def __init__(self, config: KopfConfig, per_view: Mapping[str, np.ndarray], constraint,
-                 constraint_weight):
-        self.config, self.per_view = config, per_view
-        self.constraint, self.constraint_weight = constraint, constraint_weight
-        self.size, self.levels = config.size, config.levels
-        self.key = json.dumps(config.to_dict(), sort_keys=True, default=str)
-        self.distinct = list({id(a): a for a in (per_view[v] for v in config.views)}.values())
-        self.channels = self.distinct[0].shape[2]
-        pooled = np.concatenate([a.reshape(-1, self.channels) for a in self.distinct]).astype(np.float64)
-        self.lo = pooled.min(axis=0)
-        span = pooled.max(axis=0) - self.lo
-        self.scale = np.where(span > 0, config.histogram_bins / np.where(span > 0, span, 1.0), 0.0)
-        self.sigma = float(pooled.std()) or 1.0
-        self.view_axes = np.array([VIEW_AXES[v] for v in config.views], dtype=np.int64)
-        # the volume's bytes depend on the exemplars and the constraint too
-        self.fingerprint = {"exemplars": np.concatenate([a.ravel() for a in self.distinct])}
-        if constraint is not None:
-            self.fingerprint["constraint"] = constraint
-            self.fingerprint["constraint_weight"] = constraint_weight
-
-    def prepare(self, level, shape):
-        config, views, per_view = self.config, self.config.views, self.per_view
-        level_ex = {id(a): downsample_exemplar(a, level) for a in self.distinct}
-        indices = {key: PatchIndex(ex, config.window, config.variance) for key, ex in level_ex.items()}
-        self.view_index = [indices[id(per_view[v])] for v in views]
-        self.pixels = np.concatenate([ex.reshape(-1, self.channels) for ex in level_ex.values()])
-        self.hist_target = np.mean(
-            [channel_histograms(level_ex[id(per_view[v])], self.lo, self.scale, config.histogram_bins)
-             / (level_ex[id(per_view[v])].shape[0] * level_ex[id(per_view[v])].shape[1])
-             for v in views], axis=0)
-        self.packed = _pack_exemplars(self.view_index, self.lo, self.scale, config.histogram_bins)
-        self.target, self.tau = _coarsen_constraint(self.constraint, self.constraint_weight, level)
-        self.floor = 1e-3 * self.sigma * math.sqrt(config.window ** 2 * self.channels)
-        self.n_iter = config.iterations[config.levels - 1 - level]
-
-    def initial(self, shape, rng):
-        return np.ascontiguousarray(self.pixels[rng.integers(0, len(self.pixels), size=shape)],
-                                    dtype=np.float32)
-
-    def upsample(self, state, rng):
-        return _upsample(state, self.config.upsample, self.pixels, rng)
-
-    def start(self, level, state):
-        return self.n_iter, float("nan")
-
-    def relax(self, level, volume, rng, on_step):
-        config, views, n_iter = self.config, self.config.views, self.n_iter
-        shape = volume.shape[:3]
-        level_history = []
-        t_search = t_opt = 0.0
-        queries = 0
-        for it in range(n_iter):
-            ts = time.perf_counter()
-            assign = np.empty((len(views), *shape), dtype=np.int32)
-            omega = np.empty((len(views), *shape), dtype=np.float32)
-            energy = 0.0
-            for vi, view in enumerate(views):
-                assign[vi], omega[vi], e, q = search_view(
-                    volume, view, self.view_index[vi], grid=config.grid, eps=config.eps, r=config.r,
-                    floor=self.floor, offset=int(self.packed.offsets[vi]))
-                energy += e
-                queries += q
-            t_search += time.perf_counter() - ts
-            ts = time.perf_counter()
-            if config.mean_shift is None:
-                bandwidth = 0.0
-            else:
-                h0, h1 = config.mean_shift
-                frac = it / (n_iter - 1) if n_iter > 1 else 1.0
-                bandwidth = self.sigma * h0 * (h1 / h0) ** frac
-            order = rng.permutation(volume.shape[0] * volume.shape[1] * volume.shape[2]).astype(np.int64)
-            hist = channel_histograms(volume, self.lo, self.scale, config.histogram_bins)
-            optimisation_phase(volume, assign, omega, self.view_axes, self.packed,
-                               window=config.window, grid=config.grid, order=order, hist=hist,
-                               hist_target=self.hist_target, histogram_weight=config.histogram_weight,
-                               lo=self.lo, scale=self.scale, bins=config.histogram_bins,
-                               bandwidth=bandwidth, constraint=self.target, tau=self.tau)
-            t_opt += time.perf_counter() - ts
-            sites = sum(int((assign[vi] >= 0).sum()) for vi in range(len(views)))
-            level_history.append(energy / max(1, sites))
-            on_step(it + 1, level_history[-1])
-        stats = {
-            "shape": list(shape), "iterations": n_iter, "queries": queries,
-            "search_seconds": t_search, "optimise_seconds": t_opt,
-            "pca_dims": {v: self.view_index[vi].dims for vi, v in enumerate(views)},
-            "patches": {v: int(self.view_index[vi].patches.shape[0]) for vi, v in enumerate(views)},
-        }
-        return volume, level_history, stats
-
-    def to_arrays(self, volume):
-        return {"volume": volume}
-
-    def from_arrays(self, arrays):
-        return np.ascontiguousarray(arrays["volume"], dtype=np.float32)
-
-    def array_specs(self, level, shape):
-        return {"volume": ArraySpec((*shape, self.channels), np.float32)}
-
-
 def run(per_view: Mapping[str, np.ndarray], config: KopfConfig, rng: np.random.Generator, *,
         progress: ProgressCallback | None = None, checkpoint=None, constraint=None,
         constraint_weight=None, t_start: float | None = None) -> SynthesisResult:
@@ -404,8 +292,8 @@ def run(per_view: Mapping[str, np.ndarray], config: KopfConfig, rng: np.random.G
     """
     t_start = time.perf_counter() if t_start is None else t_start
     channels = next(iter(per_view.values())).shape[2]
-    target, tau = _constraint_arrays(constraint, constraint_weight, config.size, channels)
-    levels = _KopfLevels(config, per_view, target, tau)
+    target, tau = constraint_arrays(constraint, constraint_weight, config.size, channels)
+    levels = KopfLevels(config, per_view, target, tau)
     out = run_pyramid(levels, rng, progress=progress, checkpoint=checkpoint,
                       timings={"setup": time.perf_counter() - t_start},
                       stats={"threads": _jit.thread_count()}, t_start=t_start)

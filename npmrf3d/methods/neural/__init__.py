@@ -27,7 +27,7 @@ Examples
 
 from __future__ import annotations
 
-import math
+import hashlib
 import os
 import pathlib
 import time
@@ -39,22 +39,14 @@ from ..._cluster import check_scheduler, probe_scheduler
 from ...config import DEFAULT_SIZE, SynthesisMethod, SynthesisResult
 from ...errors import ParameterError
 from ...model.exemplar import resolve_exemplars
-from ...resources import Estimate, check_memory
+from ...resources import check_memory, generate_estimate, neural_estimate
 from .._api import prepare, seed_of
 from . import _extra
 from ._extra import MissingExtraError
-from .config import (
-    ORIGIN_LIMIT,
-    ZARR_BLOCK,
-    ZARR_WORKERS,
-    NeuralConfig,
-    make_neural_config,
-    neural_estimate,
-    tile_bytes,
-)
+from .config import ORIGIN_LIMIT, ZARR_BLOCK, ZARR_WORKERS, NeuralConfig, make_neural_config
 
 __all__ = ["METHOD", "MissingExtraError", "NeuralConfig", "generate", "load_model",
-           "make_neural_config", "save_model", "train", "write_zarr"]
+           "make_neural_config", "model_identity", "save_model", "train", "write_zarr"]
 
 #: What every exemplar must fit (a 3x3 window at one level: the descriptor needs some pixels).
 _FIT = {"window": 3, "levels": 1, "toroidal": False}
@@ -94,12 +86,6 @@ def train(exemplar=None, *, exemplars=None, rng=None, progress=None, checkpoint=
     eng = _extra.engine("training the neural generator")
     return eng.train_model(per_view, config, rng, progress=progress,
                            checkpoint=None if checkpoint is None else pathlib.Path(checkpoint))
-
-
-def generate_estimate(model, shape) -> Estimate:
-    """Memory of :func:`generate`: the float32 block and one tile's work."""
-    voxels = math.prod(shape)
-    return Estimate({"volume": 4 * model.channels * voxels, "work arrays": tile_bytes(model.config)})
 
 
 def generate(model, origin=(0, 0, 0), shape=32, *, seed=None) -> np.ndarray:
@@ -144,11 +130,19 @@ def load_model(path):
     return _extra.engine("loading a neural model").load_model(path)
 
 
+def model_identity(model_path) -> dict:
+    """The identity of a model's Zarr volumes (the model file's SHA-256), which their attributes
+    keep: a folder made by another model is refused, not mixed."""
+    return {"npmrf3d_model_sha256": hashlib.sha256(pathlib.Path(model_path).read_bytes()).hexdigest()}
+
+
 def write_zarr(model_path, out, *, size, block: int = ZARR_BLOCK, scheduler: str | None = None,
                workers: int = ZARR_WORKERS, overwrite: bool = False, progress=None) -> dict:
     """Write the ``size`` volume at the origin into the Zarr array ``out``, block by block on
     a Dask cluster (see :func:`npmrf3d.methods.neural.zarr_volume.write_zarr`); ``block`` must be a
-    multiple of the model's tile."""
+    multiple of the model's tile. The output is locked for the run, and a volume replaced with
+    ``overwrite`` stays until the new one is complete
+    (:func:`npmrf3d.io.zarr_blocks.write_volume`)."""
     size = check.triple("size", size, low=1)
     block = check.integer("block", block, low=1)
     workers = check.integer("workers", workers, low=1)

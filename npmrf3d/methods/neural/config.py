@@ -1,4 +1,5 @@
-"""The neural method's frozen configuration, its validation and its memory estimate.
+"""The neural method's frozen configuration and its validation (its memory estimate is
+:func:`npmrf3d.resources.neural_estimate`).
 
 No torch here: the registry (:mod:`npmrf3d.methods`), ``npmrf3d info`` and the command line's
 ``--help`` read this module without the ``[neural]`` extra installed.
@@ -6,16 +7,14 @@ No torch here: the registry (:mod:`npmrf3d.methods`), ``npmrf3d info`` and the c
 
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import asdict, dataclass
 
 from ... import _validation as check
 from ...config import DEFAULT_SIZE
 from ...model.neighbourhood import VIEWS
-from ...resources import F4, Estimate
 
-__all__ = ["DESCRIPTORS", "ORIGIN_LIMIT", "ZARR_BLOCK", "ZARR_WORKERS", "NeuralConfig", "make_neural_config", "neural_estimate"]
+__all__ = ["DESCRIPTORS", "ORIGIN_LIMIT", "ZARR_BLOCK", "ZARR_WORKERS", "NeuralConfig", "make_neural_config"]
 
 #: Side of the blocks (and Zarr chunks) that ``write_zarr`` writes, and its local Dask workers.
 ZARR_BLOCK = 128
@@ -25,6 +24,10 @@ ORIGIN_LIMIT = 2 ** 40
 ZARR_WORKERS = 2
 #: The texture descriptors training can compare slices with (see :mod:`npmrf3d.methods.neural.descriptor`).
 DESCRIPTORS = ("random", "vgg19")
+
+
+#: Largest training slice side taken from the exemplar when ``slice_size`` is None.
+AUTO_SLICE_MAX = 128
 
 
 @dataclass(frozen=True)
@@ -110,9 +113,14 @@ class NeuralConfig:
         return {"scales": self.scales, "noise_channels": self.noise_channels,
                 "channel_step": self.channel_step}
 
-
-#: Largest training slice side taken from the exemplar when ``slice_size`` is None.
-AUTO_SLICE_MAX = 128
+    def slice_side(self, exemplar_shape=None) -> int:
+        """The training slice side: ``slice_size``, or the side of an exemplar of
+        ``exemplar_shape`` (unknown: :data:`AUTO_SLICE_MAX`), at most :data:`AUTO_SLICE_MAX`."""
+        if self.slice_size is not None:
+            return self.slice_size
+        if exemplar_shape is None:
+            return AUTO_SLICE_MAX
+        return max(8, min(AUTO_SLICE_MAX, int(exemplar_shape[0]), int(exemplar_shape[1])))
 
 
 def make_neural_config(*, size=NeuralConfig.size, views=NeuralConfig.views,
@@ -166,37 +174,3 @@ def make_neural_config(*, size=NeuralConfig.size, views=NeuralConfig.views,
         calibrate=check.boolean("calibrate", calibrate),
         checkpoint_every=check.integer("checkpoint_every", checkpoint_every, low=1),
         seed=seed)
-
-
-def slice_side(config: NeuralConfig, exemplar_shape) -> int:
-    """The training slice side: ``config.slice_size`` or the exemplar's, at most 128."""
-    if config.slice_size is not None:
-        return config.slice_size
-    return max(8, min(AUTO_SLICE_MAX, int(exemplar_shape[0]), int(exemplar_shape[1])))
-
-
-#: Live float32 tensors of the finest scale's channel count while one tile is computed (the
-#: block input, its convolution, normalisation and activation, the concatenation; measured
-#: peak of a 64^3 tile: about 5 such tensors).
-TILE_TENSORS = 6
-#: Generation throughput (output voxels per second) on this project's 2-core machine, for time guesses.
-VOXELS_PER_SECOND = 2.5e5
-
-
-def tile_bytes(config: NeuralConfig) -> int:
-    """Working memory of generation: the finest scale's activations of one tile with its
-    margins, times the tiles computed at once (one per core)."""
-    side = config.tile + 8
-    return TILE_TENSORS * F4 * config.channel_step * config.scales * side ** 3 * (os.cpu_count() or 1)
-
-
-def neural_estimate(config: NeuralConfig, exemplars) -> Estimate:
-    """Peak memory (and a time guess) of the registry method: the volume, one tile's work, the
-    training slices (``batch`` per view, forward and backward)."""
-    shapes = [tuple(getattr(a, "shape", a)) for a in exemplars.values()]
-    channels = shapes[0][2] if shapes and len(shapes[0]) > 2 else 1
-    voxels = math.prod(config.size)
-    side = slice_side(config, shapes[0] if shapes else (AUTO_SLICE_MAX,) * 2) + 8
-    train = 3 * 3 * F4 * config.channel_step * config.scales * side * side * 9 * config.batch
-    return Estimate({"volume": F4 * channels * voxels, "work arrays": tile_bytes(config) + train},
-                    seconds=voxels / VOXELS_PER_SECOND)

@@ -39,7 +39,7 @@ from .checkpoint import (
     torch_load_failure,
     training_key,
 )
-from .config import NeuralConfig, slice_side
+from .config import NeuralConfig
 from .descriptor import gram, gram_loss, histogram_loss, histogram_target, make_descriptor
 from .generator import SolidGenerator
 
@@ -136,7 +136,7 @@ def train_model(per_view: dict, config: NeuralConfig, rng: np.random.Generator, 
     device = default_device()
     generator.to(device)
     descriptor = make_descriptor(config, channels, mean).to(device)
-    sides = {v: slice_side(config, a.shape) for v, a in per_view.items()}
+    sides = {v: config.slice_side(a.shape) for v, a in per_view.items()}
     targets, values = {}, {}
     with torch.no_grad():
         for view, exemplar in per_view.items():
