@@ -76,10 +76,10 @@ def draw(name: str, exemplar, runs: dict, out: pathlib.Path) -> pathlib.Path:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument("--size", type=int, default=64, help="side of the volumes")
     parser.add_argument("--exemplars", nargs="+", default=list(EXEMPLARS), help="bundled exemplar names")
-    parser.add_argument("--size", type=int, default=64)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", default="figures/views")
+    parser.add_argument("--out", default="figures/views", help="folder of the figures and the record")
     args = parser.parse_args(argv)
     check_installed()
     out = pathlib.Path(args.out)
