@@ -9,7 +9,6 @@ without the extra.
 from __future__ import annotations
 
 import argparse
-import hashlib
 import os
 import pathlib
 import time
@@ -20,7 +19,7 @@ from .. import _validation as check
 from .. import data
 from ..errors import ParameterError
 from ..io.files import atomic_write, write_volume_tiff
-from ..io.zarr_blocks import claim_volume, volume_attrs
+from ..io.zarr_blocks import volume_attrs
 from ..methods import neural
 from ..methods.neural import _extra
 from ..methods.neural.config import (
@@ -160,14 +159,13 @@ def _generate(args: argparse.Namespace, argv) -> int:
     _threads(args.threads)
     t0 = time.perf_counter()
     if zarr_out:
-        digest = hashlib.sha256(pathlib.Path(args.model).read_bytes()).hexdigest()
-        attrs = volume_attrs({"npmrf3d_model_sha256": digest}, size, args.block)
+        attrs = volume_attrs(neural.model_identity(args.model), size, args.block)
         bar = CountProgress("blocks", unit="block", enabled=not args.quiet)
         try:
-            with kept_on_interrupt(args, out, attrs), claim_volume(out, attrs=attrs, overwrite=args.overwrite) as place:
-                summary = neural.write_zarr(args.model, place, size=size, block=args.block,
+            with kept_on_interrupt(args, out, attrs):
+                summary = neural.write_zarr(args.model, out, size=size, block=args.block,
                                             scheduler=args.scheduler, workers=args.workers,
-                                            progress=lambda d, n: bar(d, n, None))
+                                            overwrite=args.overwrite, progress=lambda d, n: bar(d, n, None))
         finally:
             bar.close()
         if not args.quiet:

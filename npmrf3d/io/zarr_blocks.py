@@ -7,7 +7,8 @@ is finished; a rerun of the same command makes only the blocks without a marker 
 off half-way is made again whole). The array's attributes say what made it (the run's
 identity): a folder made by another run is refused, not mixed (the refusal names what
 differs). :func:`claim_volume` holds the output's lock for a whole run and keeps an old volume
-until the one replacing it is complete. The array is Zarr format 2,
+until the one replacing it is complete; :func:`write_volume` runs a whole volume's block tasks
+under it, in this process or on a Dask cluster. The array is Zarr format 2,
 ``(N1, N2, N3, C)`` float32, which napari opens directly (``napari vol.zarr``; C = 3 shows as
 RGB). Used by the block runner of the synthesis methods (:mod:`npmrf3d.methods.blocks`) and
 the neural generator (:mod:`npmrf3d.methods.neural.zarr_volume`).
@@ -26,11 +27,13 @@ import shutil
 import numpy as np
 import zarr
 
+from .._cluster import dask_client
 from ..errors import ParameterError
 from .runs import OutputLock, glob_escape, new_staging, replace_folder
 
 __all__ = ["DONE", "NEXT", "block_box", "block_indices", "claim_volume", "clamp_block", "differences",
-           "finished_blocks", "next_folder", "open_blocks", "read_attributes", "volume_attrs", "write_block"]
+           "finished_blocks", "next_folder", "open_blocks", "read_attributes", "volume_attrs", "write_block",
+           "write_volume"]
 
 #: The folder of finished-block markers inside the array's folder.
 DONE = ".npmrf3d-done"
@@ -292,3 +295,52 @@ def write_block(out, index, block: int, values: np.ndarray) -> None:
     origin, shape = block_box(index, block, array.shape[:3])
     array[tuple(slice(o, o + s) for o, s in zip(origin, shape))] = np.asarray(values, dtype=np.float32)
     pathlib.Path(out, DONE, ".".join(map(str, index))).touch()
+
+
+def write_volume(out, *, size, channels: int, block: int, attrs: dict, task, args: tuple = (),
+                 overwrite: bool = False, record: dict | None = None, scheduler: str | None = None,
+                 workers: int = 1, progress=None) -> dict:
+    """Make the ``size`` volume of ``channels`` channels into the Zarr array ``out``, block by
+    block: ``task(place, index, *args)`` makes block ``index`` and writes it into the array at
+    ``place`` (:func:`write_block`), and returns what the caller wants back (picklable).
+
+    The output is claimed for the whole run (:func:`claim_volume`: its lock; an old volume kept
+    until the new one is complete, ``overwrite`` or not) and created or resumed
+    (:func:`open_blocks` with the run's identity ``attrs`` and its ``record``); only the blocks
+    without a marker are made, in this process one after another when ``workers`` is 1 and no
+    ``scheduler`` is given, else as tasks of a local Dask cluster of ``workers`` processes or of
+    the running scheduler at that address. ``progress(done, total)`` once before the first block
+    and after each one.
+
+    Returns
+    -------
+    dict
+        ``blocks`` (total), ``skipped`` (already done), ``written`` and ``results`` (what the
+        tasks returned, in the order they finished).
+    """
+    size = tuple(int(n) for n in size)
+    with claim_volume(out, attrs=volume_attrs(attrs, size, block), overwrite=overwrite) as place:
+        open_blocks(place, size=size, channels=channels, block=block, attrs=attrs, record=record)
+        indices = block_indices(size, block)
+        finished = finished_blocks(place)
+        todo = [i for i in indices if i not in finished]
+        results = []
+
+        def made(result) -> None:
+            results.append(result)
+            if progress is not None:
+                progress(len(indices) - len(todo) + len(results), len(indices))
+
+        if progress is not None:
+            progress(len(indices) - len(todo), len(indices))
+        if todo and scheduler is None and workers == 1:
+            for index in todo:
+                made(task(os.fspath(place), index, *args))
+        elif todo:
+            from distributed import as_completed
+
+            with dask_client(scheduler, workers) as client:
+                futures = [client.submit(task, os.fspath(place), index, *args, pure=False) for index in todo]
+                for future in as_completed(futures):
+                    made(future.result())
+    return {"blocks": len(indices), "skipped": len(indices) - len(todo), "written": len(todo), "results": results}
