@@ -23,28 +23,58 @@ ParameterError
     The exception raised for user mistakes.
 """
 
-from importlib.metadata import PackageNotFoundError, version
+import importlib
 
-from . import _cache_folders, data  # noqa: F401  (_cache_folders first: before matplotlib)
-from .analysis import metrics
-from .config import DEFAULT_SIZE, PRESETS, SUPPORTS, DecisionRule, SynthesisConfig, SynthesisResult
-from .errors import ParameterError
-from .methods import METHODS, get_method, synthesize
-from .methods.chen_wang import chen_wang_synthesize
-from .methods.kopf import kopf_synthesize
-from .methods.neural import neural_synthesize
-from .methods.npmrf import npmrf_synthesize
-from .methods.npmrf_3d import npmrf_volume_synthesize
-from .methods.npmrf_coherent import coherent_synthesize
-from .methods.npmrf_options import make_config
-from .methods.volume_lh import volume_synthesize
-from .model.exemplar import load_exemplar
-from .model.heuristics import HEURISTICS
+from . import _cache_folders  # noqa: F401  (first: settles matplotlib's folder before it is imported)
 
-try:
-    __version__ = version("npmrf3d")
-except PackageNotFoundError:  # running from a source tree that was not installed
-    __version__ = "0.0.0+unknown"
+#: Where each public name lives: ``import npmrf3d`` imports none of them (numba, scipy and
+#: matplotlib take a second or more); the first use of a name imports its module (PEP 562).
+_LAZY = {
+    "DEFAULT_SIZE": ".config", "PRESETS": ".config", "SUPPORTS": ".config", "DecisionRule": ".config",
+    "SynthesisConfig": ".config", "SynthesisResult": ".config",
+    "ParameterError": ".errors",
+    "METHODS": ".methods", "get_method": ".methods", "synthesize": ".methods",
+    "chen_wang_synthesize": ".methods.chen_wang",
+    "kopf_synthesize": ".methods.kopf",
+    "neural_synthesize": ".methods.neural",
+    "npmrf_synthesize": ".methods.npmrf",
+    "npmrf_volume_synthesize": ".methods.npmrf_3d",
+    "coherent_synthesize": ".methods.npmrf_coherent",
+    "make_config": ".methods.npmrf_options",
+    "volume_synthesize": ".methods.volume_lh",
+    "load_exemplar": ".model.exemplar",
+    "HEURISTICS": ".model.heuristics",
+}
+#: Public names that are modules.
+_LAZY_MODULES = {"data": ".data", "metrics": ".analysis.metrics"}
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("npmrf3d")
+    except PackageNotFoundError:  # running from a source tree that was not installed
+        return "0.0.0+unknown"
+
+
+def __getattr__(name: str):
+    """Import a public name's module on its first use and keep the name (PEP 562)."""
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name], __name__), name)
+    elif name in _LAZY_MODULES:
+        value = importlib.import_module(_LAZY_MODULES[name], __name__)
+    elif name == "__version__":
+        value = _version()
+    else:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
 
 __all__ = [
     "DEFAULT_SIZE",

@@ -15,6 +15,10 @@ compiler can also leave one of llvmlite's objects half-built, whose finalizer th
 the process exits ("Exception ignored in: ObjectRef.__del__ ... AttributeError"); while the
 latch is set the hook keeps those quiet too, and once a run was interrupted, :func:`restore`
 collects the garbage and leaves a hook that keeps those quiet, and only those.
+
+The command line installs this handling first thing (:func:`npmrf3d.cli.main.main`) and the
+``npmrf3d`` process before it imports the command line (:mod:`npmrf3d.__main__`), so that a
+Ctrl-C at any moment is one line and exit code 130.
 """
 
 from __future__ import annotations
@@ -90,16 +94,22 @@ def install() -> dict | None:
 
 
 def restore(previous: dict | None) -> None:
-    """Put back what :func:`install` replaced and clear the latch; after an interrupt, the hook
-    put back keeps the compiler's failing finalizers quiet (:func:`_quiet_compiler_finalizers`)."""
-    interrupted = _latched.is_set()
-    _latched.clear()
+    """Put back what :func:`install` replaced and clear the latch; after an interrupt, the
+    garbage is collected first (objects the interrupt left half-built, in cycles, are freed now,
+    quietly, not at exit; a second signal meanwhile is ignored: the run is already ending) and
+    the hook put back keeps the compiler's failing finalizers quiet
+    (:func:`_quiet_compiler_finalizers`)."""
     previous = dict(previous or {})
+    interrupted = _latched.is_set()
+    if interrupted:
+        for s in SIGNALS:
+            if s in previous:
+                signal.signal(s, signal.SIG_IGN)
+        gc.collect()
+    _latched.clear()
     if "unraisablehook" in previous:
         hook = previous.pop("unraisablehook")
         sys.unraisablehook = (hook if not interrupted else
                               lambda unraisable: _quiet_compiler_finalizers(unraisable, fallback=hook))
     for s, handler in previous.items():
         signal.signal(s, handler)
-    if interrupted:  # half-built objects in cycles are freed now, under the quiet hook, not at exit
-        gc.collect()

@@ -116,26 +116,61 @@ def main(argv: list[str] | None = None) -> int:
     """Run the command line; return the exit code (0 ok, 1 the output of a command that only
     prints was lost, 2 user error, 130 interrupted).
 
-    Standard output or error closed or full never stops a command's work
-    (:func:`npmrf3d.cli._streams.guard_streams`): a run still writes its folder and exits 0."""
-    with _streams.guard_streams() as streams:
-        args, code = _main(argv)
-        reason = _streams.lost_reason(streams["stdout"])
-        if code == 0 and reason is not None and _prints_only(args):
-            if reason:  # a reader that hung up ('npmrf3d info | head') is not reported
-                say(f"{PROG}: error: cannot write to standard output: {reason}", error=True)
-            return 1
-        return code
+    Ctrl-C and SIGTERM end a command alike, from its first moment to its last (one line, exit
+    130), latched so that none is lost (:mod:`npmrf3d.cli._interrupt`). Standard output or error
+    closed or full never stops a command's work (:func:`npmrf3d.cli._streams.guard_streams`): a
+    run still writes its folder and exits 0."""
+    previous = _interrupt.install()
+    try:
+        with _streams.guard_streams() as streams:
+            args, code = _interruptible(argv)
+            reason = _streams.lost_reason(streams["stdout"])
+            if code == 0 and reason is not None and _prints_only(args):
+                if reason:  # a reader that hung up ('npmrf3d info | head') is not reported
+                    say(f"{PROG}: error: cannot write to standard output: {reason}", error=True)
+                return 1
+            return code
+    finally:
+        _interrupt.restore(previous)
 
 
-def _main(argv: list[str] | None) -> tuple[argparse.Namespace | None, int]:
-    """(the parsed arguments or None, the exit code): the body of :func:`main`."""
+def _interruptible(argv: list[str] | None) -> tuple[argparse.Namespace | None, int]:
+    """:func:`_main`, whose interruption (Ctrl-C, SIGTERM) is one line and exit code 130."""
+    parsed: list[argparse.Namespace] = []
+    try:
+        with warnings.catch_warnings():
+            return _main(argv, parsed)
+    except KeyboardInterrupt:
+        return _stopped(parsed)
+    except BrokenPipeError:  # a write around the guarded streams: stop quietly, as other tools do
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return (parsed or [None])[0], 1
+    except Exception:
+        # a Ctrl-C that landed inside numba's compiler leaves it half-done, and the next call
+        # fails ("no compiled object yet"): that failure is the interrupt's, not a bug
+        if _interrupt.pending():
+            return _stopped(parsed)
+        raise
+
+
+def _stopped(parsed: list[argparse.Namespace]) -> tuple[argparse.Namespace | None, int]:
+    """Say that the command was interrupted (and what it keeps); exit code 130."""
+    args = (parsed or [None])[0]
+    say(f"{PROG}: {interrupted_message(args)}", error=True)
+    return args, 130
+
+
+def _main(argv: list[str] | None, parsed: list) -> tuple[argparse.Namespace | None, int]:
+    """(the parsed arguments or None, the exit code): the body of :func:`main`; the parsed
+    arguments are also put in ``parsed`` as soon as they are known."""
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help, --version and usage errors (argparse printed them)
         return None, exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+    parsed.append(args)
     problem = environment_problem()
     if problem is not None:
         return args, error(problem)
@@ -143,28 +178,9 @@ def _main(argv: list[str] | None) -> tuple[argparse.Namespace | None, int]:
     option_names = {**{name: "--" + name.replace("_", "-") for name in OPTION_NAMES},
                     **neural.OPTION_NAMES, **option_strings(parser, args)}
     quiet = bool(getattr(args, "quiet", False))
-    # Ctrl-C and SIGTERM end a run alike (one line, exit 130), latched so that none is lost
-    previous = _interrupt.install()
-    try:
-        with warnings.catch_warnings(), _compile_notice(quiet):
-            _print_notes(quiet=quiet)
-            return args, guarded(args.handler, args, argv, option_names)
-    except KeyboardInterrupt:
-        say(f"{PROG}: {interrupted_message(args)}", error=True)
-        return args, 130
-    except BrokenPipeError:  # a write around the guarded streams: stop quietly, as other tools do
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-        return args, 1
-    except Exception:
-        # a Ctrl-C that landed inside numba's compiler leaves it half-done, and the next call
-        # fails ("no compiled object yet"): that failure is the interrupt's, not a bug
-        if _interrupt.pending():
-            say(f"{PROG}: {interrupted_message(args)}", error=True)
-            return args, 130
-        raise
-    finally:
-        _interrupt.restore(previous)
+    with _compile_notice(quiet):
+        _print_notes(quiet=quiet)
+        return args, guarded(args.handler, args, argv, option_names)
 
 
 def _compile_notice(quiet: bool):

@@ -183,11 +183,14 @@ class OutputLock:
             except OSError as exc:
                 raise ParameterError(f"{self.what} '{self.target}' cannot be locked: "
                                      f"{exc.strerror or exc}") from None
-            with os.fdopen(fd, "w", encoding="ascii") as handle:
-                handle.write(f"{os.getpid()} {socket.gethostname()}\n")
-            _HELD[path] = 1
-            self.path = path
-            clean_stale_staging(self.target)
+            try:  # the lock is ours from here: interrupted or failed before it is held, it goes
+                _HELD[path], self.path = 1, path
+                with os.fdopen(fd, "w", encoding="ascii") as handle:
+                    handle.write(f"{os.getpid()} {socket.gethostname()}\n")
+                clean_stale_staging(self.target)
+            except BaseException:
+                self.release()
+                raise
             return
         raise ParameterError(f"{self.what} '{self.target}' cannot be locked (lock file '{path}' "
                              f"keeps reappearing); {self.advice}")
