@@ -37,29 +37,9 @@ def _registry(name: str):
 
 
 #: The combinations (support, relaxation) that use an option, for the options that some
-#: combinations cannot use; every other option applies everywhere.
-APPLIES: dict[str, tuple[tuple[str, str], ...]] = {
-    "xi": (("full", "icm"), ("coherent", "icm")),
-    "stop": (("full", "icm"), ("coherent", "icm")),
-    "max_sweeps": (("full", "icm"), ("coherent", "icm")),
-    "temperatures": (("full", "icm"), ("coherent", "icm")),
-    "inherit": (("full", "icm"), ("full", "anneal"), ("coherent", "icm")),
-    "sampler": (("full", "anneal"), ("coherent", "anneal")),
-    "schedule": (("full", "anneal"), ("coherent", "anneal")),
-    "t0": (("full", "anneal"), ("coherent", "anneal")),
-    "t_end": (("full", "anneal"), ("coherent", "anneal")),
-    "proposals": (("full", "anneal"), ("coherent", "anneal")),
-    "proposal": (("full", "anneal"),),
-    "preset": (("full", "icm"), ("full", "anneal")),
-    "bandwidth": (("full", "icm"), ("full", "anneal")),
-    "adaptive": (("full", "icm"), ("full", "anneal")),
-    "decision": (("full", "icm"), ("full", "anneal")),
-    "tau": (("full", "icm"), ("full", "anneal")),
-    "histogram_weight": (("full", "icm"), ("full", "anneal")),
-    "toroidal_exemplar": (("full", "icm"), ("full", "anneal")),
-    "segmented": (("coherent", "icm"), ("coherent", "anneal")),
-    "phase_weight": (("coherent", "icm"), ("coherent", "anneal")),
-}
+#: combinations cannot use (every other option applies everywhere): entered by each such field
+#: itself (:func:`_in_table`), in the fields' order.
+APPLIES: dict[str, tuple[tuple[str, str], ...]] = {}
 #: The options that support ``coherent`` with ICM uses only with per-voxel temperatures (without
 #: them every voxel is re-decided in each of a level's iterations and children copy 8/8).
 TEMPERATURE_OPTIONS = ("xi", "stop", "max_sweeps", "inherit")
@@ -73,18 +53,21 @@ def applies(name: str, where: tuple) -> bool:
     return name not in APPLIES or tuple(where[:2]) in APPLIES[name]
 
 
-def _in_table(name: str, needs: str) -> dict:
-    """``applies`` and ``needs`` of an option that only some (support, relaxation, temperatures)
-    combinations read, from the one table that says which (:data:`APPLIES`)."""
+def _in_table(name: str, where: tuple[tuple[str, str], ...], needs: str | None) -> dict:
+    """Enter option ``name`` in :data:`APPLIES` as used by the (support, relaxation) pairs
+    ``where`` only, and give its field the ``applies`` (from that table) and the ``needs`` text
+    that go with it; ``needs`` None: the table's entry only (the field is always recorded)."""
+    APPLIES[name] = where
+
     def read(config) -> bool:
         return applies(name, (config.support, config.relaxation, config.temperatures))
-    return {"applies": read, "needs": needs}
+    return {} if needs is None else {"applies": read, "needs": needs}
 
 
-_FULL = "support is full"
-_ANNEAL = "relaxation is anneal"
-_COHERENT = "support is coherent"
-_TEMPERED = "temperatures is set (relaxation icm)"
+_FULL = (("full", "icm"), ("full", "anneal")), "support is full"
+_COHERENT = (("coherent", "icm"), ("coherent", "anneal")), "support is coherent"
+_ANNEAL = (("full", "anneal"), ("coherent", "anneal")), "relaxation is anneal"
+_TEMPERED = (("full", "icm"), ("coherent", "icm")), "temperatures is set (relaxation icm)"
 
 
 @dataclass(frozen=True)
@@ -114,22 +97,22 @@ class DecisionRule:
 
     bandwidth: float = option(1.0, "support full: neighbour bandwidth / h_opt", kind="real",
                               low=0.0, low_open=True, decided=_PRESET_VALUE, metavar="B",
-                              **_in_table('bandwidth', _FULL))
+                              **_in_table('bandwidth', *_FULL))
     centre_bandwidth: float = option(1.0, "centre-value bandwidth / h_opt (or / sigma)", kind="real", low=0.0,
                                      low_open=True, decided=_PRESET_VALUE, metavar="B")
     adaptive: float = option(0.0, "support full: 2h^2 = A * best distance", kind="real", low=0.0,
                              decided=_PRESET_VALUE, metavar="A",
-                             **_in_table('adaptive', _FULL))
+                             **_in_table('adaptive', *_FULL))
     decision: str = option("argmax", "support full: argmax, or sample exp(score/tau)",
                            kind="choice", choices=lambda: _registry("DECISIONS"),
                            decided=_PRESET_VALUE,
-                           **_in_table('decision', _FULL))
+                           **_in_table('decision', *_FULL))
     tau: float = option(1.0, "support full: temperature of sample", kind="real", low=0.0,
                         low_open=True, decided=_PRESET_VALUE, metavar="T",
-                        **_in_table('tau', _FULL))
+                        **_in_table('tau', *_FULL))
     histogram_weight: float = option(0.0, "support full: over-used label penalty",
                                      kind="real", low=0.0, decided=_PRESET_VALUE, metavar="W",
-                                     **_in_table('histogram_weight', _FULL))
+                                     **_in_table('histogram_weight', *_FULL))
     outlier: float = option(0.0, "uniform share in each view's estimate",
                             kind="real", low=0.0, high=1.0, high_open=True,
                             decided=_PRESET_VALUE, metavar="A")
@@ -196,45 +179,46 @@ class SynthesisConfig:
     inherit: str = option("resynth", "inherited voxels may change (resynth) or stay (fixed)",
                           kind="choice", choices=lambda: _registry("INHERIT"),
                           group="volume and pyramid",
-                          **_in_table('inherit', "temperatures is set, or support is full"))
+                          **_in_table('inherit', (("full", "icm"), ("full", "anneal"), ("coherent", "icm")),
+                                     "temperatures is set, or support is full"))
     xi: float = option(IcmOptions.xi, "icm: cooling step, < 0", kind="real",
                        high=0.0, high_open=True, decided="-1; support full: -3",
-                       **_in_table('xi', _TEMPERED))
+                       **_in_table('xi', *_TEMPERED))
     stop: float = option(IcmOptions.stop, "icm: a level stops when its temperature fell by F",
                          kind="real", low=0.0, high=1.0, low_open=True, metavar="F",
-                         **_in_table('stop', _TEMPERED))
+                         **_in_table('stop', *_TEMPERED))
     max_sweeps: int = option(IcmOptions.max_sweeps, "icm: most sweeps per level", kind="int", low=1,
-                             **_in_table('max_sweeps', _TEMPERED))
+                             **_in_table('max_sweeps', *_TEMPERED))
     sampler: str = option(AnnealOptions.sampler, "anneal: heat-bath or metropolis (the paper)", kind="choice",
                           choices=lambda: SAMPLERS, decided="metropolis; support full: heat-bath",
-                          **_in_table('sampler', _ANNEAL))
+                          **_in_table('sampler', *_ANNEAL))
     schedule: str = option(AnnealOptions.schedule, "anneal: temperature from --t0 to --t-end",
                            kind="choice", choices=lambda: SCHEDULES,
-                           **_in_table('schedule', _ANNEAL))
+                           **_in_table('schedule', *_ANNEAL))
     t0: float = option(AnnealOptions.t0, "anneal: a level's first temperature", kind="real", low=0.0,
                        low_open=True, metavar="T",
-                       **_in_table('t0', _ANNEAL))
+                       **_in_table('t0', *_ANNEAL))
     t_end: float = option(AnnealOptions.t_end, "anneal: a level's last temperature, <= t0",
                           kind="real", low=0.0, metavar="T",
-                          **_in_table('t_end', _ANNEAL))
+                          **_in_table('t_end', *_ANNEAL))
     proposals: int = option(AnnealOptions.proposals, "anneal: sweeps per level",
                             kind="int", low=1, metavar="P",
-                            **_in_table('proposals', _ANNEAL))
+                            **_in_table('proposals', *_ANNEAL))
     proposal: str = option(AnnealOptions.proposal,
                            "anneal, metropolis, support full: proposals from the exemplar or the labels",
                            kind="choice",
                            choices=lambda: PROPOSALS,
-                           **_in_table('proposal', "support is full (relaxation anneal)"))
+                           **_in_table('proposal', (("full", "anneal"),), "support is full (relaxation anneal)"))
     support: str = option("coherent", "estimates over coherent candidates or every patch (full)",
                           kind="choice", choices=lambda: SUPPORTS,
                           decided="coherent")
     preset: str = option("tuned", "support full: the decision rule",
                          kind="choice", choices=lambda: tuple(PRESETS),
                          decided="tuned",
-                         **_in_table('preset', _FULL))
+                         **_in_table('preset', *_FULL))
     segmented: str = option("auto", "support coherent: the preset for segmented exemplars", kind="choice",
                             choices=lambda: SEGMENTED_MODES,
-                            **_in_table('segmented', _COHERENT))
+                            **_in_table('segmented', *_COHERENT))
     rule: DecisionRule = option(help="decision rule", kind="nested", default_factory=DecisionRule)
     grey_levels: int | None = option(None, "re-quantise each channel to K levels",
                                      kind="int", low=2, high=65536, optional=True, metavar="K",
@@ -244,9 +228,10 @@ class SynthesisConfig:
                                  group="views and exemplars", decided="keep every colour")
     toroidal_exemplar: bool = option(False, "support full: exemplar patches wrap around",
                                      kind="flag", group="views and exemplars",
-                                     **_in_table('toroidal_exemplar', _FULL))
+                                     **_in_table('toroidal_exemplar', *_FULL))
     temperatures: bool = option(False, "icm with per-voxel temperatures (Urs et al. 2014)",
-                                kind="flag", decided="with support full")
+                                kind="flag", decided="with support full",
+                                **_in_table('temperatures', _TEMPERED[0], None))
     blockwise: bool = option(False, "the block-local sampler (docs/blocks.md)", kind="flag", group="blocks")
     # blockwise: levels of at most this many voxels run whole, once for all blocks (256^3: the
     # cones of blocks of 128 at 512^3 would repeat its 256^3 level 8.8 times over)
@@ -258,7 +243,7 @@ class SynthesisConfig:
     # comes nearer the scans' crops; photographs' quality unchanged (docs/quality.md)
     phase_weight: float = option(16.0, "support coherent: phase control (0 = off)", kind="real", low=0.0,
                                  metavar="W", decided="16; support full: 0",
-                                 **_in_table('phase_weight', _COHERENT))
+                                 **_in_table('phase_weight', *_COHERENT))
     # support coherent: neighbourhoods searched and voting every `grid` voxels along both plane axes;
     # None: the run's own (methods.npmrf_options.coherent_grid: 2 on photographs where every level's
     # side is even, docs/quality.md "Sparse sites"; else every site)

@@ -11,7 +11,11 @@ else:
   messages), so a method's ``make_config`` only checks what ties several options together;
 - :func:`refuse_inapplicable` refuses, in one line, an option set away from its default that the
   configuration would not read (``sampler`` without annealing, ``pilot`` without blocks);
-- :func:`option_table` writes the docs' option tables.
+- :func:`option_table` writes the docs' option tables;
+- :func:`made_from` gives a method's ``make_config`` its keywords, one per option, with the
+  fields' defaults, so that it validates a dict of every option rather than listing them;
+- :func:`shared` carries a configuration into another method's, field by field, for every
+  option the two have by name (the default method runs the coherent sampler so).
 
 Adding an option to a method is one field here and its use in the method.
 """
@@ -20,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import inspect
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -27,7 +32,8 @@ from typing import Any
 from . import _validation as check
 
 __all__ = ["Option", "option", "options_of", "validate", "refuse_inapplicable", "given_options",
-           "option_table", "flag_name", "recorded", "refusing", "same_option"]
+           "option_table", "flag_name", "recorded", "refusing", "same_option", "flat_options", "keywords",
+           "made_from", "shared"]
 
 _KEY = "npmrf3d_option"
 
@@ -101,6 +107,86 @@ def same_option(config_class, name: str, default=dataclasses.MISSING, **changes)
 def options_of(config_class) -> dict[str, tuple[dataclasses.Field, Option]]:
     """{field name: (field, option)} of the fields of ``config_class`` that are options, in order."""
     return {f.name: (f, f.metadata[_KEY]) for f in dataclasses.fields(config_class) if _KEY in f.metadata}
+
+
+def flat_options(config_class) -> dict[str, tuple[dataclasses.Field, Option]]:
+    """:func:`options_of` with a nested configuration's options (the decision rule's) in its place."""
+    out = {}
+    for name, (f, opt) in options_of(config_class).items():
+        out.update(options_of(type(field_default(f))) if opt.kind == "nested" else {name: (f, opt)})
+    return out
+
+
+def keywords(config_class, **more) -> dict[str, Any]:
+    """{keyword: default} of ``config_class``'s ``make_config``: every option of
+    :func:`flat_options` with its field's default, None where the run decides it
+    (:attr:`Option.decided`), then ``more`` (keywords that are no field, or another default).
+
+    >>> from npmrf3d.methods.chen_wang import ChenWangConfig
+    >>> list(keywords(ChenWangConfig))[:4], keywords(ChenWangConfig)["k"]
+    (['size', 'window', 'levels', 'views'], 5)
+    """
+    out = {name: None if opt.decided is not None else field_default(f)
+           for name, (f, opt) in flat_options(config_class).items()}
+    return {**out, **more}
+
+
+def made_from(config_class, **more) -> Callable[[Callable[[dict], Any]], Callable[..., Any]]:
+    """Decorator: ``build(values)``, which validates ``values`` -- a dict of every keyword of
+    :func:`keywords` (``config_class``, ``more``) -- into a configuration, becomes
+    ``make_config(**options)``, whose signature lists those keywords and defaults (so ``help``,
+    ``inspect`` and the API's list of a method's options read them) and which refuses an unknown
+    keyword in one line. An option added to ``config_class`` is a keyword at once.
+
+    >>> from npmrf3d.methods.chen_wang import make_chen_wang_config
+    >>> make_chen_wang_config(size=16, levels=2, k=3).k
+    3
+    >>> make_chen_wang_config(kk=3)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    npmrf3d.errors.ParameterError: there is no option 'kk'; the options are size, window, levels, views, ...
+    """
+    defaults = keywords(config_class, **more)
+
+    def decorate(build: Callable[[dict], Any]) -> Callable[..., Any]:
+        @functools.wraps(build)
+        def make_config(**options):
+            unknown = [name for name in options if name not in defaults]
+            if unknown:
+                check.fail(f"there is no option {unknown[0]!r}; the options are {', '.join(defaults)}")
+            return build({**defaults, **options})
+
+        make_config.__signature__ = inspect.Signature(
+            [inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=value)
+             for name, value in defaults.items()])
+        return make_config
+    return decorate
+
+
+def flat_values(config) -> dict[str, Any]:
+    """{name: value} of every option of ``config``, a nested configuration's in its place."""
+    out = {}
+    for name, (_, opt) in options_of(type(config)).items():
+        value = getattr(config, name)
+        out.update(flat_values(value) if opt.kind == "nested" else {name: value})
+    return out
+
+
+def shared(config, target_class) -> dict[str, Any]:
+    """The values of ``config``'s options (:func:`flat_values`) that ``target_class`` has by the
+    same name, for the target's ``make_config``: one configuration carried into another field by
+    field. A None that ``config`` leaves for the run to decide (:attr:`Option.decided`) is left
+    out, so that the target's own default holds.
+
+    >>> from npmrf3d.methods.npmrf_options import make_config
+    >>> from npmrf3d.methods.npmrf_coherent import CoherentConfig
+    >>> carried = shared(make_config(size=16, levels=2), CoherentConfig)
+    >>> carried["levels"], carried["outlier"], "grid" in carried, "preset" in carried
+    (2, 0.01, False, False)
+    """
+    fields, values = flat_options(type(config)), flat_values(config)
+    return {name: values[name] for name in options_of(target_class)
+            if name in values and not (values[name] is None and fields[name][1].decided is not None)}
 
 
 def field_default(f: dataclasses.Field):

@@ -20,7 +20,7 @@ from ..config import DEFAULT_SIZE
 from ..io.runs import RUN_FILES
 from ..model.exemplar import BUNDLED_PREFIX
 from ..model.neighbourhood import VIEWS
-from ..options import default_text, field_default, flag_name, options_of, refuse_inapplicable
+from ..options import default_text, field_default, flag_name, flat_options, options_of, refuse_inapplicable
 from ._common import (
     add_exemplar_kind,
     add_run_options,
@@ -51,13 +51,7 @@ def _parse_tuple(text: str) -> int | tuple[int, ...]:
 def method_options(config_class) -> dict:
     """{name: (field, option)} of every option of ``config_class`` the command line takes: its
     fields, with a nested configuration's fields (the decision rule) in its place."""
-    out = {}
-    for name, (f, opt) in options_of(config_class).items():
-        if opt.kind == "nested":
-            out.update(options_of(type(field_default(f))))
-        elif opt.kind != "own":
-            out[name] = (f, opt)
-    return out
+    return {name: (f, opt) for name, (f, opt) in flat_options(config_class).items() if opt.kind != "own"}
 
 
 def _add_option(group, name: str, f: dataclasses.Field, opt) -> None:

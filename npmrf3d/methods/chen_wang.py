@@ -69,7 +69,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import _validation as check
-from ..options import option, options_of, refusing, validate
+from ..options import made_from, option, options_of, refusing, validate
 from ..config import DEFAULT_SIZE, SynthesisMethod, SynthesisResult
 from ..model.kcoherence_engine import KCoherenceLevels
 from ..model.neighbourhood import VIEWS
@@ -176,17 +176,8 @@ class ChenWangConfig:
 DEFAULTS = ChenWangConfig()
 
 
-def make_chen_wang_config(
-    *, size=DEFAULTS.size, window=DEFAULTS.window, levels=DEFAULTS.levels, views=DEFAULTS.views,
-    iterations=DEFAULTS.iterations, k=DEFAULTS.k, pca_dims=DEFAULTS.pca_dims, r=DEFAULTS.r,
-    grid=DEFAULTS.grid, index_weight=DEFAULTS.index_weight,
-    position_weight=DEFAULTS.position_weight, position_boost=DEFAULTS.position_boost,
-    coherence_exclude=DEFAULTS.coherence_exclude, random_candidates=DEFAULTS.random_candidates,
-    global_share=DEFAULTS.global_share, coherence_bias=DEFAULTS.coherence_bias,
-    value_weight=DEFAULTS.value_weight, value_prior=DEFAULTS.value_prior, value_bins=DEFAULTS.value_bins,
-    phase_weight=DEFAULTS.phase_weight, batches=DEFAULTS.batches, solver=DEFAULTS.solver, balance_views=DEFAULTS.balance_views,
-    blockwise=DEFAULTS.blockwise, pilot=DEFAULTS.pilot, whole_voxels=DEFAULTS.whole_voxels, seed=None,
-) -> ChenWangConfig:
+@made_from(ChenWangConfig)
+def make_chen_wang_config(values: dict) -> ChenWangConfig:
     """Validate plain keyword arguments into a frozen :class:`ChenWangConfig`.
 
     ``window`` and ``iterations`` take one integer or one per level (coarsest first); when the
@@ -198,14 +189,14 @@ def make_chen_wang_config(
     (:class:`npmrf3d.model.kcoherence_histograms.PilotHistograms`); the global search, which
     reads the whole volume, is off (``global_share`` recorded as 0).
     """
-    values = dict(locals())
-    levels = validate(ChenWangConfig, "levels", levels)
+    levels = validate(ChenWangConfig, "levels", values["levels"])
+    window, iterations, grid = values["window"], values["iterations"], values["grid"]
     if window is DEFAULTS.window and levels != len(DEFAULTS.window):
         window = (DEFAULTS.window * levels)[-levels:] if levels > 3 else DEFAULTS.window[-levels:]
     if iterations is DEFAULTS.iterations and levels != len(DEFAULTS.iterations):
         iterations = (DEFAULTS.iterations * levels)[-levels:] if levels > 3 else DEFAULTS.iterations[-levels:]
     window = validate(ChenWangConfig, "window", window, levels=levels)
-    dims = check.size(size, levels=levels, window=1)
+    dims = check.size(values["size"], levels=levels, window=1)
     grid = check.integer("grid", grid, low=1, high=min(window))
     for li, w in enumerate(window):
         level = levels - 1 - li
@@ -220,8 +211,8 @@ def make_chen_wang_config(
                            f"has {side} voxels per side, not a multiple of {grid}")
     own = {"size": dims, "window": window, "levels": levels, "grid": grid,
            "iterations": validate(ChenWangConfig, "iterations", iterations, levels=levels),
-           "views": check.views(views, VIEWS),
-           "seed": None if seed is None else check.integer("seed", seed, low=0)}
+           "views": check.views(values["views"], VIEWS),
+           "seed": None if values["seed"] is None else check.integer("seed", values["seed"], low=0)}
     options = {name: validate(ChenWangConfig, name, values[name])
                for name in options_of(ChenWangConfig) if name not in own}
     if options["blockwise"]:

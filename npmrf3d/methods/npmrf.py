@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import time
 from collections.abc import Callable
@@ -19,6 +20,7 @@ from ..model.parzen import PRUNE, adaptive_floor, build_view_models
 from ..model.pyramid import ArraySpec, Levels, LevelState, random_state, run_pyramid, upsample
 from ..model.relax import RELAXATIONS
 from ..model.relax.icm import expected_sweeps
+from ..options import shared
 from ..resources import coherent_estimate, npmrf_estimate, one_after_another
 from . import npmrf_coherent
 from ._api import prepare
@@ -277,36 +279,28 @@ def segmented(config: SynthesisConfig, per_view) -> bool:
 
 
 def _coherent_options(config: SynthesisConfig, phases: bool, levels: int) -> npmrf_coherent.CoherentConfig:
-    """The coherent sampler's options for a ``coherent``-support configuration: its window at
-    every level (:data:`npmrf3d.methods.npmrf_coherent.SEGMENTED`'s window and histogram vote weighting for a
-    segmented exemplar, ``phases`` = :func:`segmented`), ``levels`` levels, its views,
-    heuristic, centre bandwidth and outlier share; with relaxation ``anneal`` its temperatures
-    ``t0`` to ``t_end`` by ``schedule`` over ``proposals`` iterations per level (``sampler``'s
-    draw among the candidates); with ``temperatures`` its ICM with per-voxel temperatures
-    (``xi``, ``stop``, ``max_sweeps``, ``upsample``, ``inherit``)."""
+    """The coherent sampler's options for a ``coherent``-support configuration: every option the
+    two configurations share by name as it is (:func:`npmrf3d.options.shared`), with ``levels``
+    levels and the site spacing of :func:`coherent_grid`; with relaxation ``anneal`` its
+    ``proposals`` as the iterations of every level (else ``t0`` 0: the highest score decides);
+    ``temperatures`` as its per-voxel ICM; for a segmented exemplar (``phases`` =
+    :func:`segmented`) the preset's changes (:meth:`npmrf3d.methods.npmrf_coherent.SegmentedPreset.changes`)."""
     anneal = config.relaxation == "anneal"
-    window = npmrf_coherent.SEGMENTED.window if phases else config.window
-    value_weight = npmrf_coherent.SEGMENTED.value_weight if phases else npmrf_coherent.DEFAULTS.value_weight
-    return npmrf_coherent.make_coherent_config(
-        size=config.size, window=(window,) * levels, levels=levels,
-        views=config.views, heuristic=config.heuristic, centre_bandwidth=config.rule.centre_bandwidth,
-        outlier=config.rule.outlier, value_weight=value_weight, phase_weight=config.phase_weight,
-        t0=config.t0 if anneal else 0.0,
-        t_end=config.t_end, schedule=config.schedule, sampler=config.sampler, blockwise=config.blockwise,
-        whole_voxels=config.whole_voxels, grid=coherent_grid(config, phases, levels),
-        seed=config.seed,
-        **({"iterations": (config.proposals,) * levels} if anneal else {}),
-        **({"icm": True, "xi": config.xi, "stop": config.stop, "max_sweeps": config.max_sweeps,
-            "upsample": config.upsample, "inherit": config.inherit} if config.temperatures else {}))
+    run = {"levels": levels, "icm": config.temperatures, "grid": coherent_grid(config, phases, levels),
+           "t0": config.t0 if anneal else 0.0, **({"iterations": config.proposals} if anneal else {})}
+    preset = npmrf_coherent.SEGMENTED.changes() if phases else {}
+    return npmrf_coherent.make_coherent_config(**{**shared(config, npmrf_coherent.CoherentConfig), **run, **preset})
 
 
-def _coherent_runs(config: SynthesisConfig, phases: bool) -> list[npmrf_coherent.CoherentConfig]:
+@functools.lru_cache(maxsize=32)
+def _coherent_runs(config: SynthesisConfig, phases: bool) -> tuple[npmrf_coherent.CoherentConfig, ...]:
     """The coherent sampler's runs: one, or the segmented preset's pyramids, deepest first (a
-    ``blockwise`` run: the deepest only, since the choice between them reads the whole volume)."""
+    ``blockwise`` run: the deepest only, since the choice between them reads the whole volume);
+    made once for a configuration, which its memory estimate, block aprons and run all read."""
     levels = npmrf_coherent.SEGMENTED.pyramids(config.levels) if phases else (config.levels,)
     if config.blockwise:
         levels = levels[:1]
-    return [_coherent_options(config, phases, n) for n in levels]
+    return tuple(_coherent_options(config, phases, n) for n in levels)
 
 
 def npmrf_aprons(config: SynthesisConfig, per_view) -> tuple[int, ...] | None:

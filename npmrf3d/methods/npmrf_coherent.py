@@ -48,6 +48,7 @@ import numpy as np
 
 from .. import _validation as check
 from ..analysis.metrics import two_point_shape_error
+from ..io.checkpoints import exemplar_digest
 from ..config import DEFAULT_SIZE, SynthesisMethod, SynthesisResult
 from ..model.kcoherence_engine import (
     CANDIDATE_HEURISTICS,
@@ -63,15 +64,13 @@ from ..model.pyramid import INHERIT, LABEL_UPSAMPLING, run_pyramid
 from ..model.relax.anneal import SCHEDULES
 from ..resources import coherent_estimate
 from . import chen_wang
-from ..options import option, options_of, refusing, same_option, validate
+from ..options import made_from, option, options_of, refusing, same_option, validate
 from ._api import prepare
 
 __all__ = ["CANDIDATE_HEURISTICS", "CANDIDATE_SAMPLERS", "COHERENT_HEURISTICS", "METHOD", "SEGMENTED",
            "SEGMENTED_MAX_VALUES", "CoherentConfig", "SegmentedPreset",
            "best_of_pyramids", "coherent_levels", "coherent_synthesize", "icm_schedule", "is_segmented", "make_coherent_config", "run",
            "temperatures", "trial_checkpoint"]
-
-_CW = chen_wang.DEFAULTS
 
 #: An exemplar with at most this many distinct grey values is segmented (a phase image: a
 #: thresholded micro-CT slice, a label map; also a 2x2x2-averaged binary scan, 9 values).
@@ -100,6 +99,16 @@ class SegmentedPreset:
     value_weight: float = 8.0
     fewer_levels: int = 1
 
+    def changes(self) -> dict:
+        """What the preset sets of the coherent sampler's options: its fields named as options of
+        :class:`CoherentConfig`.
+
+        >>> SEGMENTED.changes()
+        {'window': 5, 'value_weight': 8.0}
+        """
+        names = options_of(CoherentConfig)
+        return {name: value for name, value in asdict(self).items() if name in names}
+
     def pyramids(self, levels: int) -> tuple[int, ...]:
         """The level counts the preset runs, in order: ``levels``, and ``levels - fewer_levels``
         when at least one level is left.
@@ -116,19 +125,31 @@ SEGMENTED = SegmentedPreset()
 
 def is_segmented(exemplars) -> bool:
     """Whether the exemplars (arrays ``(H, W[, C])``) hold at most :data:`SEGMENTED_MAX_VALUES`
-    distinct grey values (the mean over channels) together.
+    distinct grey values (the mean over channels) together. Each exemplar's values are counted
+    once (:func:`_grey_values`), however often a run asks.
 
     >>> is_segmented([np.tile([0.0, 1.0], (4, 2))]), is_segmented([np.linspace(0, 1, 64).reshape(8, 8)])
     (True, False)
     """
-    values: set = set()
-    for a in exemplars:
-        a = np.asarray(a, dtype=np.float32)
-        grey = a.mean(axis=-1) if a.ndim == 3 else a
-        values.update(np.unique(grey).tolist())
-        if len(values) > SEGMENTED_MAX_VALUES:
-            return False
-    return True
+    counted = [_grey_values(a) for a in exemplars]
+    return None not in counted and len(frozenset().union(*counted)) <= SEGMENTED_MAX_VALUES
+
+
+#: The distinct grey values of the exemplars counted lately, by :func:`exemplar_digest` (a run
+#: asks for its memory estimate, the command line's window check and the run itself).
+_COUNTED: dict[str, frozenset | None] = {}
+
+
+def _grey_values(a) -> frozenset | None:
+    """The distinct grey values of exemplar ``a``; None above :data:`SEGMENTED_MAX_VALUES`."""
+    a = np.asarray(a, dtype=np.float32)
+    key = exemplar_digest(a)
+    if key not in _COUNTED:
+        grey = np.unique(a.mean(axis=-1) if a.ndim == 3 else a)
+        if len(_COUNTED) >= 16:
+            del _COUNTED[next(iter(_COUNTED))]
+        _COUNTED[key] = frozenset(grey.tolist()) if len(grey) <= SEGMENTED_MAX_VALUES else None
+    return _COUNTED[key]
 
 
 def _annealed(config) -> bool:
@@ -226,53 +247,34 @@ DEFAULTS = CoherentConfig()
 _SHARED = tuple(name for name in options_of(chen_wang.ChenWangConfig) if name in options_of(CoherentConfig))
 
 
-def make_coherent_config(
-    *, size=DEFAULTS.size, window=DEFAULTS.window, levels=DEFAULTS.levels, views=DEFAULTS.views,
-    iterations=DEFAULTS.iterations, grid=DEFAULTS.grid, heuristic=DEFAULTS.heuristic,
-    centre_bandwidth=DEFAULTS.centre_bandwidth, outlier=DEFAULTS.outlier, k=DEFAULTS.k,
-    index_weight=DEFAULTS.index_weight, position_weight=DEFAULTS.position_weight,
-    position_boost=DEFAULTS.position_boost, random_candidates=DEFAULTS.random_candidates,
-    global_share=DEFAULTS.global_share, coherence_bias=DEFAULTS.coherence_bias,
-    value_weight=DEFAULTS.value_weight, value_prior=DEFAULTS.value_prior, value_bins=DEFAULTS.value_bins,
-    phase_weight=DEFAULTS.phase_weight, t0=DEFAULTS.t0, t_end=DEFAULTS.t_end, schedule=DEFAULTS.schedule,
-    sampler=DEFAULTS.sampler, icm=DEFAULTS.icm, xi=DEFAULTS.xi, stop=DEFAULTS.stop,
-    max_sweeps=DEFAULTS.max_sweeps, upsample=DEFAULTS.upsample, inherit=DEFAULTS.inherit,
-    blockwise=DEFAULTS.blockwise, pilot=DEFAULTS.pilot, whole_voxels=DEFAULTS.whole_voxels, seed=None,
-) -> CoherentConfig:
-    """Validate plain keyword arguments into a frozen :class:`CoherentConfig` (the shared
-    coherence fields are validated as Chen–Wang's, the ICM ones as the NP-MRF sampler's).
-    ML_H1a and ML_H1b are ICM-only: with ``t0 > 0`` they are refused."""
-    cw = chen_wang.make_chen_wang_config(
-        size=size, window=window, levels=levels, views=views, iterations=iterations, grid=grid, k=k,
-        index_weight=index_weight, position_weight=position_weight, position_boost=position_boost,
-        random_candidates=random_candidates, global_share=global_share,
-        coherence_bias=coherence_bias, value_weight=value_weight, value_prior=value_prior,
-        value_bins=value_bins, phase_weight=phase_weight, blockwise=blockwise, pilot=pilot,
-        whole_voxels=whole_voxels, seed=seed)
-    heuristic, centre_bandwidth, outlier, t0, schedule, sampler, icm, upsample, inherit, xi, stop, max_sweeps = (
-        validate(CoherentConfig, name, value) for name, value in (
-            ("heuristic", heuristic), ("centre_bandwidth", centre_bandwidth), ("outlier", outlier),
-            ("t0", t0), ("schedule", schedule), ("sampler", sampler), ("icm", icm), ("upsample", upsample),
-            ("inherit", inherit), ("xi", xi), ("stop", stop), ("max_sweeps", max_sweeps)))
+@made_from(CoherentConfig)
+def make_coherent_config(values: dict) -> CoherentConfig:
+    """Validate keyword arguments, one per option of :class:`CoherentConfig`, into a frozen
+    :class:`CoherentConfig` (the shared coherence fields are validated as Chen–Wang's, the others
+    by their fields' limits). ML_H1a and ML_H1b are ICM-only: with ``t0 > 0`` they are refused."""
+    cw = chen_wang.make_chen_wang_config(**{name: values[name] for name in _SHARED})
+    own = {name: validate(CoherentConfig, name, values[name]) for name in options_of(CoherentConfig)
+           if name not in _SHARED and name != "t_end"}
+    heuristic, t0 = own["heuristic"], own["t0"]
     if t0 > 0.0 and heuristic in PER_VIEW_HEURISTICS:
         check.fail(f"heuristic {heuristic} cannot be annealed (t0 > 0): ML_H1a and ML_H1b are ICM-only "
                    f"per-view argmax rules with no score to draw by; use t0 = 0, or ML_H2b or ML_H2a")
+    t_end = values["t_end"]
     if t0 > 0.0:
-        t_end = check.real("t_end", t_end, low=0.0, low_open=schedule == "geometric", high=t0)
-    if icm and cw.blockwise:
+        t_end = check.real("t_end", t_end, low=0.0, low_open=own["schedule"] == "geometric", high=t0)
+    if own["icm"] and cw.blockwise:
         check.fail("icm=True cannot run blockwise: its stop rule reads every voxel's temperature; "
                    "use icm=False (the fixed iterations) or blockwise=False")
-    if icm and t0 > 0.0:
+    if own["icm"] and t0 > 0.0:
         check.fail(f"icm=True and t0={t0:g} are two relaxations: ICM decides by the highest score "
                    "(set t0=0), annealing runs the fixed iterations (set icm=False)")
-    return CoherentConfig(heuristic=heuristic, centre_bandwidth=centre_bandwidth, outlier=outlier,
-                          t0=t0, t_end=float(t_end), schedule=schedule, sampler=sampler, icm=icm, xi=xi,
-                          stop=stop, max_sweeps=max_sweeps, upsample=upsample, inherit=inherit,
-                          **{name: getattr(cw, name) for name in _SHARED})
+    return CoherentConfig(**own, t_end=float(t_end), **{name: getattr(cw, name) for name in _SHARED})
 
 
 def _chen_wang_config(config: CoherentConfig) -> chen_wang.ChenWangConfig:
-    return chen_wang.make_chen_wang_config(**{name: getattr(config, name) for name in _SHARED})
+    """The Chen–Wang configuration within a validated ``config`` (its shared fields, already
+    validated as Chen–Wang's: made as it is, not checked again)."""
+    return chen_wang.ChenWangConfig(**{name: getattr(config, name) for name in _SHARED})
 
 
 def temperatures(config: CoherentConfig) -> tuple[tuple[float, ...], ...]:

@@ -16,22 +16,20 @@ import dataclasses
 from .. import _validation as check
 from ..config import (
     APPLIES,
-    TEMPERATURE_OPTIONS,
-    applies,
     COHERENT_RULE,
     DEFAULT_SIZE,
     PRESETS,
-    SEGMENTED_MODES,
     SUPPORTS,
+    TEMPERATURE_OPTIONS,
     VARIANTS,
+    DecisionRule,
     SynthesisConfig,
+    applies,
 )
-from ..model.heuristics import DECISIONS, get_heuristic
+from ..model.heuristics import get_heuristic
 from ..model.kcoherence_icm import IcmSchedule
 from ..model.neighbourhood import VIEWS
-from ..model.pyramid import INHERIT, UPSAMPLING
-from ..model.relax import RELAXATIONS
-from ..model.relax.anneal import PROPOSALS, SAMPLERS, SCHEDULES
+from ..options import made_from, options_of, validate
 
 __all__ = ["APPLIES", "BY_SUPPORT", "DEFAULT_SAMPLER", "DEFAULT_UPSAMPLE", "DEFAULT_XI", "applies", "combination",
            "make_config"]
@@ -122,22 +120,12 @@ def _support_and_preset(variant, support, preset) -> tuple[str, str]:
     return support, preset
 
 
-def _support_rule(support: str, preset_name: str, **rule_options):
+def _support_rule(support: str, preset_name: str, values: dict) -> DecisionRule:
     """The support's decision rule (:data:`npmrf3d.config.COHERENT_RULE`, or the full support's
-    preset) with each rule option that is not None checked and put in its place."""
+    preset) with each rule option of ``values`` that is not None checked and put in its place."""
     rule = COHERENT_RULE if support == "coherent" else PRESETS[preset_name]
-    overrides = {}
-    for name in ("bandwidth", "centre_bandwidth", "tau"):
-        if rule_options[name] is not None:
-            overrides[name] = check.real(name, rule_options[name], low=0.0, low_open=True)
-    for name in ("adaptive", "histogram_weight"):
-        if rule_options[name] is not None:
-            overrides[name] = check.real(name, rule_options[name], low=0.0)
-    if rule_options["outlier"] is not None:
-        overrides["outlier"] = check.real("outlier", rule_options["outlier"], low=0.0, high=1.0, high_open=True)
-    if rule_options["decision"] is not None:
-        overrides["decision"] = check.choice("decision", rule_options["decision"], DECISIONS)
-    return dataclasses.replace(rule, **overrides)
+    return dataclasses.replace(rule, **{name: validate(DecisionRule, name, values[name])
+                                        for name in options_of(DecisionRule) if values[name] is not None})
 
 
 def _refuse_relaxation_mismatch(given: dict, support: str, relaxation: str, temperatures: bool, upsample: str,
@@ -162,17 +150,47 @@ def _refuse_relaxation_mismatch(given: dict, support: str, relaxation: str, temp
                    f"{heuristic} is defined by per-view argmax searches: use decision='argmax'")
 
 
-def make_config(
-    *, size=DEFAULT_SIZE, window=_C.window, levels=_C.levels, heuristic=_C.heuristic,
-    relaxation=_C.relaxation, views=_C.views, support=None, preset=None, upsample=None,
-    inherit=_C.inherit, xi=None, stop=_C.stop, max_sweeps=_C.max_sweeps, sampler=None,
-    schedule=_C.schedule, t0=_C.t0, t_end=_C.t_end, proposals=_C.proposals, proposal=_C.proposal,
-    variant=None, segmented=_C.segmented, bandwidth=None, centre_bandwidth=None, adaptive=None,
-    decision=None, tau=None, histogram_weight=None, outlier=None, grey_levels=None, palette=None,
-    toroidal_exemplar=False, temperatures=None, blockwise=False, whole_voxels=_C.whole_voxels, phase_weight=None,
-    grid=_C.grid, seed=None,
-) -> SynthesisConfig:
-    """Validate plain keyword arguments into a frozen :class:`SynthesisConfig`.
+#: Options checked against others rather than by their fields' limits alone.
+_TIED = {
+    "t_end": lambda v: check.real("t_end", v["t_end"], low=0.0, low_open=v["schedule"] == "geometric",
+                                  high=v["t0"]),
+    "grid": lambda v: None if v["grid"] is None else check.integer("grid", v["grid"], low=1, high=v["window"]),
+}
+
+
+def _decided(values: dict, support: str, relaxation: str) -> dict:
+    """The options whose default the run decides (None in :func:`make_config`), decided:
+    ``upsample`` (8/8 for support ``coherent``, else :data:`DEFAULT_UPSAMPLE` of the relaxation),
+    ``xi`` and ``sampler`` (:data:`BY_SUPPORT`), ``temperatures`` (with support ``full`` and ICM)
+    and ``phase_weight`` (the field's for support ``coherent``, 0 for ``full``, which has no phase
+    control)."""
+    def given(name, default):
+        return default if values[name] is None else values[name]
+    return {"upsample": given("upsample", "8/8" if support == "coherent" else DEFAULT_UPSAMPLE[relaxation]),
+            **{name: given(name, by_support[support]) for name, by_support in BY_SUPPORT.items()},
+            "temperatures": given("temperatures", support == "full" and relaxation == "icm"),
+            "phase_weight": given("phase_weight", _C.phase_weight) if support == "coherent" else 0.0}
+
+
+def _refuse_coherent_only(values: dict, support: str) -> None:
+    """Refuse what only support ``coherent`` without per-voxel temperatures runs: sparse sites,
+    blocks."""
+    if values["grid"] not in (None, 1) and support != "coherent":
+        check.fail(f"grid {values['grid']} needs support 'coherent' (the full-Parzen sampler estimates every "
+                   "voxel); use grid 1 or support 'coherent'")
+    if values["blockwise"] and support != "coherent":
+        check.fail("blockwise runs need support 'coherent' (the full-Parzen sampler's estimates "
+                   "read the whole exemplar and its ICM stop rule the whole volume)")
+    if values["blockwise"] and values["temperatures"]:
+        check.fail("blockwise runs cannot use per-voxel temperatures (their stop rule reads the "
+                   "whole volume); drop temperatures=True (command line: --temperatures)")
+
+
+@made_from(SynthesisConfig, size=DEFAULT_SIZE, variant=None)
+def make_config(values: dict) -> SynthesisConfig:
+    """Validate keyword arguments, one per option of :class:`SynthesisConfig` (the decision
+    rule's in its place) and ``variant``, into a frozen :class:`SynthesisConfig`: each option
+    is checked against its field's limits; what ties several together is checked here.
 
     ``support`` (None: ``coherent``) and ``preset`` (None: ``tuned``; the full support's
     decision rule, :data:`npmrf3d.config.PRESETS`) may also be given together by the older name
@@ -196,75 +214,31 @@ def make_config(
     axes of each view (1: every voxel), so each level's side must be a multiple of it; None: the
     run's own (:func:`coherent_grid`).
     """
-    levels = check.integer("levels", levels, low=1, high=8)
-    window = check.window(window)
-    dims = check.size(size, levels=levels, window=window)
-    heuristic = get_heuristic(heuristic).name
-    relaxation = check.choice("relaxation", relaxation, RELAXATIONS)
-    views = check.views(views, VIEWS)
-    support, preset_name = _support_and_preset(variant, support, preset)
-    given = {"xi": xi, "stop": stop, "max_sweeps": max_sweeps, "inherit": inherit,
-             "sampler": sampler, "schedule": schedule, "t0": t0, "t_end": t_end, "proposals": proposals,
-             "proposal": proposal, "preset": preset if variant is None else None, "bandwidth": bandwidth,
-             "adaptive": adaptive, "decision": decision, "tau": tau, "histogram_weight": histogram_weight,
-             "toroidal_exemplar": bool(toroidal_exemplar) or None, "temperatures": temperatures,
-             "segmented": segmented if segmented == "yes" else None,
-             "phase_weight": phase_weight}
+    levels = validate(_C, "levels", values["levels"])
+    window = check.window(values["window"])
+    heuristic = get_heuristic(values["heuristic"]).name
+    relaxation = validate(_C, "relaxation", values["relaxation"])
+    variant, raw = values.pop("variant"), dict(values)
+    support, preset = _support_and_preset(variant, values["support"], values["preset"])
+    own = {"levels": levels, "window": window, "size": check.size(values["size"], levels=levels, window=window),
+           "heuristic": heuristic, "relaxation": relaxation, "views": check.views(values["views"], VIEWS),
+           "support": support, "preset": preset,
+           "seed": None if values["seed"] is None else check.integer("seed", values["seed"], low=0)}
     if relaxation == "anneal" and not get_heuristic(heuristic).objective:
         check.fail(f"heuristic {heuristic} cannot drive annealing: annealing compares objective "
                    f"values, and {heuristic} is defined by per-view argmax searches with no "
                    f"objective; use ML_H2a or ML_H2b, or relaxation 'icm'")
-    if upsample is None:
-        upsample = "8/8" if support == "coherent" else DEFAULT_UPSAMPLE[relaxation]
-    upsample = check.choice("upsample", upsample, UPSAMPLING)
-    inherit = check.choice("inherit", inherit, INHERIT)
-    xi = check.real("xi", BY_SUPPORT["xi"][support] if xi is None else xi, high=0.0, high_open=True)
-    stop = check.real("stop", stop, low=0.0, high=1.0, low_open=True)
-    max_sweeps = check.integer("max_sweeps", max_sweeps, low=1)
-    sampler = check.choice("sampler", BY_SUPPORT["sampler"][support] if sampler is None else sampler, SAMPLERS)
-    schedule = check.choice("schedule", schedule, SCHEDULES)
-    t0 = check.real("t0", t0, low=0.0, low_open=True)
-    t_end = check.real("t_end", t_end, low=0.0, low_open=schedule == "geometric", high=t0)
-    proposals = check.integer("proposals", proposals, low=1)
-    proposal = check.choice("proposal", proposal, PROPOSALS)
-    segmented = check.choice("segmented", segmented, SEGMENTED_MODES)
-    rule = _support_rule(support, preset_name, bandwidth=bandwidth, centre_bandwidth=centre_bandwidth, tau=tau,
-                         adaptive=adaptive, histogram_weight=histogram_weight, outlier=outlier, decision=decision)
+    values.update(own, **_decided(values, support, relaxation))
+    for name, (_, opt) in options_of(_C).items():  # in the fields' order, each once
+        if name in _TIED:
+            values[name] = _TIED[name](values)
+        elif name not in own and opt.kind != "nested":
+            values[name] = validate(_C, name, values[name])
+    rule = _support_rule(support, preset, values)
+    given = {**{name: raw[name] for name in APPLIES}, "preset": raw["preset"] if variant is None else None,
+             "segmented": raw["segmented"] if raw["segmented"] == "yes" else None}
     _refuse_unused(given, support, relaxation)  # after the values' own checks
-    if temperatures is None:
-        temperatures = support == "full" and relaxation == "icm"
-    temperatures = check.boolean("temperatures", temperatures)
-    _refuse_relaxation_mismatch(given, support, relaxation, temperatures, upsample, rule.decision, heuristic)
-    if grey_levels is not None:
-        grey_levels = check.integer("grey_levels", grey_levels, low=2, high=65536)
-    if palette is not None:
-        palette = check.integer("palette", palette, low=2, high=65536)
-    if seed is not None:
-        seed = check.integer("seed", seed, low=0)
-    blockwise = check.boolean("blockwise", blockwise)
-    whole_voxels = check.integer("whole_voxels", whole_voxels, low=1)
-    if support != "coherent":  # no phase control there
-        phase_weight = 0.0
-    elif phase_weight is None:
-        phase_weight = _C.phase_weight
-    phase_weight = check.real("phase_weight", phase_weight, low=0.0)
-    if grid is not None:
-        grid = check.integer("grid", grid, low=1, high=window)
-        if grid != 1 and support != "coherent":
-            check.fail(f"grid {grid} needs support 'coherent' (the full-Parzen sampler estimates every "
-                       "voxel); use grid 1 or support 'coherent'")
-    if blockwise and support != "coherent":
-        check.fail("blockwise runs need support 'coherent' (the full-Parzen sampler's estimates "
-                   "read the whole exemplar and its ICM stop rule the whole volume)")
-    if blockwise and temperatures:
-        check.fail("blockwise runs cannot use per-voxel temperatures (their stop rule reads the "
-                   "whole volume); drop temperatures=True (command line: --temperatures)")
-    return SynthesisConfig(
-        size=dims, window=window, levels=levels, heuristic=heuristic, relaxation=relaxation,
-        views=views, upsample=upsample, inherit=inherit, xi=xi, stop=stop, max_sweeps=max_sweeps,
-        sampler=sampler, schedule=schedule, t0=t0, t_end=t_end, proposals=proposals,
-        proposal=proposal, support=support, preset=preset_name, segmented=segmented, rule=rule,
-        grey_levels=grey_levels, palette=palette, toroidal_exemplar=bool(toroidal_exemplar),
-        temperatures=temperatures, blockwise=blockwise, whole_voxels=whole_voxels, phase_weight=phase_weight,
-        grid=grid, seed=seed,
-    )
+    _refuse_relaxation_mismatch(given, support, relaxation, values["temperatures"], values["upsample"],
+                                rule.decision, heuristic)
+    _refuse_coherent_only(values, support)
+    return SynthesisConfig(rule=rule, **{name: values[name] for name in options_of(_C) if name != "rule"})
