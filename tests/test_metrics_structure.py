@@ -143,14 +143,16 @@ def test_an_unfinished_run_is_refused_with_the_missing_count(tmp_path, capsys):
                    capsys, words=("not complete (5 of 8 blocks made): 3 blocks missing",))
 
 
-def test_a_block_of_zeros_in_a_volume_holding_zeros_is_read_with_a_note(tmp_path, capsys):
+def test_a_block_of_zeros_has_its_chunk_file_and_is_read(tmp_path, capsys):
     values = np.random.default_rng(2).integers(0, 2, (16, 16, 16, 1)).astype(np.float32)
-    values[:8, :8, :8] = 0.0               # an all-zero block: Zarr writes no chunk file for it
+    values[:8, :8, :8] = 0.0               # an all-zero block: its chunk file is written all the same
     exemplar = tmp_path / "exemplar.npy"
     np.save(exemplar, values[:, :, 12, 0])
     volume = _zarr(tmp_path, values)
-    assert blocks_without_chunks(volume) == [(0, 0, 0)]
+    assert blocks_without_chunks(volume) == []
     assert cli.main(["metrics", str(exemplar), str(volume), "--out", str(tmp_path / "m")]) == 0
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "note: 1 block of Zarr volume" in err and "read as zeros" in err
+    assert capsys.readouterr().err == ""
     assert (tmp_path / "m" / "metrics.json").is_file()
+    (volume / "0.0.0.0").unlink()          # now lost: refused like any other lost chunk
+    refused_naming(["metrics", str(exemplar), str(volume), "--out", str(tmp_path / "m2")], tmp_path,
+                   capsys, words=("is missing 1 of 8 blocks",))

@@ -40,7 +40,7 @@ from .. import _validation as check
 from .. import io
 from ..analysis import metrics, structure
 from ..analysis.metrics import METRICS, layout
-from ..analysis.metrics.volume_files import check_chunks, read_volume
+from ..analysis.metrics.volume_files import read_volume
 from ..analysis.metrics.references import RATIO_METRICS, against_controls, floor
 from ..errors import ParameterError
 from ..io.runs import RUN_FILES, OutputLock
@@ -367,9 +367,8 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
 
 def _measure(args: argparse.Namespace, argv: list[str], views: tuple[str, ...], out: pathlib.Path) -> int:
     """Read, compare, write: the body of :func:`run`, under the locks of the run folders."""
-    volume, stored, without = read_volume(args.volume)
+    volume, stored = read_volume(args.volume)
     exemplars, sources = _read_exemplars(args, views)
-    note = check_chunks(args.volume, volume, without, exemplars)
     run_views = _run_views(args.volume)
     judged = _layout(volume, exemplars) if args.structure else None
     result = metrics.evaluate(volume, exemplars, views=views)
@@ -412,6 +411,4 @@ def _measure(args: argparse.Namespace, argv: list[str], views: tuple[str, ...], 
     if run_views is not None:
         say(_views_line(run_views))
     say(f"wrote {out}{os.sep}: {', '.join(OUT_FILES)}")
-    if note is not None:
-        say(f"{PROG}: note: {note}", error=True)
     return 0

@@ -290,8 +290,9 @@ def blocks_without_chunks(out) -> list[tuple[int, int, int]]:
 
 def write_block(out, index, block: int, values: np.ndarray) -> None:
     """Write block ``index`` (``values`` of its :func:`block_box` shape, with channels) into the
-    array ``out``, then its marker."""
-    array = zarr.open_array(pathlib.Path(out), mode="r+")
+    array ``out``, then its marker. The chunk file is written even when every value is the fill
+    value 0, so that a made block always has one and a lost chunk file is told from zeros."""
+    array = zarr.open_array(pathlib.Path(out), mode="r+").with_config({"write_empty_chunks": True})
     origin, shape = block_box(index, block, array.shape[:3])
     array[tuple(slice(o, o + s) for o, s in zip(origin, shape))] = np.asarray(values, dtype=np.float32)
     pathlib.Path(out, DONE, ".".join(map(str, index))).touch()
