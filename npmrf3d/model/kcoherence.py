@@ -160,7 +160,7 @@ def pca_project(patches: np.ndarray, dims: int = 20) -> tuple[np.ndarray, np.nda
     float64 because the search kernel computes in float64: float32 tables cost it 1.5x in
     conversions (measured, 64^3 search of one view).
 
-    The two other PCAs are not this one: NP_K's (:func:`npmrf3d.methods._kopf_steps.pca_basis`)
+    The two other PCAs are not this one: NP_K's (:func:`npmrf3d.model.kopf_search.pca_basis`)
     keeps a share of the variance by an SVD and a float32 basis, and the 3D appearance space's
     (:func:`npmrf3d.methods.volume_lh.appearance_space`) multiplies two copies of the centred
     vectors (a general product, where ``x.T @ x`` of one array is numpy's symmetric one), which
