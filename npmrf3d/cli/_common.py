@@ -42,6 +42,24 @@ class Parser(argparse.ArgumentParser):
         line = " ".join(str(message).split())
         self.exit(2, f"{self.prog}: error: {line} (see '{self.prog} --help')\n")
 
+    def parse_args(self, args=None, namespace=None):
+        """As argparse's, except that an argument no parser knows is refused by the sub-command
+        it was given to (``npmrf3d volume: error: unrecognized arguments: ...``)."""
+        namespace, extras = self.parse_known_args(args, namespace)
+        if extras:
+            self._command_parser(namespace).error(f"unrecognized arguments: {' '.join(extras)}")
+        return namespace
+
+    def _command_parser(self, namespace) -> argparse.ArgumentParser:
+        """The innermost sub-command's parser that ``namespace`` was parsed with."""
+        parser = self
+        while True:
+            commands = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+            chosen = getattr(namespace, commands[0].dest, None) if commands else None
+            if chosen not in (commands[0].choices if commands else {}):
+                return parser
+            parser = commands[0].choices[chosen]
+
 
 def add_run_options(parser: argparse.ArgumentParser, *, out: str, zarr: bool = False) -> argparse._ArgumentGroup:
     """The options of every command that makes a volume, defined once: ``--seed``, ``--out``

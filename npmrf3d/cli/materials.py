@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import pathlib
 import time
 
@@ -40,7 +41,7 @@ from ..model.neighbourhood import VIEWS
 from ..model.otsu import otsu_threshold
 from ._blocks import blockwise_requested, zarr_output
 from ._common import check_checkpoint, claim_output, dry_run, output_folder, parse_size, say, write_result
-from ._generic import add_method_parser, config_options, method_options
+from ._generic import add_method_parser, config_options, method_options, refuse_written
 from ._materials_figures import FIGURES, write_figures, write_page
 from ._options import given
 from ._progress import run_method
@@ -51,6 +52,8 @@ METHOD = get_method("npmrf")
 CROP_METHOD = get_method("volume-lh")
 #: What the command writes beside the run files.
 MATERIALS_FILES = ("materials.json", "materials.html", *FIGURES)
+#: ``--exemplar-kind``: a 3-D array is guessed, an image or a 3D crop.
+EXEMPLAR_KINDS = ("auto", "image", "volume")
 
 
 def _extra(parser: argparse.ArgumentParser, sections: dict) -> None:
@@ -93,7 +96,10 @@ def register(commands, formatter_class) -> None:
             action.help = ("2D slice (image or .npy), 3D crop (.npy or TIFF stack) or bundled:NAME "
                            "(default: %(default)s)")
         elif action.dest == "exemplar_kind":
-            action.help = "auto reads a 3-D array recognised as a volume as a 3D crop; image reads it as an image"
+            action.choices = EXEMPLAR_KINDS
+            action.metavar = "{" + ",".join(EXEMPLAR_KINDS) + "}"
+            action.help = ("auto reads a 3-D array recognised as a volume as a 3D crop; image reads it as an "
+                           "image; volume reads it as a 3D crop")
         elif action.dest in hidden:
             action.help = argparse.SUPPRESS
     parser.usage = "%(prog)s [INPUT] [options]"
@@ -116,8 +122,10 @@ def read_input(source, name: str, exemplar_kind: str = "auto") -> np.ndarray:
             if np.any(array[..., -1] != array[..., -1].max()):
                 _fail(f"{name} has transparent pixels; save it without an alpha channel")
             array = array[..., :-1]
-    kind = "image" if exemplar_kind == "image" else "auto"
-    kind, shaped = interpret(array, axes=axes, kind=kind, name=name, expect="volume")
+    if axes is None and array.ndim == 3 and exemplar_kind != "image" and 1 in array.shape[:2]:
+        _fail(f"{name} of shape {array.shape} is a 3D crop one voxel thick: a crop needs at least "
+              f"{MIN_VOLUME_SIDE} voxels along every side (a single slice goes in as a 2D image)")
+    kind, shaped = interpret(array, axes=axes, kind=exemplar_kind, name=name, expect="volume")
     if shaped.shape[-1] > 1 and np.any(shaped != shaped[..., :1]):
         _fail(f"{name} is a colour image ({shaped.shape[-1]} channels that differ); a phase is not a "
               f"colour: give a grey slice or a label image (one value per phase)")
@@ -148,7 +156,9 @@ def segment(arrays: list, threshold: str = "auto") -> tuple[list, np.ndarray, st
             try:
                 cut = float(threshold)
             except ValueError:
-                _fail(f"--threshold must be auto or a number; got {threshold!r}")
+                cut = math.nan
+            if not math.isfinite(cut):
+                _fail(f"--threshold must be auto or a finite number; got {threshold!r}")
             low, high = float(pooled.min()), float(pooled.max())
             if not low <= cut < high:
                 _fail(f"--threshold {threshold} is outside the input's values [{low:.6g}, {high:.6g}): "
@@ -182,6 +192,8 @@ def _inputs(args: argparse.Namespace) -> tuple[dict, dict]:
         _fail(f"--slices must name three slices FRONT,RIGHT,TOP; got {args.slices!r}")
     if given(args, "views"):
         _fail("--views does not apply to --slices, which constrains the three views")
+    if args.exemplar_kind == "volume":
+        _fail("--exemplar-kind volume does not apply to --slices, which takes three 2D slices")
     arrays, names = {}, {}
     for view, text in zip(VIEWS, parts):
         source, names[view] = exemplar_source(text)
@@ -190,6 +202,16 @@ def _inputs(args: argparse.Namespace) -> tuple[dict, dict]:
             _fail(f"{view} slice '{names[view]}' is a volume; --slices takes three 2D slices")
     args.views = ",".join(VIEWS)
     return arrays, names
+
+
+def _each_slice_shows_phases(labels: dict, sources: dict, phases: int) -> None:
+    """Refuse one of three slices that holds one phase only: a material whose phases fill its
+    volume shows two or more in every slice, and no volume matches slices that say otherwise."""
+    for view, a in labels.items():
+        first = a.flat[0]
+        if view in sources and np.all(a == first):
+            _fail(f"{view} slice '{sources[view]}' holds one phase only (value {first}) while the slices "
+                  f"together hold {phases}; each slice must show two or more phases")
 
 
 def _crop_config(args: argparse.Namespace):
@@ -213,6 +235,7 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
     segmented, values, how = segment(list(distinct.values()), args.threshold)
     by_id = dict(zip(distinct, segmented))
     labels = {k: by_id[id(a)] for k, a in raw.items()}
+    _each_slice_shows_phases(labels, sources, len(values))
     crop = list(raw) == ["volume"]
     if crop:
         method, config = CROP_METHOD, _crop_config(args)
@@ -223,6 +246,7 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
         config = METHOD.make_config(size=parse_size(args.size), views=args.views, seed=args.seed,
                                     **{**config_options(args, SynthesisConfig),
                                        "blockwise": blockwise_requested(args)})
+        refuse_written(args, config)
         shared = {id(a): _indices(a, values) for a in labels.values()}
         per_view = resolve_exemplars(None, {v: shared[id(a)] for v, a in labels.items()}, config.views,
                                      **method.fit(config))

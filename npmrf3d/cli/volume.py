@@ -18,6 +18,7 @@ import numpy as np
 
 from ..analysis.materials import stationarity_warning
 from ..errors import ParameterError
+from ..io.runs import RUN_FILES
 from ..methods import check_resources
 from ..methods.npmrf_3d import METHOD as NPMRF_METHOD
 from ..methods.volume_lh import METHOD, VolumeConfig
@@ -139,7 +140,7 @@ def _handler(args: argparse.Namespace, argv: list[str], method) -> int:
         _check_angle(args)
         field_name, extra["vector_field"] = field_input(args.vector_field, config.size)
         config = dataclasses.replace(config, vector_field=field_name)
-    out = output_folder(args)
+    out = output_folder(args, () if zarr_output(args) else RUN_FILES)  # a Zarr volume checks its own identity
     checkpoint = pathlib.Path(args.checkpoint) if args.checkpoint is not None else None
     check_checkpoint(checkpoint, out)
     source, _ = exemplar_source(args.exemplar)
