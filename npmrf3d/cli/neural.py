@@ -18,7 +18,7 @@ import numpy as np
 from .. import _validation as check
 from .. import data
 from ..errors import ParameterError
-from ..io.files import atomic_write, write_volume_tiff
+from ..io.files import atomic_write, broken_link, write_volume_tiff
 from ..io.zarr_blocks import volume_attrs
 from ..methods import neural
 from ..methods.neural import _extra
@@ -78,6 +78,9 @@ def _check_new_file(text: str, overwrite: bool, what: str) -> pathlib.Path:
     if not text.strip():
         raise ParameterError("--out must name a file; got an empty string")
     path = pathlib.Path(text)
+    nowhere = broken_link(path)
+    if nowhere is not None and path.suffix.lower() == ".zarr":  # a folder is made beside it, then moved there
+        raise ParameterError(f"{what} '{path}' {nowhere}; remove the link or choose another --out")
     if path.exists() and path.is_dir() and path.suffix.lower() != ".zarr":
         raise ParameterError(f"{what} '{path}' is a folder; give a file name")
     if path.exists() and not overwrite:
