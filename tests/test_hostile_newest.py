@@ -279,4 +279,3 @@ def _load_volume() -> np.ndarray:
 def test_the_api_accepts_an_inapplicable_option_at_its_default():
     config = npmrf3d.get_method("kopf").make_config(size=16, levels=2, histogram_weight=0.0, histogram_bins=16)
     assert config.histogram_weight == 0.0
-
