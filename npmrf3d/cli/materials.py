@@ -158,7 +158,7 @@ def segment(arrays: list, threshold: str = "auto") -> tuple[list, np.ndarray, st
             except ValueError:
                 cut = math.nan
             if not math.isfinite(cut):
-                _fail(f"--threshold must be auto or a finite number; got {threshold!r}")
+                _fail(f"--threshold must be auto or a number; got {threshold!r}")
             low, high = float(pooled.min()), float(pooled.max())
             if not low <= cut < high:
                 _fail(f"--threshold {threshold} is outside the input's values [{low:.6g}, {high:.6g}): "
