@@ -99,6 +99,7 @@ class SegmentedPreset:
     window: int = 5
     value_weight: float = 8.0
     fewer_levels: int = 1
+    smoothness: float = 0.0
 
     def pyramids(self, levels: int) -> tuple[int, ...]:
         """The level counts the preset runs, in order: ``levels``, and ``levels - fewer_levels``
@@ -165,6 +166,9 @@ class CoherentConfig:
                                      "the exemplar's standard deviation", kind="real", low=0.0, low_open=True)
     outlier: float = option(0.01, "share of a uniform term mixed into each view's estimate", kind="real",
                             low=0.0, high=1.0, high_open=True)
+    smoothness: float = option(0.0, "strength of a prior for colours that agree with the voxel's six face "
+                               "neighbours (0 = none): continues a phase's runs along every axis",
+                               kind="real", low=0.0)
     k: int = same_option(_CWC, "k")
     index_weight: float = same_option(_CWC, "index_weight")
     position_weight: float = same_option(_CWC, "position_weight")
@@ -229,7 +233,8 @@ _SHARED = tuple(name for name in options_of(chen_wang.ChenWangConfig) if name in
 def make_coherent_config(
     *, size=DEFAULTS.size, window=DEFAULTS.window, levels=DEFAULTS.levels, views=DEFAULTS.views,
     iterations=DEFAULTS.iterations, grid=DEFAULTS.grid, heuristic=DEFAULTS.heuristic,
-    centre_bandwidth=DEFAULTS.centre_bandwidth, outlier=DEFAULTS.outlier, k=DEFAULTS.k,
+    centre_bandwidth=DEFAULTS.centre_bandwidth, outlier=DEFAULTS.outlier, smoothness=DEFAULTS.smoothness,
+    k=DEFAULTS.k,
     index_weight=DEFAULTS.index_weight, position_weight=DEFAULTS.position_weight,
     position_boost=DEFAULTS.position_boost, random_candidates=DEFAULTS.random_candidates,
     global_share=DEFAULTS.global_share, coherence_bias=DEFAULTS.coherence_bias,
@@ -249,9 +254,10 @@ def make_coherent_config(
         coherence_bias=coherence_bias, value_weight=value_weight, value_prior=value_prior,
         value_bins=value_bins, phase_weight=phase_weight, blockwise=blockwise, pilot=pilot,
         whole_voxels=whole_voxels, seed=seed)
-    heuristic, centre_bandwidth, outlier, t0, schedule, sampler, icm, upsample, inherit, xi, stop, max_sweeps = (
-        validate(CoherentConfig, name, value) for name, value in (
+    heuristic, centre_bandwidth, outlier, smoothness, t0, schedule, sampler, icm, upsample, inherit, xi, stop, \
+        max_sweeps = (validate(CoherentConfig, name, value) for name, value in (
             ("heuristic", heuristic), ("centre_bandwidth", centre_bandwidth), ("outlier", outlier),
+            ("smoothness", smoothness),
             ("t0", t0), ("schedule", schedule), ("sampler", sampler), ("icm", icm), ("upsample", upsample),
             ("inherit", inherit), ("xi", xi), ("stop", stop), ("max_sweeps", max_sweeps)))
     if t0 > 0.0 and heuristic in PER_VIEW_HEURISTICS:
@@ -266,7 +272,7 @@ def make_coherent_config(
         check.fail(f"icm=True and t0={t0:g} are two relaxations: ICM decides by the highest score "
                    "(set t0=0), annealing runs the fixed iterations (set icm=False)")
     return CoherentConfig(heuristic=heuristic, centre_bandwidth=centre_bandwidth, outlier=outlier,
-                          t0=t0, t_end=float(t_end), schedule=schedule, sampler=sampler, icm=icm, xi=xi,
+                          smoothness=smoothness, t0=t0, t_end=float(t_end), schedule=schedule, sampler=sampler, icm=icm, xi=xi,
                           stop=stop, max_sweeps=max_sweeps, upsample=upsample, inherit=inherit,
                           **{name: getattr(cw, name) for name in _SHARED})
 
@@ -301,7 +307,7 @@ def coherent_levels(config: CoherentConfig, per_view: Mapping[str, np.ndarray]) 
     """The k-coherence engine of a run: deciding by the NP-MRF rule (annealed by the
     configuration's temperatures, or ICM's per-voxel temperatures with ``icm``)."""
     decision = CandidateDecision(config.heuristic, config.centre_bandwidth, config.outlier,
-                                 None if config.icm else temperatures(config), config.sampler)
+                                 None if config.icm else temperatures(config), config.sampler, config.smoothness)
     return KCoherenceLevels("coherent", _chen_wang_config(config), per_view, decision, icm_schedule(config))
 
 

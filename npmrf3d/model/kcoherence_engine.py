@@ -102,6 +102,10 @@ class CandidateDecision:
         The annealed draw: the heat-bath step above, or a Metropolis step -- one candidate
         proposed uniformly, accepted if its score is at least the current colour's, else with
         probability ``exp((score_new - score_current) / T)``.
+    smoothness : float
+        Strength of the smoothness prior on every candidate's score: its colour's agreement with
+        the voxel's six face neighbours (:mod:`npmrf3d._kernels.smoothness`; 0 = none). It runs
+        on the levels that run whole (every level but a ``blockwise`` run's finer ones).
     """
 
     heuristic: str | None = None
@@ -109,6 +113,7 @@ class CandidateDecision:
     outlier: float = 0.0
     temperatures: tuple[tuple[float, ...], ...] | None = None
     sampler: str = "heat-bath"
+    smoothness: float = 0.0
 
     def temperature(self, level_index: int, iteration: int) -> float:
         """The temperature of an iteration of the level ``level_index`` (0 = the coarsest)."""

@@ -321,13 +321,18 @@ class LevelPass:
         return target
 
     def solver_rule(self, rng, it: int) -> _solver.SolverRule:
-        """The solver's rule in iteration ``it``: the decision's temperature, and a salt when it anneals."""
-        decision = self.engine.decision
+        """The solver's rule in iteration ``it``: the decision's temperature, and a salt when it
+        anneals; on a whole level, the smoothness prior with the volume as it is now."""
+        engine = self.engine
+        decision = engine.decision
         temperature = decision.temperature(self.li, it)
         salt = _salt(rng) if temperature > 0.0 else 0
+        smooth = {} if decision.smoothness == 0.0 or self.local else {
+            "smoothness": decision.smoothness, "previous": self.state.volume.copy(),
+            "inv_span": 1.0 / np.where(engine.value_span > 0, engine.value_span, 1.0)}
         return _solver.SolverRule(self.medoid, self.config.balance_views, self.likelihood, self.h2c, decision.outlier,
                                   temperature, salt, CANDIDATE_SAMPLERS[decision.sampler], self.origin, self.extent,
-                                  self.colour_ids, self.kernel)
+                                  self.colour_ids, self.kernel, **smooth)
 
     def solve(self, order, bounds, rule, it: int) -> int:
         """Decide the voxels of ``order`` (:func:`npmrf3d._kernels.kcoherence_solver.solve`): a
