@@ -292,6 +292,7 @@ def _coherent_options(config: SynthesisConfig, phases: bool, levels: int) -> npm
         views=config.views, heuristic=config.heuristic, centre_bandwidth=config.rule.centre_bandwidth,
         outlier=config.rule.outlier, value_weight=value_weight, phase_weight=config.phase_weight,
         smoothness=npmrf_coherent.SEGMENTED.smoothness if phases else 0.0,
+        attached=npmrf_coherent.SEGMENTED.attached and phases,
         t0=config.t0 if anneal else 0.0,
         t_end=config.t_end, schedule=config.schedule, sampler=config.sampler, blockwise=config.blockwise,
         whole_voxels=config.whole_voxels, grid=coherent_grid(config, phases, levels),
