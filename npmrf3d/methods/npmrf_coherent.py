@@ -1,5 +1,8 @@
 """The coherent NP-MRF sampler: the NP-MRF likelihood decided over coherent candidates.
 
+Why one module of over 400 lines: the sampler's configuration (every option a field), its preset
+for segmented exemplars and the runs of both belong together.
+
 The paper's model (docs/model.md, sections 2-3) sums each view's Parzen estimate over *all*
 exemplar patches; measured on real photographs that makes speckle or blobs (docs/quality.md). Here each
 view's estimate sums over the **coherent candidates** instead: every voxel keeps, per view, the
@@ -95,14 +98,9 @@ class SegmentedPreset:
     (docs/segmented.md, "Two pyramids, the better kept"). The preset searches every site
     (:func:`npmrf3d.methods.npmrf_options.coherent_grid`; docs/segmented.md, "The segmented preset").
 
-    ``smoothness`` and ``attached``: the smoothness prior on the candidates' scores
-    (:class:`CoherentConfig`), read against the volume with the minority phase's pieces apart
-    from its largest seen as the majority phase. One slice does not show how a phase connects
-    through the third dimension: without them the Berea slice's volume held a sixth of its pore
-    space in detached pieces (the scan: a fortieth), its interfaces were 14 % larger than the
-    scan's and its relative diffusivity 5-51 % under the scan's crops along the axes; with them
-    (strength 3) the surface, the diffusivity along every axis and the two-point shape lie
-    within the crops' spread (benchmarks/bench_materials.py).
+    ``smoothness``, ``attached``: the smoothness prior (:class:`CoherentConfig`), which joins a
+    phase that one slice shows apart into a network through the third dimension (Berea's pore
+    diffusivity from one slice: 5-71 % under the scan's crops without it; benchmarks/bench_materials.py).
     """
 
     window: int = 5
@@ -177,8 +175,7 @@ class CoherentConfig:
     outlier: float = option(0.01, "share of a uniform term mixed into each view's estimate", kind="real",
                             low=0.0, high=1.0, high_open=True)
     smoothness: float = option(0.0, "strength of a prior for colours that agree with the voxel's six face "
-                               "neighbours (0 = none): continues a phase's runs along every axis",
-                               kind="real", low=0.0)
+                               "neighbours (0 = none): continues a phase's runs along every axis", kind="real", low=0.0)
     attached: bool = option(False, "the smoothness prior sees the minority phase's pieces apart from its largest "
                             "as the majority phase: draws the phase towards its network", kind="flag",
                             applies=lambda c: c.smoothness > 0, needs="smoothness is above 0")
@@ -247,8 +244,7 @@ def make_coherent_config(
     *, size=DEFAULTS.size, window=DEFAULTS.window, levels=DEFAULTS.levels, views=DEFAULTS.views,
     iterations=DEFAULTS.iterations, grid=DEFAULTS.grid, heuristic=DEFAULTS.heuristic,
     centre_bandwidth=DEFAULTS.centre_bandwidth, outlier=DEFAULTS.outlier, smoothness=DEFAULTS.smoothness,
-    attached=DEFAULTS.attached,
-    k=DEFAULTS.k,
+    attached=DEFAULTS.attached, k=DEFAULTS.k,
     index_weight=DEFAULTS.index_weight, position_weight=DEFAULTS.position_weight,
     position_boost=DEFAULTS.position_boost, random_candidates=DEFAULTS.random_candidates,
     global_share=DEFAULTS.global_share, coherence_bias=DEFAULTS.coherence_bias,
@@ -286,7 +282,8 @@ def make_coherent_config(
         check.fail(f"icm=True and t0={t0:g} are two relaxations: ICM decides by the highest score "
                    "(set t0=0), annealing runs the fixed iterations (set icm=False)")
     return CoherentConfig(heuristic=heuristic, centre_bandwidth=centre_bandwidth, outlier=outlier,
-                          smoothness=smoothness, attached=attached, t0=t0, t_end=float(t_end), schedule=schedule, sampler=sampler, icm=icm, xi=xi,
+                          smoothness=smoothness, attached=attached, t0=t0, t_end=float(t_end), schedule=schedule,
+                          sampler=sampler, icm=icm, xi=xi,
                           stop=stop, max_sweeps=max_sweeps, upsample=upsample, inherit=inherit,
                           **{name: getattr(cw, name) for name in _SHARED})
 
