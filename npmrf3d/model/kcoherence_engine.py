@@ -250,8 +250,8 @@ class KCoherenceLevels(Levels):
         self.value_lo = pooled.min(axis=0).astype(np.float64)
         self.value_span = pooled.max(axis=0).astype(np.float64) - self.value_lo
         self.view_axes = np.array([VIEW_AXES[v] for v in views], dtype=np.int64)
-        #: whether the exemplars' minority phase lies below the middle of their values
-        self.minority_below = minority_below(self.distinct, self.value_lo, self.value_span)
+        #: with ``decision.attached``: whether the exemplars' minority phase lies below the middle of their values
+        self.minority_below = decision.attached and minority_below(self.distinct, self.value_lo, self.value_span)
         self.key = run_key(method, config, self.per_view, decision=dataclasses.asdict(decision),
                            **({} if icm is None else {"icm": dataclasses.asdict(icm)}))
         self.phases = self.control = None
