@@ -14,7 +14,14 @@ grey one):
 * ``diff0..2`` -- relative diffusivity of the phase along each axis, ``fraction / tau`` with
   ``tau`` TauFactor's tortuosity factor (0 when the phase does not percolate). The table gives
   it rather than ``tau`` because ``tau`` is unbounded: crops of a scan whose phase barely
-  percolates read 10^6 beside 3 (``materials.json`` keeps ``tau`` too);
+  percolates read 10^6 beside 3 (``materials.json`` keeps ``tau`` too). ``--diffusivity
+  finite-volume`` solves the same problem with the project's own solver
+  (:func:`npmrf3d.analysis.materials.relative_diffusivity`), several times faster;
+* ``odiff0..2`` -- the same for the other phase (the matrix a pore network runs through);
+* ``perc`` -- whether the phase connects the two faces normal to each axis (face neighbours,
+  :func:`npmrf3d.analysis.materials.percolates`), ``1 1 0`` for axes 0 and 1 only; the crops'
+  spread is each axis's share of crops that percolate, and the volume is outside by the share
+  of the axes it misses among those along which most crops percolate;
 * ``s2`` -- error of the radial two-point correlation's shape: the L2 distance of
   ``(S2(r) - phi^2) / (phi - phi^2)``, r = 1..S/2, to the mean of the crops' curves, divided by
   that of a structureless volume (the exemplar's voxels shuffled): 0 = the scan's shape,
@@ -60,9 +67,16 @@ from materials_scans import SCANS, by_name
 METHODS = ("npmrf", "chen-wang", "kopf", "volume-lh")
 #: also accepted by --methods: the coherent sampler itself, whose options the default fixes
 EXTRA_METHODS = ("coherent",)
-SCALARS = ("fraction", "surface", "diff0", "diff1", "diff2", "chord", "chord_other")
+SCALARS = ("fraction", "surface", "diff0", "diff1", "diff2", "odiff0", "odiff1", "odiff2", "chord",
+           "chord_other")
 ERRORS = ("s2", "s2_axes")
 TAUS = ("tau0", "tau1", "tau2")
+#: per axis, 1.0 where the phase connects the two faces normal to it
+PERCS = ("perc0", "perc1", "perc2")
+#: the table's columns, in order
+COLUMNS = SCALARS + ("perc",) + ERRORS
+#: how the benchmark may solve for the relative diffusivity
+SOLVERS = ("taufactor", "finite-volume")
 
 
 def crop_corners(shape, side: int, max_crops: int) -> list[tuple[int, int, int]]:
@@ -90,8 +104,19 @@ def tortuosity(ind: np.ndarray, axis: int) -> float:
         return float("inf")
 
 
-def statistics(ind: np.ndarray, *, tau: bool = True) -> dict:
-    """The benchmark's statistics of one phase indicator (see the module docstring)."""
+def diffusivities(ind: np.ndarray, solver: str) -> tuple[list[float], list[float]]:
+    """Per axis, the phase's tortuosity factor and relative diffusivity by ``solver``
+    (``inf`` and 0 where it does not percolate)."""
+    if solver == "taufactor":
+        taus = [tortuosity(ind, a) for a in range(3)]
+        return taus, [float(ind.mean()) / t for t in taus]
+    diffs = [materials.relative_diffusivity(ind, axis=a) for a in range(3)]
+    return [float(ind.mean()) / d if d > 0 else float("inf") for d in diffs], diffs
+
+
+def statistics(ind: np.ndarray, *, tau: bool = True, solver: str = "taufactor") -> dict:
+    """The benchmark's statistics of one phase indicator (see the module docstring); without
+    ``tau`` no diffusivity (NaN)."""
     r = min(ind.shape) // 2
     fraction = float(ind.mean())
     radial = materials.radial_two_point(ind, max_distance=r, periodic=False)
@@ -102,14 +127,34 @@ def statistics(ind: np.ndarray, *, tau: bool = True) -> dict:
            "chord": float(chords.mean()) if len(chords) else 0.0,
            "chord_other": float(others.mean()) if len(others) else 0.0,
            "radial": shape_curve(radial, fraction), "axes": shape_curve(axes, fraction)}
-    for a in range(3):
-        out[f"tau{a}"] = tortuosity(ind, a) if tau else float("nan")
-        out[f"diff{a}"] = fraction / out[f"tau{a}"]
+    nan = [float("nan")] * 3
+    taus, diffs = diffusivities(ind, solver) if tau else (nan, nan)
+    others = diffusivities(~ind, solver)[1] if tau else nan
+    for a, percolating in enumerate(materials.percolates(ind)):
+        out[f"tau{a}"], out[f"diff{a}"], out[f"odiff{a}"] = taus[a], diffs[a], others[a]
+        out[f"perc{a}"] = float(percolating)
     return out
 
 
 def l2(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.sqrt(np.mean((np.asarray(a) - np.asarray(b)) ** 2)))
+
+
+def percolation_verdict(values, shares) -> float:
+    """The share of the axes along which most crops percolate (``shares``: per axis, the crops'
+    share) that the volume (``values``: 1.0 or 0.0 per axis) does not connect; 0 when it
+    connects them all.
+
+    >>> percolation_verdict([1.0, 1.0, 0.0], [1.0, 0.9, 0.6]), percolation_verdict([1, 0, 0], [1, 0.2, 0])
+    (0.3333333333333333, 0.0)
+    """
+    needed = [v for v, share in zip(values, shares) if share >= 0.5]
+    return sum(v < 0.5 for v in needed) / len(needed) if needed else 0.0
+
+
+def percolation_text(values) -> str:
+    """``1 1 0``: per axis, whether the phase percolates; a crops' share reads ``.93``."""
+    return " ".join(f"{v:.0f}" if v in (0.0, 1.0) else f"{v:.2f}".lstrip("0") for v in values)
 
 
 def verdict(value: float, low: float, high: float) -> float:
@@ -143,12 +188,16 @@ class Judge:
         self.spread = {k: (float(np.min([c[k] for c in crops])), float(np.max([c[k] for c in crops])))
                        for k in SCALARS + TAUS}
         self.spread.update({k: (0.0, float(np.max([e[k] for e in errors]))) for k in ERRORS})
+        self.spread["perc"] = tuple(float(np.mean([c[k] for c in crops])) for k in PERCS)
 
     def judge(self, stats: dict) -> dict:
         values = {k: stats[k] for k in SCALARS + TAUS}
         values["s2"] = l2(stats["radial"], self.radial) / self.control["s2"]
         values["s2_axes"] = l2(stats["axes"], self.axes) / self.control["s2_axes"]
-        return {k: {"value": float(v), "outside": verdict(float(v), *self.spread[k])} for k, v in values.items()}
+        out = {k: {"value": float(v), "outside": verdict(float(v), *self.spread[k])} for k, v in values.items()}
+        axes = [stats[k] for k in PERCS]
+        out["perc"] = {"value": percolation_text(axes), "outside": percolation_verdict(axes, self.spread["perc"])}
+        return out
 
 
 def exemplars_for(crop: np.ndarray, isotropic: bool) -> tuple[np.ndarray, dict]:
@@ -174,6 +223,8 @@ def synthesize(method: str, crop: np.ndarray, isotropic: bool, size: int, seed: 
 def cell(j: dict) -> str:
     o = j["outside"]
     v = j["value"]
+    if isinstance(v, str):
+        return v if o == 0 else f"{v} ({o:+.0%})"
     if np.isnan(v):
         return "–"
     text = "inf" if not np.isfinite(v) else (f"{v:.3f}" if abs(v) < 10 else f"{v:.3g}")
@@ -243,14 +294,15 @@ def run_scan(name: str, path: pathlib.Path, args) -> dict:
     above = float((crop > threshold).mean())
     minority = (lambda v: v > threshold) if above <= 0.5 else (lambda v: v <= threshold)
     t0 = time.perf_counter()
-    cache = pathlib.Path(args.out) / "crops" / f"{name}-{side}-{len(corners)}-{'no-tau' if args.no_tau else 'tau'}.npz"
+    solver = "no-tau" if args.no_tau else args.diffusivity
+    cache = pathlib.Path(args.out) / "crops" / f"{name}-{side}-{len(corners)}-{solver}-perc.npz"
     if cache.is_file():  # the crops' statistics depend only on the scan, the size and the corners
         with np.load(cache, allow_pickle=False) as saved:
             crops = [{k: (saved[k][n] if saved[k].ndim > 1 else float(saved[k][n])) for k in saved.files}
                      for n in range(len(corners))]
     else:
-        crops = [statistics(minority(volume[i:i + side, j:j + side, k:k + side]), tau=not args.no_tau)
-                 for i, j, k in corners]
+        crops = [statistics(minority(volume[i:i + side, j:j + side, k:k + side]), tau=not args.no_tau,
+                            solver=args.diffusivity) for i, j, k in corners]
         cache.parent.mkdir(parents=True, exist_ok=True)
         np.savez(cache, **{k: np.array([c[k] for c in crops]) for k in crops[0]})
     shuffled = np.random.default_rng(0).permutation(crop.ravel()).reshape(crop.shape)
@@ -262,14 +314,13 @@ def run_scan(name: str, path: pathlib.Path, args) -> dict:
     for method in args.methods:
         for seed in args.seeds:
             vol, seconds = synthesize(method, crop, scan.isotropic, side, seed, args.options.get(method, {}))
-            stats = statistics(minority(vol), tau=not args.no_tau)
+            stats = statistics(minority(vol), tau=not args.no_tau, solver=args.diffusivity)
             label = method if len(args.seeds) == 1 else f"{method} s{seed}"
             runs[label] = {"method": method, "seed": seed, "seconds": round(seconds, 1),
                            "judged": judge.judge(stats), "radial": stats["radial"]}
             volumes[label] = vol
             j = runs[label]["judged"]
-            print(f"  {label}: {seconds:.1f} s; " + ", ".join(f"{k} {cell(j[k])}" for k in SCALARS + ERRORS),
-                  flush=True)
+            print(f"  {label}: {seconds:.1f} s; " + ", ".join(f"{k} {cell(j[k])}" for k in COLUMNS), flush=True)
     out = pathlib.Path(args.out)
     figure(out / f"{name}.png", name, crop, volumes, judge, runs)
     return {"scan": name, "shape": list(volume.shape), "isotropic": scan.isotropic, "held_out": scan.held_out,
@@ -278,21 +329,32 @@ def run_scan(name: str, path: pathlib.Path, args) -> dict:
             "runs": {k: {kk: vv for kk, vv in v.items() if kk != "radial"} for k, v in runs.items()}}
 
 
+def spread_text(key: str, spread) -> str:
+    """The crops' spread of one column as the table gives it."""
+    if key == "perc":
+        return percolation_text(spread)
+    lo, hi = spread
+    return f"{lo:.3g}–{hi:.3g}" if key in SCALARS else f"≤ {hi:.3f}"
+
+
+def outside_values(cells: dict) -> list[float]:
+    """The verdicts of one run's judged cells (the table's columns measured)."""
+    return [cells[k]["outside"] for k in COLUMNS if not np.isnan(cells[k]["outside"])]
+
+
 def table(records: list[dict]) -> str:
-    keys = SCALARS + ERRORS
+    keys = COLUMNS
     lines = ["| scan | method | " + " | ".join(keys) + " | inside | time (s) |",
              "|---" * (len(keys) + 4) + "|"]
     for rec in records:
-        spread = " | ".join(f"{lo:.3g}–{hi:.3g}" if k in SCALARS else f"≤ {hi:.3f}"
-                            for k, (lo, hi) in ((k, rec["spread"][k]) for k in keys))
+        spread = " | ".join(spread_text(k, rec["spread"][k]) for k in keys)
         lines.append(f"| **{rec['scan']}**{'' if rec['held_out'] else ' (tuning)'}"
                      f"{'' if rec['isotropic'] else ', 3 slices'} | crops' spread | {spread} | | |")
         for label, run in rec["runs"].items():
             j = run["judged"]
-            judged = [k for k in keys if not np.isnan(j[k]["outside"])]
-            n_in = sum(j[k]["outside"] == 0 for k in judged)
+            outs = outside_values(j)
             lines.append(f"| | {label} | " + " | ".join(cell(j[k]) for k in keys)
-                         + f" | {n_in}/{len(judged)} | {run['seconds']:.0f} |")
+                         + f" | {sum(o == 0 for o in outs)}/{len(outs)} | {run['seconds']:.0f} |")
     return "\n".join(lines)
 
 
@@ -308,7 +370,7 @@ def summary(records: list[dict]) -> str:
                              key=(METHODS + EXTRA_METHODS).index)
             for method in methods:
                 cells = [run["judged"] for r in recs for run in r["runs"].values() if run["method"] == method]
-                outs = [c[k]["outside"] for c in cells for k in SCALARS + ERRORS if not np.isnan(c[k]["outside"])]
+                outs = [o for c in cells for o in outside_values(c)]
                 inside = np.mean([o == 0 for o in outs])
                 worst = max(abs(o) for o in outs)
                 s2 = np.mean([c["s2"]["value"] for c in cells])
@@ -326,7 +388,10 @@ def main(argv=None) -> int:
     p.add_argument("--seeds", type=int, nargs="+", default=[7])
     p.add_argument("--size", type=int, default=64, help="side of the crops and of the volumes made")
     p.add_argument("--max-crops", type=int, default=27)
-    p.add_argument("--no-tau", action="store_true", help="skip the tortuosity factors (no taufactor)")
+    p.add_argument("--no-tau", action="store_true", help="skip the diffusivities (no taufactor)")
+    p.add_argument("--diffusivity", choices=SOLVERS, default="taufactor",
+                   help="how to solve for the relative diffusivities: TauFactor or the project's own "
+                        "finite-volume solver (the same problem, several times faster)")
     p.add_argument("--option", action="append", default=[], metavar="METHOD:KEY=VALUE",
                    help="an option of one method's configuration, e.g. npmrf:levels=4 (repeatable)")
     p.add_argument("--out", default="figures/materials")
@@ -347,7 +412,7 @@ def main(argv=None) -> int:
     print()
     print(summary(records))
     record = {"hardware": hardware(), "size": args.size, "seeds": args.seeds, "methods": args.methods,
-              "options": args.options,
+              "options": args.options, "diffusivity": None if args.no_tau else args.diffusivity,
               "scans": records}
     with open(pathlib.Path(args.out) / "materials.json", "w") as fh:
         json.dump(record, fh, indent=1, default=float)

@@ -597,9 +597,24 @@ def naive_score(per_view, prior, likelihood, has_prior):
     return score
 
 
+def naive_smoothness(colour, previous, site, span, beta):
+    """The smoothness prior of ``colour`` at ``site``: ``-beta`` times the sum over the six face
+    neighbours (toroidal) of ``previous`` of the mean over channels of ``((colour - neighbour) /
+    span)^2``."""
+    total = 0.0
+    for axis in range(3):
+        for shift in (-1, 1):
+            n = list(site)
+            n[axis] = (n[axis] + shift) % previous.shape[axis]
+            gap = (np.asarray(colour, dtype=np.float64) - previous[tuple(n)].astype(np.float64)) / span
+            total += float(np.mean(gap ** 2))
+    return -beta * total
+
+
 def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, order, bounds,
                 pos_hist, theta, position_weight, position_boost=0.0, medoid=0, balance=False,
-                likelihood=0, h2c=1.0, outlier=0.0, values=None, temperature=0.0, salt=0, sampler=0, trust=None):
+                likelihood=0, h2c=1.0, outlier=0.0, values=None, temperature=0.0, salt=0, sampler=0, trust=None,
+                smoothness=0.0, span=None):
     """Literal discrete solver; returns (volume, src, pos_hist, changed). ``likelihood`` 1 or 2:
     the coherent NP-MRF decision (per-view Parzen estimate of each candidate's colour, product or
     minimum over views) instead of the medoid; with ``temperature > 0`` a heat-bath draw among the
@@ -614,7 +629,10 @@ def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, o
     (its nearest own vote when the pick is another view's). ``values`` (see
     :func:`naive_votes`, plus ``unit``): the value histogram, which follows every changed voxel
     between batches (updated in place).
-    ``trust``: see :func:`naive_votes`."""
+    ``trust``: see :func:`naive_votes`. ``smoothness > 0``: every candidate's prior also gets
+    :func:`naive_smoothness` against the volume as it was before the pass (``span`` per channel).
+    """
+    previous = volume.astype(np.float64)
     volume = volume.copy()
     src = src.copy()
     pos_hist = [h.astype(np.float64).copy() for h in pos_hist]
@@ -653,12 +671,14 @@ def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, o
                     totals = {}
                     for m in votes:
                         totals[m[1]] = totals.get(m[1], 0.0) + m[3]
-                    has_prior = values is not None and values.get("prior", 0.0) > 0
+                    has_prior = values is not None and values.get("prior", 0.0) > 0 or smoothness > 0
                     best_score = -np.inf
                     logs, tables = [], []
                     for q in ranked:
                         per_view = naive_view_estimates(votes[q][0], votes, totals, len(views), h2c, outlier)
                         prior = naive_prior(votes[q][0], values)
+                        if smoothness > 0:
+                            prior += naive_smoothness(votes[q][0], previous, site, span, smoothness)
                         if likelihood >= 3:
                             tables.append([x * np.exp(prior) for x in per_view])
                             continue
@@ -689,7 +709,10 @@ def naive_solve(volume, src, assign, omega, views, exemplars, *, window, grid, o
                     elif temperature > 0 and sampler == 1:
                         cur = volume[site]
                         per_view = naive_view_estimates(cur, votes, totals, len(views), h2c, outlier)
-                        cur_score = naive_score(per_view, naive_prior(cur, values), likelihood, has_prior)
+                        cur_prior = naive_prior(cur, values)
+                        if smoothness > 0:
+                            cur_prior += naive_smoothness(cur, previous, site, span, smoothness)
+                        cur_score = naive_score(per_view, cur_prior, likelihood, has_prior)
                         cur_log = cur_score if likelihood == 1 else np.log(cur_score)
                         h = naive_mix(salt * n_vox + int(flat))
                         a = min(int((h + 0.5) / 2147483648.0 * len(ranked)), len(ranked) - 1)

@@ -65,7 +65,7 @@ def test_a_run_writes_the_table_record_and_figure(bm, tmp_path, capsys):
                     "--methods", "kopf", "--option", "kopf:levels=1", "--no-tau", "--out", str(out)]) == 0
     record = json.loads((out / "materials.json").read_text())
     run = record["scans"][0]["runs"]["kopf"]
-    assert set(run["judged"]) == set(bm.SCALARS + bm.TAUS + bm.ERRORS)
+    assert set(run["judged"]) == set(bm.SCALARS + bm.TAUS + bm.ERRORS + ("perc",))
     assert record["options"] == {"kopf": {"levels": 1}}
     assert (out / "ketton.png").stat().st_size > 10_000
     assert "| | kopf |" in (out / "table.md").read_text()

@@ -55,11 +55,13 @@ def test_every_option_the_two_configurations_share_reaches_the_coherent_sampler(
 
 
 def test_the_segmented_preset_is_data_over_the_coherent_options():
-    assert SEGMENTED.changes() == {"window": SEGMENTED.window, "value_weight": SEGMENTED.value_weight}
+    assert SEGMENTED.changes() == {"window": SEGMENTED.window, "value_weight": SEGMENTED.value_weight,
+                                   "smoothness": SEGMENTED.smoothness, "attached": SEGMENTED.attached}
     runs = npmrf._coherent_runs(make_config(size=32, levels=3), True)
     assert [r.levels for r in runs] == list(SEGMENTED.pyramids(3))
     for r in runs:
         assert r.window == (SEGMENTED.window,) * r.levels and r.value_weight == SEGMENTED.value_weight
+        assert r.smoothness == SEGMENTED.smoothness and r.attached == SEGMENTED.attached
         assert r.grid == 1
     plain = npmrf._coherent_runs(make_config(size=32, levels=3), False)[0]
     assert plain.value_weight == CoherentConfig.value_weight and plain.grid == 2

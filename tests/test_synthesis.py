@@ -164,12 +164,13 @@ def _phase_slice(side: int = 24) -> np.ndarray:
 
 def _preset_twins(image, size, levels, seed):
     """The segmented preset's two runs, made by hand: the coherent sampler with the preset's
-    window and vote weighting and the default's phase control, ``levels`` then ``levels - 1``
+    window, vote weighting and smoothness prior and the default's phase control, ``levels`` then ``levels - 1``
     levels, on one generator in turn."""
     from npmrf3d.methods.npmrf_coherent import SEGMENTED, coherent_synthesize
     generator = np.random.default_rng(seed)
     return [coherent_synthesize(image, size=size, levels=n, window=(SEGMENTED.window,) * n,
-                                value_weight=SEGMENTED.value_weight,
+                                value_weight=SEGMENTED.value_weight, smoothness=SEGMENTED.smoothness,
+                                attached=SEGMENTED.attached,
                                 phase_weight=npmrf3d.SynthesisConfig.phase_weight, rng=generator)
             for n in (levels, levels - SEGMENTED.fewer_levels)]
 

@@ -30,6 +30,7 @@ import numpy as np
 
 from . import candidate_decision as _decide
 from ._jit import jit, jit_parallel, prange
+from .smoothness import add_smoothness, smoothness_prior
 from .candidate_decision import HEAT_BATH, METROPOLIS, ML_H1A, ML_H1B, ML_H2A, ML_H2B, value_prior
 from .kcoherence import first_site, global_flat, grid_voxels, mix, value_bin, wrap
 
@@ -105,6 +106,11 @@ class SolverRule(NamedTuple):
         among the distinct colours and the NP-MRF rule's kernel between them
         (:func:`npmrf3d._kernels.candidate_decision.kernel_table` with ``h2c``), looked up instead
         of computed (same bits); empty: computed
+    smoothness : float, the NP-MRF rule's smoothness prior's strength (0 = none,
+        :mod:`npmrf3d._kernels.smoothness`)
+    previous : (N0, N1, N2, C) float32, the volume before the pass, whose face neighbours the
+        smoothness prior reads (any shape when ``smoothness`` is 0)
+    inv_span : (C,) float64, one over each channel's range of exemplar values
     """
 
     medoid: int
@@ -119,6 +125,9 @@ class SolverRule(NamedTuple):
     extent: np.ndarray = np.zeros(3, dtype=np.int64)
     colour_ids: np.ndarray = np.zeros(0, dtype=np.int64)
     kernel: np.ndarray = np.zeros((0, 0), dtype=np.float64)
+    smoothness: float = 0.0
+    previous: np.ndarray = np.zeros((0, 0, 0, 1), dtype=np.float32)
+    inv_span: np.ndarray = np.ones(1, dtype=np.float64)
 
 
 class VoteTrust(NamedTuple):
@@ -536,6 +545,11 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
     score and on every view's estimate for ML_H1a and ML_H1b), which vanishes when the
     histograms agree.
 
+    With ``smoothness > 0`` (NP-MRF rule only) every candidate's score also gets the smoothness
+    prior of its colour against the voxel's face neighbours in ``previous``
+    (:mod:`npmrf3d._kernels.smoothness`), in every rule's terms: added to the log-score, a factor
+    ``exp(prior)`` on ML_H2a's score and on each view's estimate of ML_H1a and ML_H1b.
+
     Annealing (``temperature > 0``, NP-MRF rule only): instead of the highest score, the voxel
     draws candidate ``a`` with probability proportional to ``exp(l_a / temperature)`` (a
     heat-bath step over its candidates; ``l_a`` the ML_H2b log-score, or the log of the ML_H2a
@@ -553,6 +567,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
     outlier, temperature, salt, sampler = rule.outlier, rule.temperature, rule.salt, rule.sampler
     hist_args = (val_hist, hist.value_target, hist.value_unit, val_prior, val_lo, val_scale)
     colour_ids, kernel = rule.colour_ids, rule.kernel
+    smooth, previous, inv_span = rule.smoothness, rule.previous, rule.inv_span
     tabled = kernel.shape[0] > 0
     n_views = assign.shape[0]
     n0, n1, n2, channels = volume.shape
@@ -636,6 +651,9 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                     best = _score_candidates(ex_flat, vg, vv, vw, count, vsum, tops, n_try, likelihood, ranked, tabled,
                                              h2c, outlier, priors, exp_priors, val_prior, lik, liks, products, prior_of,
                                              table, scores)
+                    if likelihood and smooth > 0.0:
+                        add_smoothness(ex_flat, vg, tops, n_try, previous, p0, p1, p2, inv_span, smooth, likelihood,
+                                       ranked, products, prior_of, table, scores)
                     if ranked:
                         win = _decide.highest_objective(products, n_try, liks, likelihood, prior_of, -1)
                         best = tops[win] if win >= 0 else 0
@@ -653,6 +671,8 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                     elif likelihood and temperature > 0.0 and sampler == METROPOLIS:
                         current = _decide.colour_score(volume[p0, p1, p2], ex_flat, vg, vv, vw, count, vsum, h2c,
                                                        outlier, likelihood, hist_args, bins, lik)
+                        if smooth > 0.0:
+                            current += smoothness_prior(volume[p0, p1, p2], previous, p0, p1, p2, inv_span, smooth)
                         key = salt * n_vox + global_flat(p0, p1, p2, volume.shape, rule.origin, rule.extent)
                         pick = _decide.metropolis(scores, n_try, current, temperature, key)
                         if pick < 0:

@@ -1,5 +1,8 @@
 """The coherent NP-MRF sampler: the NP-MRF likelihood decided over coherent candidates.
 
+Why one module of over 400 lines: the sampler's configuration (every option a field), its preset
+for segmented exemplars and the runs of both belong together.
+
 The paper's model (docs/model.md, sections 2-3) sums each view's Parzen estimate over *all*
 exemplar patches; measured on real photographs that makes speckle or blobs (docs/quality.md). Here each
 view's estimate sums over the **coherent candidates** instead: every voxel keeps, per view, the
@@ -93,18 +96,24 @@ class SegmentedPreset:
     of one slice and smears the small throats of another, and only the exemplar can tell which
     (docs/segmented.md, "Two pyramids, the better kept"). The preset searches every site
     (:func:`npmrf3d.methods.npmrf_options.coherent_grid`; docs/segmented.md, "The segmented preset").
+
+    ``smoothness``, ``attached``: the smoothness prior (:class:`CoherentConfig`), which joins a
+    phase that one slice shows apart into a network through the third dimension (Berea's pore
+    diffusivity from one slice: 5-71 % under the scan's crops without it; benchmarks/bench_materials.py).
     """
 
     window: int = 5
     value_weight: float = 8.0
     fewer_levels: int = 1
+    smoothness: float = 3.0
+    attached: bool = True
 
     def changes(self) -> dict:
         """What the preset sets of the coherent sampler's options: its fields named as options of
         :class:`CoherentConfig`.
 
         >>> SEGMENTED.changes()
-        {'window': 5, 'value_weight': 8.0}
+        {'window': 5, 'value_weight': 8.0, 'smoothness': 3.0, 'attached': True}
         """
         names = options_of(CoherentConfig)
         return {name: value for name, value in asdict(self).items() if name in names}
@@ -186,6 +195,11 @@ class CoherentConfig:
                                      "the exemplar's standard deviation", kind="real", low=0.0, low_open=True)
     outlier: float = option(0.01, "share of a uniform term mixed into each view's estimate", kind="real",
                             low=0.0, high=1.0, high_open=True)
+    smoothness: float = option(0.0, "strength of a prior for colours that agree with the voxel's six face "
+                               "neighbours (0 = none): continues a phase's runs along every axis", kind="real", low=0.0)
+    attached: bool = option(False, "the smoothness prior sees the minority phase's pieces apart from its largest "
+                            "as the majority phase: draws the phase towards its network", kind="flag",
+                            applies=lambda c: c.smoothness > 0, needs="smoothness is above 0")
     k: int = same_option(_CWC, "k")
     index_weight: float = same_option(_CWC, "index_weight")
     position_weight: float = same_option(_CWC, "position_weight")
@@ -303,7 +317,8 @@ def coherent_levels(config: CoherentConfig, per_view: Mapping[str, np.ndarray]) 
     """The k-coherence engine of a run: deciding by the NP-MRF rule (annealed by the
     configuration's temperatures, or ICM's per-voxel temperatures with ``icm``)."""
     decision = CandidateDecision(config.heuristic, config.centre_bandwidth, config.outlier,
-                                 None if config.icm else temperatures(config), config.sampler)
+                                 None if config.icm else temperatures(config), config.sampler, config.smoothness,
+                                 config.attached)
     return KCoherenceLevels("coherent", _chen_wang_config(config), per_view, decision, icm_schedule(config))
 
 

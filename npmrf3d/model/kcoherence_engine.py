@@ -52,6 +52,7 @@ from .kcoherence_histograms import (
     value_counts,
     value_scale,
 )
+from .connectivity import minority_below
 from .kcoherence_icm import IcmSchedule, inherited_mask
 from .kcoherence_pass import (
     CANDIDATE_HEURISTICS,
@@ -102,6 +103,14 @@ class CandidateDecision:
         The annealed draw: the heat-bath step above, or a Metropolis step -- one candidate
         proposed uniformly, accepted if its score is at least the current colour's, else with
         probability ``exp((score_new - score_current) / T)``.
+    smoothness : float
+        Strength of the smoothness prior on every candidate's score: its colour's agreement with
+        the voxel's six face neighbours (:mod:`npmrf3d._kernels.smoothness`; 0 = none). It runs
+        on the levels that run whole (every level but a ``blockwise`` run's finer ones).
+    attached : bool
+        The smoothness prior reads the volume with the minority phase's pieces apart from its
+        largest seen as the majority phase (:func:`npmrf3d.model.connectivity.attached_view`):
+        it draws the phase towards its network and away from detached pieces.
     """
 
     heuristic: str | None = None
@@ -109,6 +118,8 @@ class CandidateDecision:
     outlier: float = 0.0
     temperatures: tuple[tuple[float, ...], ...] | None = None
     sampler: str = "heat-bath"
+    smoothness: float = 0.0
+    attached: bool = False
 
     def temperature(self, level_index: int, iteration: int) -> float:
         """The temperature of an iteration of the level ``level_index`` (0 = the coarsest)."""
@@ -239,6 +250,8 @@ class KCoherenceLevels(Levels):
         self.value_lo = pooled.min(axis=0).astype(np.float64)
         self.value_span = pooled.max(axis=0).astype(np.float64) - self.value_lo
         self.view_axes = np.array([VIEW_AXES[v] for v in views], dtype=np.int64)
+        #: with ``decision.attached``: whether the exemplars' minority phase lies below the middle of their values
+        self.minority_below = decision.attached and minority_below(self.distinct, self.value_lo, self.value_span)
         self.key = run_key(method, config, self.per_view, decision=dataclasses.asdict(decision),
                            **({} if icm is None else {"icm": dataclasses.asdict(icm)}))
         self.phases = self.control = None

@@ -29,6 +29,7 @@ from .._kernels import candidate_decision as _decide
 from .._kernels import kcoherence as _search
 from .._kernels import kcoherence_solver as _solver
 from . import kcoherence as coh
+from .connectivity import attached_view
 from .exemplar import pack_rows
 from .kcoherence_histograms import PilotHistograms, ValueHistogram, position_histogram
 from .kcoherence_icm import IcmLevel
@@ -321,13 +322,27 @@ class LevelPass:
         return target
 
     def solver_rule(self, rng, it: int) -> _solver.SolverRule:
-        """The solver's rule in iteration ``it``: the decision's temperature, and a salt when it anneals."""
-        decision = self.engine.decision
+        """The solver's rule in iteration ``it``: the decision's temperature, and a salt when it
+        anneals; on a whole level, the smoothness prior with the volume as it is now."""
+        engine = self.engine
+        decision = engine.decision
         temperature = decision.temperature(self.li, it)
         salt = _salt(rng) if temperature > 0.0 else 0
+        smooth = {} if decision.smoothness == 0.0 or self.local else {
+            "smoothness": decision.smoothness, "previous": self.previous(),
+            "inv_span": 1.0 / np.where(engine.value_span > 0, engine.value_span, 1.0)}
         return _solver.SolverRule(self.medoid, self.config.balance_views, self.likelihood, self.h2c, decision.outlier,
                                   temperature, salt, CANDIDATE_SAMPLERS[decision.sampler], self.origin, self.extent,
-                                  self.colour_ids, self.kernel)
+                                  self.colour_ids, self.kernel, **smooth)
+
+    def previous(self) -> np.ndarray:
+        """The volume the smoothness prior reads: a copy of the level's as it is now, with the
+        minority phase's detached pieces seen as the majority phase when the decision asks
+        (:func:`npmrf3d.model.connectivity.attached_view`)."""
+        engine, volume = self.engine, self.state.volume
+        if engine.decision.attached:
+            return attached_view(volume, engine.value_lo, engine.value_span, engine.minority_below)
+        return volume.copy()
 
     def solve(self, order, bounds, rule, it: int) -> int:
         """Decide the voxels of ``order`` (:func:`npmrf3d._kernels.kcoherence_solver.solve`): a
