@@ -1,5 +1,5 @@
-"""Dask for the studies (:mod:`npmrf3d.studies.runner`) and the neural Zarr writer
-(:mod:`npmrf3d.methods.neural.zarr_volume`): the one place that starts local clusters, sizes them
+"""Dask for the studies (:mod:`npmrf3d.studies.runner`) and the executor of Zarr volumes made in
+blocks (:func:`npmrf3d.io.zarr_blocks.write_volume`): the one place that starts local clusters, sizes them
 (:func:`plan_workers`), checks a scheduler address (:func:`check_scheduler`,
 :func:`probe_scheduler`) and connects to one (:func:`dask_client`). Dask is imported only when a
 cluster starts or a client connects.

@@ -8,9 +8,10 @@ off half-way is made again whole). The array's attributes say what made it (the 
 identity): a folder made by another run is refused, not mixed (the refusal names what
 differs). :func:`claim_volume` holds the output's lock for a whole run and keeps an old volume
 until the one replacing it is complete; :func:`write_volume` runs a whole volume's block tasks
-under it, in this process or on a Dask cluster. The array is Zarr format 2,
-``(N1, N2, N3, C)`` float32, which napari opens directly (``napari vol.zarr``; C = 3 shows as
-RGB). Used by the block runner of the synthesis methods (:mod:`npmrf3d.methods.blocks`) and
+under it, in the caller's order, in this process or on a Dask cluster (or the first block here
+while the cluster starts): the one executor of every volume made in blocks. The array is Zarr
+format 2, ``(N1, N2, N3, C)`` float32, which napari opens directly (``napari vol.zarr``; C = 3
+shows as RGB). Used by the block runner of the synthesis methods (:mod:`npmrf3d.methods.blocks`) and
 the neural generator (:mod:`npmrf3d.methods.neural.zarr_volume`).
 """
 
@@ -23,11 +24,12 @@ import json
 import os
 import pathlib
 import shutil
+import time
 
 import numpy as np
 import zarr
 
-from .._cluster import dask_client
+from .._cluster import ClusterStart
 from ..errors import ParameterError
 from .runs import OutputLock, glob_escape, new_staging, replace_folder
 
@@ -299,32 +301,46 @@ def write_block(out, index, block: int, values: np.ndarray) -> None:
 
 
 def write_volume(out, *, size, channels: int, block: int, attrs: dict, task, args: tuple = (),
-                 overwrite: bool = False, record: dict | None = None, scheduler: str | None = None,
-                 workers: int = 1, progress=None) -> dict:
+                 here_args: tuple | None = None, overwrite: bool = False, record: dict | None = None,
+                 scheduler: str | None = None, workers: int = 1, order=None, first_here=None,
+                 progress=None) -> dict:
     """Make the ``size`` volume of ``channels`` channels into the Zarr array ``out``, block by
     block: ``task(place, index, *args)`` makes block ``index`` and writes it into the array at
-    ``place`` (:func:`write_block`), and returns what the caller wants back (picklable).
+    ``place`` (:func:`write_block`), and returns what the caller wants back (picklable). The one
+    executor of every volume made in blocks.
 
     The output is claimed for the whole run (:func:`claim_volume`: its lock; an old volume kept
     until the new one is complete, ``overwrite`` or not) and created or resumed
     (:func:`open_blocks` with the run's identity ``attrs`` and its ``record``); only the blocks
-    without a marker are made, in this process one after another when ``workers`` is 1 and no
-    ``scheduler`` is given, else as tasks of a local Dask cluster of ``workers`` processes or of
-    the running scheduler at that address. ``progress(done, total)`` once before the first block
-    and after each one.
+    without a marker are made, in the order of the key ``order(index)`` (None: their indices'),
+    in this process one after another when ``workers`` is 1 and no ``scheduler`` is given, else
+    as tasks of a local Dask cluster of ``workers`` processes or of the running scheduler at that
+    address. With a cluster, ``first_here(place)`` true makes the first block in this process
+    while the cluster starts in the background (a block that makes what the others read). A
+    block made in this process gets ``here_args`` instead of ``args`` (None: ``args``; e.g. the
+    threads of every core rather than a worker's share). ``progress(done, total)`` once before
+    the first block and after each one.
 
     Returns
     -------
     dict
-        ``blocks`` (total), ``skipped`` (already done), ``written`` and ``results`` (what the
-        tasks returned, in the order they finished).
+        ``blocks`` (total), ``skipped`` (already done), ``written``, ``results`` (what the tasks
+        returned, in the order they finished), ``rest_seconds`` and ``rest_blocks`` (the wall
+        time of the blocks after the first one made in this process, with what is left of the
+        cluster's start, and their number; every block when none is made here first).
     """
     size = tuple(int(n) for n in size)
+    here_args = args if here_args is None else here_args
     with claim_volume(out, attrs=volume_attrs(attrs, size, block), overwrite=overwrite) as place:
         open_blocks(place, size=size, channels=channels, block=block, attrs=attrs, record=record)
         indices = block_indices(size, block)
         finished = finished_blocks(place)
-        todo = [i for i in indices if i not in finished]
+        todo = sorted((i for i in indices if i not in finished), key=order)
+        if scheduler is None and workers == 1:
+            here = todo
+        else:
+            here = todo[:1] if todo and first_here is not None and first_here(place) else []
+        on_cluster = todo[len(here):]
         results = []
 
         def made(result) -> None:
@@ -334,14 +350,20 @@ def write_volume(out, *, size, channels: int, block: int, attrs: dict, task, arg
 
         if progress is not None:
             progress(len(indices) - len(todo), len(indices))
-        if todo and scheduler is None and workers == 1:
-            for index in todo:
-                made(task(os.fspath(place), index, *args))
-        elif todo:
-            from distributed import as_completed
+        # the cluster starts in the background: its workers' start-up overlaps the first block
+        with ClusterStart(scheduler, workers) if on_cluster else contextlib.nullcontext() as cluster:
+            if here:
+                made(task(os.fspath(place), here[0], *here_args))
+            t_rest = time.perf_counter()
+            for index in here[1:]:
+                made(task(os.fspath(place), index, *here_args))
+            if on_cluster:
+                from distributed import as_completed
 
-            with dask_client(scheduler, workers) as client:
-                futures = [client.submit(task, os.fspath(place), index, *args, pure=False) for index in todo]
+                client = cluster.client()
+                futures = [client.submit(task, os.fspath(place), index, *args, pure=False) for index in on_cluster]
                 for future in as_completed(futures):
                     made(future.result())
-    return {"blocks": len(indices), "skipped": len(indices) - len(todo), "written": len(todo), "results": results}
+            rest_seconds = time.perf_counter() - t_rest
+    return {"blocks": len(indices), "skipped": len(indices) - len(todo), "written": len(todo), "results": results,
+            "rest_seconds": rest_seconds, "rest_blocks": len(todo) - min(1, len(here))}

@@ -7,8 +7,10 @@ seed and a grid position: a volume made as blocks equals, bit for bit, the volum
 with the same seed, whatever the block size, the order of the blocks or the worker that makes
 them. :func:`make_block` makes one block; :func:`synthesize_blocks` a whole volume in memory;
 :func:`write_zarr` a volume of any size that fits on disk, each block a task of a local Dask
-cluster (``workers``) or of a running scheduler, into a chunked Zarr array
-(:mod:`npmrf3d.io.zarr_blocks`: resumable, the run's record in its attributes).
+cluster (``workers``) or of a running scheduler, into a chunked Zarr array: the run is
+:func:`npmrf3d.io.zarr_blocks.write_volume`'s (resumable, the run's record in its attributes),
+given this module's block task, the largest blocks first and the first block made in this
+process while the cluster starts; it sums the tasks' seconds and peak memory.
 
 The cost of a block is its cone: the block grown at every level by that level's apron
 (iterations times the window's reach), so blocks much larger than the aprons waste least
@@ -17,7 +19,6 @@ The cost of a block is its cone: the block grown at every level by that level's 
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import json
 import os
@@ -29,19 +30,9 @@ from collections.abc import Callable, Mapping
 import numpy as np
 
 from .. import _validation as check
-from .._cluster import ClusterStart
 from .._kernels._jit import use_threads
 from ..config import SynthesisMethod
-from ..io.zarr_blocks import (
-    block_box,
-    block_indices,
-    claim_volume,
-    clamp_block,
-    finished_blocks,
-    open_blocks,
-    volume_attrs,
-    write_block,
-)
+from ..io.zarr_blocks import block_box, block_indices, clamp_block, volume_attrs, write_block, write_volume
 from ..io.checkpoints import exemplar_digest
 from ..model.pyramid import level_shape
 from ..model.regions import RegionPlan, plan_region
@@ -190,9 +181,10 @@ def block_plan(method: SynthesisMethod, per_view, config, *, block: int) -> Bloc
 START = ".npmrf3d-coarse.npz"
 
 
-def _task(method_name: str, per_view, config, out: str, index, block: int, threads: int) -> tuple[float, int]:
-    """One task on a worker: make block ``index`` and write it and its marker; its seconds and
-    the worker process's peak resident memory so far (bytes)."""
+def _task(out: str, index, method_name: str, per_view, config, block: int, threads: int) -> tuple[float, int]:
+    """One block's task (:func:`npmrf3d.io.zarr_blocks.write_volume`): make block ``index`` and
+    write it and its marker into ``out``; its seconds and the process's peak resident memory so
+    far (bytes)."""
     t0 = time.perf_counter()
     use_threads(threads)
     origin, shape = block_box(index, block, config.size)
@@ -249,66 +241,22 @@ def write_zarr(method: SynthesisMethod, per_view, config, out, *, block: int, re
         memory_per_worker = None if available is None else available // max(1, workers if scheduler is None else 1)
     check_memory(plan.memory, available=memory_per_worker,
                  hint="use a smaller --block (each worker holds one block's cone), or fewer --workers")
-    attrs = zarr_attrs(method, config, per_view, block)
-    with claim_volume(out, attrs=attrs, overwrite=overwrite) as place:
-        open_blocks(place, size=config.size, channels=next(iter(per_view.values())).shape[-1], block=block,
-                    attrs={"npmrf3d_run": attrs["npmrf3d_run"]}, record=json.loads(json.dumps(record, default=str)))
-        return _write_blocks(method, per_view, config, place, block=block, workers=workers, threads=threads,
-                             scheduler=scheduler, progress=progress, plan=plan)
-
-
-def _write_blocks(method: SynthesisMethod, per_view, config, out: pathlib.Path, *, block: int, workers: int,
-                  threads: int, scheduler: str | None, progress, plan: BlockPlan) -> dict:
-    """The blocks of ``out`` (an open array of this run) that have no marker yet, made and written."""
-    indices = block_indices(config.size, block)
-    finished = finished_blocks(out)
-    # the largest blocks first, so that the last ones, which a worker may make while the others
-    # have nothing left, are the smallest (the order changes no voxel)
-    todo = sorted((i for i in indices if i not in finished),
-                  key=lambda i: -int(np.prod(block_box(i, block, config.size)[1])))
-    done = len(indices) - len(todo)
-    written = len(todo)
-    seconds = 0.0
-    worker_peak = 0
-    if progress is not None:
-        progress(done, len(indices))
-    first = bool(todo) and not (out / START).exists()
-    # one local worker: every block is made here, one after another (a worker process would only
-    # add its start and Dask's bookkeeping); else the first, which makes the shared coarse levels,
-    # is made here with every core the cluster would use, before the others need them
-    here = todo if scheduler is None and workers == 1 else todo[:1] if first else []
-    on_cluster = todo[len(here):]
-
-    def made(took: float, peak: int) -> None:
-        nonlocal seconds, worker_peak, done
-        seconds += took
-        worker_peak = max(worker_peak, peak)
-        done += 1
-        if progress is not None:
-            progress(done, len(indices))
-
-    def make_here(index) -> None:
-        made(*_task(method.name, per_view, config, os.fspath(out), index, block, workers * threads))
-
-    # the cluster starts in the background: its workers' start-up overlaps the first block
-    with ClusterStart(scheduler, workers) if on_cluster else contextlib.nullcontext() as cluster:
-        if here:
-            make_here(here[0])
-        t_rest = time.perf_counter()
-        for index in here[1:]:
-            make_here(index)
-        if on_cluster:
-            client = cluster.client()
-            from distributed import as_completed
-
-            futures = [client.submit(_task, method.name, per_view, config, os.fspath(out), i, block, threads,
-                                     pure=False) for i in on_cluster]
-            for future in as_completed(futures):
-                made(*future.result())
-        rest_seconds = time.perf_counter() - t_rest
-    return {"blocks": len(indices), "skipped": len(indices) - written, "written": written,
-            "seconds": seconds, "rest_seconds": rest_seconds,
-            "rest_blocks": len(on_cluster) + max(0, len(here) - 1),
-            "worker_peak_bytes": worker_peak, "plan": plan.describe(),
-            "block_bytes": plan.memory.bytes,
-            "block_memory": format_bytes(plan.memory.bytes)}
+    size = tuple(config.size)
+    # one local worker: every block is made here, one after another with every core (a worker
+    # process would only add its start and Dask's bookkeeping); else the first, which makes the
+    # shared coarse levels, is made here with every core the cluster would use while the cluster
+    # starts. The largest blocks first, so that the last ones, which a worker may make while the
+    # others have nothing left, are the smallest (the order changes no voxel).
+    summary = write_volume(
+        out, size=size, channels=next(iter(per_view.values())).shape[-1], block=block,
+        attrs={"npmrf3d_run": run_identity(method, config, per_view)}, task=_task,
+        args=(method.name, per_view, config, block, threads),
+        here_args=(method.name, per_view, config, block, workers * threads),
+        overwrite=overwrite, record=json.loads(json.dumps(record, default=str)), scheduler=scheduler,
+        workers=workers, order=lambda index: -int(np.prod(block_box(index, block, size)[1])),
+        first_here=lambda place: not pathlib.Path(place, START).exists(), progress=progress)
+    made = summary["results"]
+    return {"blocks": summary["blocks"], "skipped": summary["skipped"], "written": summary["written"],
+            "seconds": sum(seconds for seconds, _ in made), "rest_seconds": summary["rest_seconds"],
+            "rest_blocks": summary["rest_blocks"], "worker_peak_bytes": max((peak for _, peak in made), default=0),
+            "plan": plan.describe(), "block_bytes": plan.memory.bytes, "block_memory": format_bytes(plan.memory.bytes)}
