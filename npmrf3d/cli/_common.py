@@ -61,18 +61,21 @@ class Parser(argparse.ArgumentParser):
             parser = commands[0].choices[chosen]
 
 
-def add_run_options(parser: argparse.ArgumentParser, *, out: str, zarr: bool = False) -> argparse._ArgumentGroup:
+def add_run_options(parser: argparse.ArgumentParser, *, out: str, zarr: bool = True,
+                    blockwise: bool = False) -> argparse._ArgumentGroup:
     """The options of every command that makes a volume, defined once: ``--seed``, ``--out``
-    (default ``out``; with ``zarr`` also a Zarr volume made in blocks), ``--overwrite``,
-    ``--quiet``, ``--dry-run`` and ``--checkpoint``."""
+    (default ``out``; with ``zarr`` a name ending in ``.zarr`` is a Zarr volume, made in blocks
+    with ``--blockwise`` when the command has it: ``blockwise``), ``--overwrite``, ``--quiet``,
+    ``--dry-run`` and ``--checkpoint``."""
     run = parser.add_argument_group("run")
     run.add_argument("--seed", type=int, default=0, metavar="S",
                      help="random seed, a non-negative integer; the result depends on it only")
     run.add_argument("--out", default=out, metavar="DIR",
                      help="output folder for the run files; created if missing" + (
-                         "; a name ending in .zarr: a chunked Zarr array instead of a run folder, "
-                         "made at once, or with --blockwise in blocks (any size that fits on disk)"
-                         if zarr else ""))
+                         "; a name ending in .zarr: a chunked Zarr volume instead (napari opens it), "
+                         "made at once" if zarr else "") + (
+                         ", or with --blockwise in blocks (any size that fits on disk)"
+                         if zarr and blockwise else ""))
     run.add_argument("--overwrite", action="store_true",
                      help="replace the files of a previous run in --out instead of refusing")
     run.add_argument("--quiet", action="store_true",

@@ -106,7 +106,7 @@ def refuse_written(args: argparse.Namespace, config) -> None:
 
 def add_method_parser(commands, name: str, method, *, help: str, description: str,
                       out: str, formatter_class, refuse=None, handler=None, aliases=(),
-                      extra=None, inputs=None) -> argparse.ArgumentParser:
+                      extra=None, inputs=None, zarr: bool = True) -> argparse.ArgumentParser:
     """Add sub-command ``name`` (and ``aliases``) that runs ``method`` (a
     :class:`npmrf3d.config.SynthesisMethod`) with its configuration's options.
 
@@ -115,7 +115,8 @@ def add_method_parser(commands, name: str, method, *, help: str, description: st
     ``handler(args, argv)`` replaces the run below; ``extra(parser, sections)`` adds the command's
     own options (a later option of the same name replaces a field's); ``inputs(parser, sections)``
     replaces the 2D exemplar, its views and the per-view exemplars (a 3D exemplar's command; its
-    ``usage`` attribute names the input in the usage line)."""
+    ``usage`` attribute names the input in the usage line); ``zarr``: ``--out X.zarr`` makes a
+    Zarr volume (else the command refuses it, and its help does not offer it)."""
     parser = commands.add_parser(name, aliases=list(aliases), help=help, description=description,
                                  formatter_class=formatter_class, conflict_handler="resolve",
                                  usage=f"%(prog)s {getattr(inputs, 'usage', '[EXEMPLAR]')} [options]")
@@ -128,8 +129,9 @@ def add_method_parser(commands, name: str, method, *, help: str, description: st
     (inputs or _exemplar_inputs)(parser, sections)
     if extra is not None:
         extra(parser, sections)
-    add_run_options(parser, out=out)
-    if "blockwise" in method_options(method.config_class):
+    blockwise = "blockwise" in method_options(method.config_class)
+    add_run_options(parser, out=out, zarr=zarr, blockwise=blockwise)
+    if blockwise:
         add_block_options(sections["blocks"], sampler=False)
 
     def run_command(args: argparse.Namespace, argv: list[str]) -> int:

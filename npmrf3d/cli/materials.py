@@ -88,7 +88,7 @@ def register(commands, formatter_class) -> None:
             "  npmrf3d materials --slices front.png,right.png,top.png --out fibres\n"
             "  npmrf3d materials bundled:fibres48 --size 32 --out crop   # a 3D crop: volume-lh"
         ),
-        out="npmrf3d-materials-out", formatter_class=formatter_class, handler=run, extra=_extra)
+        out="npmrf3d-materials-out", formatter_class=formatter_class, handler=run, extra=_extra, zarr=False)
     hidden = {f"exemplar_{v}" for v in VIEWS} | {"block", "workers", "scheduler"}  # refused here
     for action in parser._actions:
         if action.dest == "exemplar":
