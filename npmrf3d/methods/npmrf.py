@@ -291,6 +291,7 @@ def _coherent_options(config: SynthesisConfig, phases: bool, levels: int) -> npm
         size=config.size, window=(window,) * levels, levels=levels,
         views=config.views, heuristic=config.heuristic, centre_bandwidth=config.rule.centre_bandwidth,
         outlier=config.rule.outlier, value_weight=value_weight, phase_weight=config.phase_weight,
+        feature_weight=npmrf_coherent.SEGMENTED.feature_weight if phases else npmrf_coherent.DEFAULTS.feature_weight,
         t0=config.t0 if anneal else 0.0,
         t_end=config.t_end, schedule=config.schedule, sampler=config.sampler, blockwise=config.blockwise,
         whole_voxels=config.whole_voxels, grid=coherent_grid(config, phases, levels),
