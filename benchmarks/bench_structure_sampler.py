@@ -15,7 +15,8 @@ exemplar, the crops B are the floor. Per photograph, variant and seed, one 64^3 
   are given as ``floor ends``);
 * ``ac``, ``hkl``: the quality benchmark's pooled short-lag autocorrelation error (ratio to the
   structureless control) and histogram KL (``_quality.measure``);
-* ``s``: seconds of the synthesis alone.
+* ``s``: seconds of the synthesis alone (wall; the JSON rows also hold its CPU seconds, which a
+  busy machine distorts less).
 
 Variants (:data:`VARIANTS`) are the default run (``npmrf3d.synthesize``) or the default's
 coherent options with fields replaced (``_quality._npmrf_coherent_with``); ``--trace`` also
@@ -182,10 +183,11 @@ class Photo:
         return row
 
 
-def run_variant(photo: Photo, variant: str, size: int, levels: int, seed: int) -> tuple[np.ndarray, float]:
-    t0 = time.perf_counter()
+def run_variant(photo: Photo, variant: str, size: int, levels: int,
+                seed: int) -> tuple[np.ndarray, float, float]:
+    t0, c0 = time.perf_counter(), time.process_time()
     volume = np.asarray(VARIANTS[variant](photo.a, size, levels, seed), dtype=np.float32)
-    return volume, time.perf_counter() - t0
+    return volume, time.perf_counter() - t0, time.process_time() - c0
 
 
 def save_png(path: Path, exemplar: np.ndarray, volume: np.ndarray) -> None:
@@ -246,8 +248,8 @@ def report(names, variants, seeds, args) -> None:
         for variant in variants:
             rows = []
             for seed in seeds:
-                volume, sec = run_variant(photo, variant, args.size, args.levels, seed)
-                row = {**photo.score(volume, seed), "s": sec, "photo": name, "variant": variant,
+                volume, sec, cpu = run_variant(photo, variant, args.size, args.levels, seed)
+                row = {**photo.score(volume, seed), "s": sec, "cpu": cpu, "photo": name, "variant": variant,
                        "seed": seed, "size": args.size}
                 rows.append(row)
                 if args.png:
