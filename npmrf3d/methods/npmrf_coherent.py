@@ -167,7 +167,7 @@ class CoherentConfig:
                                      "the exemplar's standard deviation", kind="real", low=0.0, low_open=True)
     outlier: float = option(0.01, "share of a uniform term mixed into each view's estimate", kind="real",
                             low=0.0, high=1.0, high_open=True)
-    feature_weight: float = option(1.0, "weight of the exemplar's line-distance channel (distance to the nearest "
+    feature_weight: float = option(2.0, "weight of the exemplar's line-distance channel (distance to the nearest "
                                    "thin dark line, Lefebvre & Hoppe 2006) in matching and deciding, times the "
                                    "exemplar's spread; 0 = colours alone", kind="real", low=0.0)
     k: int = same_option(_CWC, "k")
