@@ -86,9 +86,8 @@ class SegmentedPreset:
     slices of four scans (the phase fraction and the 3D correlation shape improve on all).
 
     ``window``: at every level (the photographs' 7 covers half of the coarsest level's 16 x 16
-    exemplar of a 64 x 64 slice); ``value_weight``: the histogram vote weighting
-    (:class:`CoherentConfig`), which keeps the phase fractions; ``feature_weight``: no
-    line-distance channel (chosen on photographs of thin lines, not on phase images); ``fewer_levels``: a second run
+    exemplar of a 64 x 64 slice); ``value_weight``: the histogram vote weighting (:class:`CoherentConfig`),
+    which keeps the phase fractions; ``feature_weight``: no line channel; ``fewer_levels``: a second run
     with this many fewer pyramid levels (when one level at least is left; 0 = none), and the
     volume kept is the one whose two-point correlation shape is nearer the exemplars'
     (:func:`npmrf3d.analysis.metrics.two_point_shape_error`): the coarsest level builds the large pores
@@ -167,9 +166,7 @@ class CoherentConfig:
                                      "the exemplar's standard deviation", kind="real", low=0.0, low_open=True)
     outlier: float = option(0.01, "share of a uniform term mixed into each view's estimate", kind="real",
                             low=0.0, high=1.0, high_open=True)
-    feature_weight: float = option(2.0, "weight of the exemplar's line-distance channel (distance to the nearest "
-                                   "thin dark line, Lefebvre & Hoppe 2006) in matching and deciding, times the "
-                                   "exemplar's spread; 0 = colours alone", kind="real", low=0.0)
+    feature_weight: float = option(2.0, "weight of the line-distance channel; 0 = colours alone", kind="real", low=0.0)
     k: int = same_option(_CWC, "k")
     index_weight: float = same_option(_CWC, "index_weight")
     position_weight: float = same_option(_CWC, "position_weight")
@@ -234,9 +231,8 @@ _SHARED = tuple(name for name in options_of(chen_wang.ChenWangConfig) if name in
 def make_coherent_config(
     *, size=DEFAULTS.size, window=DEFAULTS.window, levels=DEFAULTS.levels, views=DEFAULTS.views,
     iterations=DEFAULTS.iterations, grid=DEFAULTS.grid, heuristic=DEFAULTS.heuristic,
-    centre_bandwidth=DEFAULTS.centre_bandwidth, outlier=DEFAULTS.outlier,
-    feature_weight=DEFAULTS.feature_weight, k=DEFAULTS.k,
-    index_weight=DEFAULTS.index_weight, position_weight=DEFAULTS.position_weight,
+    centre_bandwidth=DEFAULTS.centre_bandwidth, outlier=DEFAULTS.outlier, feature_weight=DEFAULTS.feature_weight,
+    k=DEFAULTS.k, index_weight=DEFAULTS.index_weight, position_weight=DEFAULTS.position_weight,
     position_boost=DEFAULTS.position_boost, random_candidates=DEFAULTS.random_candidates,
     global_share=DEFAULTS.global_share, coherence_bias=DEFAULTS.coherence_bias,
     value_weight=DEFAULTS.value_weight, value_prior=DEFAULTS.value_prior, value_bins=DEFAULTS.value_bins,
@@ -255,12 +251,12 @@ def make_coherent_config(
         coherence_bias=coherence_bias, value_weight=value_weight, value_prior=value_prior,
         value_bins=value_bins, phase_weight=phase_weight, blockwise=blockwise, pilot=pilot,
         whole_voxels=whole_voxels, seed=seed)
-    heuristic, centre_bandwidth, outlier, feature_weight, t0, schedule, sampler, icm, upsample, inherit, xi, stop, \
-        max_sweeps = (validate(CoherentConfig, name, value) for name, value in (
+    (heuristic, centre_bandwidth, outlier, feature_weight, t0, schedule, sampler, icm, upsample, inherit, xi, stop,
+     max_sweeps) = (validate(CoherentConfig, name, value) for name, value in (
             ("heuristic", heuristic), ("centre_bandwidth", centre_bandwidth), ("outlier", outlier),
-            ("feature_weight", feature_weight),
-            ("t0", t0), ("schedule", schedule), ("sampler", sampler), ("icm", icm), ("upsample", upsample),
-            ("inherit", inherit), ("xi", xi), ("stop", stop), ("max_sweeps", max_sweeps)))
+            ("feature_weight", feature_weight), ("t0", t0), ("schedule", schedule), ("sampler", sampler),
+            ("icm", icm), ("upsample", upsample), ("inherit", inherit), ("xi", xi), ("stop", stop),
+            ("max_sweeps", max_sweeps)))
     if t0 > 0.0 and heuristic in PER_VIEW_HEURISTICS:
         check.fail(f"heuristic {heuristic} cannot be annealed (t0 > 0): ML_H1a and ML_H1b are ICM-only "
                    f"per-view argmax rules with no score to draw by; use t0 = 0, or ML_H2b or ML_H2a")
@@ -273,10 +269,9 @@ def make_coherent_config(
         check.fail(f"icm=True and t0={t0:g} are two relaxations: ICM decides by the highest score "
                    "(set t0=0), annealing runs the fixed iterations (set icm=False)")
     return CoherentConfig(heuristic=heuristic, centre_bandwidth=centre_bandwidth, outlier=outlier,
-                          feature_weight=feature_weight,
-                          t0=t0, t_end=float(t_end), schedule=schedule, sampler=sampler, icm=icm, xi=xi,
-                          stop=stop, max_sweeps=max_sweeps, upsample=upsample, inherit=inherit,
-                          **{name: getattr(cw, name) for name in _SHARED})
+                          feature_weight=feature_weight, t0=t0, t_end=float(t_end), schedule=schedule,
+                          sampler=sampler, icm=icm, xi=xi, stop=stop, max_sweeps=max_sweeps, upsample=upsample,
+                          inherit=inherit, **{name: getattr(cw, name) for name in _SHARED})
 
 
 def _chen_wang_config(config: CoherentConfig) -> chen_wang.ChenWangConfig:
@@ -311,7 +306,7 @@ def coherent_levels(config: CoherentConfig, per_view: Mapping[str, np.ndarray]) 
     decision = CandidateDecision(config.heuristic, config.centre_bandwidth, config.outlier,
                                  None if config.icm else temperatures(config), config.sampler)
     return KCoherenceLevels("coherent", _chen_wang_config(config), per_view, decision, icm_schedule(config),
-                            feature=config.feature_weight)
+                            config.feature_weight)
 
 
 def run(per_view: Mapping[str, np.ndarray], config: CoherentConfig, rng: np.random.Generator, *,
