@@ -88,8 +88,8 @@ class SegmentedPreset:
     slices of four scans (the phase fraction and the 3D correlation shape improve on all).
 
     ``window``: at every level (the photographs' 7 covers half of the coarsest level's 16 x 16
-    exemplar of a 64 x 64 slice); ``value_weight``: the histogram vote weighting
-    (:class:`CoherentConfig`), which keeps the phase fractions; ``fewer_levels``: a second run
+    exemplar of a 64 x 64 slice); ``value_weight``: the histogram vote weighting (:class:`CoherentConfig`),
+    which keeps the phase fractions; ``feature_weight``: no line channel; ``fewer_levels``: a second run
     with this many fewer pyramid levels (when one level at least is left; 0 = none), and the
     volume kept is the one whose two-point correlation shape is nearer the exemplars'
     (:func:`npmrf3d.analysis.metrics.two_point_shape_error`): the coarsest level builds the large pores
@@ -107,13 +107,14 @@ class SegmentedPreset:
     fewer_levels: int = 1
     smoothness: float = 3.0
     attached: bool = True
+    feature_weight: float = 0.0
 
     def changes(self) -> dict:
         """What the preset sets of the coherent sampler's options: its fields named as options of
         :class:`CoherentConfig`.
 
         >>> SEGMENTED.changes()
-        {'window': 5, 'value_weight': 8.0, 'smoothness': 3.0, 'attached': True}
+        {'window': 5, 'value_weight': 8.0, 'smoothness': 3.0, 'attached': True, 'feature_weight': 0.0}
         """
         names = options_of(CoherentConfig)
         return {name: value for name, value in asdict(self).items() if name in names}
@@ -200,6 +201,7 @@ class CoherentConfig:
     attached: bool = option(False, "the smoothness prior sees the minority phase's pieces apart from its largest "
                             "as the majority phase: draws the phase towards its network", kind="flag",
                             applies=lambda c: c.smoothness > 0, needs="smoothness is above 0")
+    feature_weight: float = option(2.0, "weight of the line-distance channel; 0 = colours alone", kind="real", low=0.0)
     k: int = same_option(_CWC, "k")
     index_weight: float = same_option(_CWC, "index_weight")
     position_weight: float = same_option(_CWC, "position_weight")
@@ -319,7 +321,8 @@ def coherent_levels(config: CoherentConfig, per_view: Mapping[str, np.ndarray]) 
     decision = CandidateDecision(config.heuristic, config.centre_bandwidth, config.outlier,
                                  None if config.icm else temperatures(config), config.sampler, config.smoothness,
                                  config.attached)
-    return KCoherenceLevels("coherent", _chen_wang_config(config), per_view, decision, icm_schedule(config))
+    return KCoherenceLevels("coherent", _chen_wang_config(config), per_view, decision, icm_schedule(config),
+                            config.feature_weight)
 
 
 def run(per_view: Mapping[str, np.ndarray], config: CoherentConfig, rng: np.random.Generator, *,
@@ -334,7 +337,7 @@ def run(per_view: Mapping[str, np.ndarray], config: CoherentConfig, rng: np.rand
     chen_wang._check_exemplar_levels(_chen_wang_config(config), per_view)
     levels = coherent_levels(config, per_view)
     out = run_pyramid(levels, rng, progress=progress, checkpoint=checkpoint, t_start=t_start, region=region)
-    return SynthesisResult(volume=out.state.volume, history=out.history, config=config,
+    return SynthesisResult(volume=levels.colours(out.state.volume), history=out.history, config=config,
                            timings=out.timings, labels=levels.labels, stats=out.stats)
 
 

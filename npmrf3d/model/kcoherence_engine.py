@@ -53,6 +53,7 @@ from .kcoherence_histograms import (
     value_scale,
 )
 from .connectivity import minority_below
+from .features import with_feature
 from .kcoherence_icm import IcmSchedule, inherited_mask
 from .kcoherence_pass import (
     CANDIDATE_HEURISTICS,
@@ -231,21 +232,33 @@ class KCoherenceLevels(Levels):
         ICM with per-voxel temperatures (:mod:`npmrf3d.model.kcoherence_icm`) instead of the
         configuration's ``iterations``: sweeps until the stop rule, trusted search and votes,
         and its up-sampling.
+    feature : float
+        Above 0: every exemplar gets the feature-distance channel of
+        :func:`npmrf3d.model.features.with_feature` of this weight, which the search and the
+        decision read as a colour; :meth:`colours` takes it off the volume.
 
     The phase control (``phase_weight``) carries over from level to level; its state goes into
     the checkpoint with the level's.
     """
 
     def __init__(self, method: str, config: Any, per_view_exemplars: Mapping[str, np.ndarray],
-                 decision: CandidateDecision = CandidateDecision(), icm: IcmSchedule | None = None):
+                 decision: CandidateDecision = CandidateDecision(), icm: IcmSchedule | None = None,
+                 feature: float = 0.0):
         self.config, self.decision, self.icm = config, decision, icm
         self.size, self.levels = config.size, config.levels
         views = self.views = config.views
-        self.per_view = {v: np.ascontiguousarray(per_view_exemplars[v], dtype=np.float32) for v in views}
+        given = {v: np.ascontiguousarray(per_view_exemplars[v], dtype=np.float32) for v in views}
+        self.colour_channels = next(iter(given.values())).shape[2]
+        self.labels = np.unique(np.concatenate([a.reshape(-1, self.colour_channels) for a in
+                                                {id(a): a for a in given.values()}.values()]),
+                                axis=0).astype(np.float32)
+        if feature > 0.0:
+            featured = {id(a): with_feature(a, feature) for a in given.values()}
+            given = {v: featured[id(a)] for v, a in given.items()}
+        self.per_view = given
         self.distinct = list({id(a): a for a in self.per_view.values()}.values())
         channels = self.distinct[0].shape[2]
         pooled = np.concatenate([a.reshape(-1, channels) for a in self.distinct])
-        self.labels = np.unique(pooled, axis=0).astype(np.float32)
         self.sigma = float(pooled.astype(np.float64).std()) or 1.0
         self.value_lo = pooled.min(axis=0).astype(np.float64)
         self.value_span = pooled.max(axis=0).astype(np.float64) - self.value_lo
@@ -253,7 +266,8 @@ class KCoherenceLevels(Levels):
         #: with ``decision.attached``: whether the exemplars' minority phase lies below the middle of their values
         self.minority_below = decision.attached and minority_below(self.distinct, self.value_lo, self.value_span)
         self.key = run_key(method, config, self.per_view, decision=dataclasses.asdict(decision),
-                           **({} if icm is None else {"icm": dataclasses.asdict(icm)}))
+                           **({} if icm is None else {"icm": dataclasses.asdict(icm)}),
+                           **({"feature": float(feature)} if feature > 0.0 else {}))
         self.phases = self.control = None
         if config.phase_weight > 0.0 and config.value_prior > 0.0:
             self.phases = bin_phases(value_counts(
@@ -268,6 +282,11 @@ class KCoherenceLevels(Levels):
         #: blockwise: the finest level that runs whole, with every histogram
         aprons = block_aprons(config, icm)
         self.lowest_whole = config.levels - 1 if aprons is None else aprons.index(None)
+
+    def colours(self, volume: np.ndarray) -> np.ndarray:
+        """The volume's colour channels (without the feature channel, if any)."""
+        return volume if volume.shape[3] == self.colour_channels else \
+            np.ascontiguousarray(volume[..., :self.colour_channels])
 
     def aprons(self):
         """With ``blockwise`` (the pilot's histograms, random numbers hashed from grid positions)
