@@ -109,15 +109,17 @@ def _npmrf_coherent_with(**replaced):
     """``npmrf3d synth``'s default run (support ``coherent``) with fields of its coherent
     sampler's options replaced: the options :func:`npmrf3d.methods.npmrf._coherent_options`
     builds for the default configuration, ``replaced`` by :func:`dataclasses.replace`, run by
-    :func:`npmrf3d.methods.npmrf_coherent.coherent_synthesize` (no palette)."""
+    :func:`npmrf3d.methods.npmrf_coherent.coherent_synthesize` (no palette) with the options the
+    run reads (:func:`npmrf3d.options.recorded`: an option it would not read is refused)."""
     def run(ex, size, levels, seed, **_):
         from npmrf3d.methods import npmrf, npmrf_coherent
+        from npmrf3d.options import recorded
         config = npmrf.make_config(size=size, levels=levels)
         phases = npmrf.segmented(config, {view: ex for view in config.views})
         if phases:
             raise ValueError("segmented exemplar: the default runs several pyramids; not covered")
         options = dataclasses.replace(npmrf._coherent_options(config, phases, levels), **replaced)
-        fields = {k: v for k, v in options.to_dict().items() if k not in ("size", "seed")}
+        fields = {k: v for k, v in recorded(options).items() if k not in ("size", "seed")}
         return npmrf_coherent.coherent_synthesize(ex, size=size, rng=seed, **fields).volume
     run.__doc__ = (f"the default coherent run with "
                    f"{', '.join(f'{k}={v!r}' for k, v in replaced.items())}")
