@@ -172,7 +172,7 @@ def test_a_signal_during_a_long_search_leaves_no_lock_and_no_output(tmp_path):
 
 
 def test_kopf_on_a_constant_exemplar_searches_one_distinct_neighbourhood():
-    from npmrf3d.model.kopf_search import PatchIndex as KopfIndex
+    from npmrf3d.model.kopf_search import NeighbourhoodIndex as KopfIndex
     from npmrf3d.methods.kopf import kopf_synthesize
 
     ex = _constant(120)

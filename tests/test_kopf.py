@@ -108,7 +108,7 @@ def test_pca_of_constant_patches_keeps_one_component():
 @pytest.mark.parametrize("channels,variance", [(1, 1.0), (3, 1.0), (1, 0.9), (3, 0.95)])
 def test_exact_search_equals_brute_force(rng, channels, variance):
     ex = rng.random((14, 13, channels), dtype=np.float32)
-    index = kopf_search.PatchIndex(ex, 3, variance)
+    index = kopf_search.NeighbourhoodIndex(ex, 3, variance)
     queries = rng.random((200, 9 * channels), dtype=np.float32)
     got, dist = index.query(queries, eps=0.0)
     patches = naive_kopf_patches(ex, 3)
@@ -126,7 +126,7 @@ def test_exact_search_equals_brute_force(rng, channels, variance):
 def test_approximate_search_is_within_one_plus_eps(rng):
     ex = rng.random((32, 32, 3), dtype=np.float32)
     ex = (ex + np.roll(ex, 1, axis=0) + np.roll(ex, 1, axis=1)) / 3
-    index = kopf_search.PatchIndex(ex, 4, 0.95)
+    index = kopf_search.NeighbourhoodIndex(ex, 4, 0.95)
     queries = rng.random((400, 48), dtype=np.float32) * 0.6 + 0.2
     eps = 2.0
     got, _ = index.query(queries, eps=eps)
@@ -139,7 +139,7 @@ def test_approximate_search_is_within_one_plus_eps(rng):
 @pytest.mark.kernels
 def test_search_view_assigns_the_sparse_grid(rng):
     ex = rng.random((12, 12, 1), dtype=np.float32)
-    index = kopf_search.PatchIndex(ex, 3, 1.0)
+    index = kopf_search.NeighbourhoodIndex(ex, 3, 1.0)
     vol = rng.random((6, 8, 4, 1), dtype=np.float32)
     for view in VIEWS3:
         assign, omega, energy, queries = kopf_search.search_view(vol, view, index, grid=2, eps=0.0, r=0.8,
@@ -164,7 +164,7 @@ def test_search_view_assigns_the_sparse_grid(rng):
 
 def _tiny_problem(rng, channels, views=VIEWS3, shape=(4, 6, 4), window=3, grid=2):
     exemplars = [rng.random((7, 8, channels), dtype=np.float32) for _ in views]
-    indices = [kopf_search.PatchIndex(ex, window, 1.0) for ex in exemplars]
+    indices = [kopf_search.NeighbourhoodIndex(ex, window, 1.0) for ex in exemplars]
     npatch = [(ex.shape[0] - window + 1) * (ex.shape[1] - window + 1) for ex in exemplars]
     assign = np.full((len(views), *shape), -1, dtype=np.int32)
     omega = np.zeros((len(views), *shape), dtype=np.float32)
@@ -235,7 +235,7 @@ def test_histogram_reweighting_moves_a_skewed_volume_towards_the_exemplar(rng):
 
     ex = ndimage.uniform_filter(rng.random((32, 32)), 2, mode="wrap")
     ex = ((ex - ex.min()) / np.ptp(ex)).astype(np.float32)[..., None]
-    index = kopf_search.PatchIndex(ex, 4, 0.95)
+    index = kopf_search.NeighbourhoodIndex(ex, 4, 0.95)
     # exemplar texels cubed: a deliberately dark, skewed volume
     vol = np.ascontiguousarray(ex.reshape(-1)[rng.integers(0, ex.size, (16, 16, 16))][..., None] ** 3)
     lo, scale, bins = np.zeros(1), np.full(1, 16.0), 16

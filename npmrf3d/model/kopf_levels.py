@@ -16,7 +16,7 @@ import numpy as np
 from .kcoherence import downsample_exemplar
 from .kopf_constraints import coarsen_constraint
 from .kopf_optimise import channel_histograms, optimisation_phase, pack_exemplars
-from .kopf_search import PatchIndex, search_view
+from .kopf_search import NeighbourhoodIndex, search_view
 from .neighbourhood import VIEW_AXES
 from .pyramid import ArraySpec, Levels, LevelState
 from .pyramid import upsample as pyramid_upsample
@@ -60,7 +60,7 @@ class KopfLevels(Levels):
     def prepare(self, level, shape):
         config, views, per_view = self.config, self.config.views, self.per_view
         level_ex = {id(a): downsample_exemplar(a, level) for a in self.distinct}
-        indices = {key: PatchIndex(ex, config.window, config.variance) for key, ex in level_ex.items()}
+        indices = {key: NeighbourhoodIndex(ex, config.window, config.variance) for key, ex in level_ex.items()}
         self.view_index = [indices[id(per_view[v])] for v in views]
         self.pixels = np.concatenate([ex.reshape(-1, self.channels) for ex in level_ex.values()])
         self.hist_target = np.mean(

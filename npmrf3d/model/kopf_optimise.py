@@ -13,7 +13,7 @@ import numpy as np
 
 from .._kernels import kopf as _k
 from .exemplar import pack_rows
-from .kopf_search import PatchIndex
+from .kopf_search import NeighbourhoodIndex
 
 __all__ = ["MEAN_SHIFT_ITERATIONS", "SWEEP_CHUNK", "PackedExemplars", "channel_bins", "channel_histograms",
            "optimisation_phase", "pack_exemplars"]
@@ -51,7 +51,7 @@ class PackedExemplars(types.SimpleNamespace):
     """The views' exemplars of one level packed for the kernels."""
 
 
-def pack_exemplars(indices: Sequence[PatchIndex], lo, scale, bins) -> PackedExemplars:
+def pack_exemplars(indices: Sequence[NeighbourhoodIndex], lo, scale, bins) -> PackedExemplars:
     ex_flat, offsets = pack_rows([idx.exemplar for idx in indices])
     return PackedExemplars(
         flat=ex_flat,

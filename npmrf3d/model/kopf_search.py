@@ -13,7 +13,7 @@ from . import nearest
 from .kcoherence import centre_patches
 from .neighbourhood import VIEW_AXES
 
-__all__ = ["CHUNK_BYTES", "QUERY_CHUNK", "PatchIndex", "pca_basis", "search_view", "volume_neighbourhoods"]
+__all__ = ["CHUNK_BYTES", "QUERY_CHUNK", "NeighbourhoodIndex", "pca_basis", "search_view", "volume_neighbourhoods"]
 
 #: Bytes of neighbourhood vectors gathered per k-d tree batch.
 CHUNK_BYTES = 48 * 2**20
@@ -54,7 +54,7 @@ def pca_basis(patches: np.ndarray, variance: float = 0.95) -> tuple[np.ndarray, 
     return mean, np.ascontiguousarray(vt[:k].T, dtype=np.float32), float(cumulative[k - 1])
 
 
-class PatchIndex:
+class NeighbourhoodIndex:
     """Approximate nearest-neighbour search among an exemplar's neighbourhoods.
 
     PCA keeping ``variance`` of the variance (:func:`pca_basis`), then a
@@ -131,7 +131,7 @@ def volume_neighbourhoods(volume: np.ndarray, view: str, window: int, grid: int,
     return np.ascontiguousarray(win).reshape(-1, window * window * volume.shape[3])
 
 
-def search_view(volume: np.ndarray, view: str, index: PatchIndex, *, grid: int, eps: float,
+def search_view(volume: np.ndarray, view: str, index: NeighbourhoodIndex, *, grid: int, eps: float,
                 r: float, floor: float, offset: int | None = None) -> tuple[np.ndarray, np.ndarray, float, int]:
     """Search phase of one view: best exemplar neighbourhood and IRLS weight per sparse site.
 
