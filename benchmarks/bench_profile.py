@@ -122,6 +122,10 @@ def floors(stats: dict, levels) -> dict:
     return out
 
 
+def _cpu(seconds: float) -> str:
+    return f"{'':>8}" if np.isnan(seconds) else f"{seconds:>8.3f}"
+
+
 def report(title: str, wall: float, cpu: float, clock: StepClock, stats: dict, voxels: int, rate: float) -> dict:
     table = split(wall, cpu, clock)
     levels = sorted((g for g in table if g is not None), reverse=True)
@@ -130,10 +134,17 @@ def report(title: str, wall: float, cpu: float, clock: StepClock, stats: dict, v
     floor_us = {lv: {s: o / (rate * 1e3) / voxels for s, o in f.items()} for lv, f in ops.items()}
     print(f"\n{title}: {wall:.2f} s wall, {cpu:.2f} s CPU, {us * wall:.2f} us per voxel "
           f"({voxels:,} voxels)")
-    print(f"  {'level':<8}{'step':<38}{'wall s':>8}{'cpu s':>8}{'share':>7}{'us/vox':>8}{'floor us':>9}{'ratio':>7}")
+    print(f"  {'step':<40}{'wall s':>8}{'cpu s':>8}{'share':>7}{'us/vox':>8}{'floor us':>9}{'ratio':>7}")
     rows = []
     for group in [None, *levels]:
-        name = "outside" if group is None else f"{group} ({'x'.join(map(str, stats['levels'][f'level_{group}']['shape']))})"
+        if group is None:
+            print("  outside the levels")
+        else:
+            one = stats["levels"][f"level_{group}"]
+            seconds = clock.level_seconds[group]
+            print(f"  level {group}: {'x'.join(map(str, one['shape']))}, {one['iterations']} iterations, window "
+                  f"{one['window']}, sites every {one['grid']}: {seconds:.3f} s, {seconds / wall:.1%}, "
+                  f"{seconds * us:.3f} us per voxel")
         for step in [OUTSIDE, *STEPS]:
             if step not in table[group]:
                 continue
@@ -141,15 +152,15 @@ def report(title: str, wall: float, cpu: float, clock: StepClock, stats: dict, v
             floor = floor_us.get(group, {}).get(step)
             rows.append({"level": group, "step": step, "wall": w, "cpu": c, "share": w / wall, "us_per_voxel": w * us,
                          "floor_us_per_voxel": floor})
-            print(f"  {name:<8}{step:<38}{w:>8.3f}{c:>8.3f}{w / wall:>7.1%}{w * us:>8.3f}"
+            print(f"    {step:<38}{w:>8.3f}{_cpu(c)}{w / wall:>7.1%}{w * us:>8.3f}"
                   + ("" if floor is None else f"{floor:>9.4f}{w * us / floor:>7.0f}"))
-            name = ""
-    print(f"  {'total':<8}{'step':<38}")
+    print("  all levels")
     for step in [OUTSIDE, *STEPS]:
         w = sum(table[g].get(step, [0.0])[0] for g in table)
         floor = sum(f.get(step, 0.0) for f in floor_us.values()) or None
         if w:
-            print(f"  {'':<8}{step:<38}{w:>8.3f}{'':>8}{w / wall:>7.1%}{w * us:>8.3f}"
+            c = sum(table[g].get(step, [0.0, 0.0])[1] for g in table)
+            print(f"    {step:<38}{w:>8.3f}{_cpu(c)}{w / wall:>7.1%}{w * us:>8.3f}"
                   + ("" if floor is None else f"{floor:>9.4f}{w * us / floor:>7.0f}"))
     floor_all = sum(sum(f.values()) for f in floor_us.values())
     print(f"  floor of the whole run {floor_all:.4f} us per voxel; the run is {us * wall / floor_all:.0f} times it")
