@@ -17,7 +17,8 @@ order (a permutation and a sort per iteration), the exemplar models (PCA, candid
 up-sampling with its initial colours, a level's set-up (packing, the NP-MRF kernel table), the
 ICM bookkeeping (none in the default), the Python between the kernels in the iteration loop
 (targets, rules, the smoothness prior's volume copy, the level's statistics) and, per level,
-the rest of the level loop; outside the levels, the set-up and the result. Per step: wall and CPU
+the rest of the level loop; outside the levels, the set-up and the result, and what follows a
+level (a block-wise run's pilot, made by its first block only). Per step: wall and CPU
 seconds, share of the run's wall time and microseconds per voxel of the output; beside the
 search and solver kernels and each level, the floor of ``bench_voxel_rate.py`` (its candidate
 comparisons at this machine's float32 matrix-multiply rate) and the ratio to it.
@@ -55,7 +56,7 @@ BETWEEN, REST, OUTSIDE = "Python between kernels", "rest of the level loop", "se
 #: The steps in the order printed; REST and OUTSIDE are what the wrapped calls leave of the level's and the run's time.
 STEPS = (SEARCH, "search: Python around the kernel", "global matches", SOLVE, "histograms",
          "voxel order (permutation, sort)", "exemplar models (PCA, candidates)", "up-sampling, initial colours",
-         "level set-up (packing, kernel table)", "ICM bookkeeping", BETWEEN, REST)
+         "level set-up (packing, kernel table)", "ICM bookkeeping", BETWEEN, REST, "after a level (the pilot)")
 ICM_METHODS = ("warm", "expected", "search_trust", "vote_trust", "visit", "cool")
 BETWEEN_METHODS = ("run", "iterate", "boxes", "value_target", "solver_rule", "phase_step", "stats")
 
@@ -65,13 +66,17 @@ def targets(clock: StepClock) -> list:
     def enter_level(_levels, level, _shape):
         clock.group = level
 
+    def leave_level(*_):  # what follows a level (a block's last crop) is outside it
+        clock.group = None
+
     L, P = engine.KCoherenceLevels, passes.LevelPass
     return [(kernels_search, "search_view", SEARCH), (kernels_solver, "solve", SOLVE),
             (P, "search", STEPS[1]), (P, "search_view", STEPS[1]), (P, "global_matches", STEPS[2]),
             (passes, "position_histogram", STEPS[4]), (histograms.ValueHistogram, "build", STEPS[4]),
             (P, "batch_histograms", STEPS[4]), (P, "voxel_order", STEPS[5]),
             (L, "prepare", STEPS[6], enter_level), (L, "initial", STEPS[7]), (L, "upsample", STEPS[7]),
-            (L, "crop", STEPS[7]), (P, "__init__", STEPS[8]), (passes, "kernel_table", STEPS[8]),
+            (L, "crop", STEPS[7]), (L, "after_level", STEPS[12], leave_level), (P, "__init__", STEPS[8]),
+            (passes, "kernel_table", STEPS[8]),
             *((icm.IcmLevel, name, STEPS[9]) for name in ICM_METHODS),
             *((P, name, BETWEEN) for name in BETWEEN_METHODS), (L, "relax", BETWEEN)]
 
@@ -195,7 +200,8 @@ def job_block(image, size: int, block: int, repeats: int, rate: float) -> dict:
         start = Path(tmp) / "start.npz"
         t0 = time.perf_counter()
         make_block(method, views, cfg, (0, 0, 0), shape, start)
-        print(f"\nthe first block of {size}^3 (levels made whole, the pilot): {time.perf_counter() - t0:.1f} s, untimed below")
+        print(f"\nthe first block of {size}^3 (levels made whole, the pilot): {time.perf_counter() - t0:.1f} s, "
+              "untimed below")
         reference = make_block(method, views, cfg, origin, shape, start)
 
         def make():
