@@ -244,6 +244,11 @@ class SynthesisConfig:
     phase_weight: float = option(16.0, "support coherent: phase control (0 = off)", kind="real", low=0.0,
                                  metavar="W", decided="16; support full: 0",
                                  **_in_table('phase_weight', *_COHERENT))
+    # the coherent sampler's line-distance channel (npmrf3d.model.features, docs/quality.md "The
+    # line-distance channel"): continuous dark lines on block walls, grainier stochastic textures
+    feature_weight: float = option(0.0, "support coherent: weight of a channel of the distance to thin "
+                                   "dark lines, matched with the colours (0 = colours alone)", kind="real",
+                                   low=0.0, **_in_table('feature_weight', *_COHERENT))
     # support coherent: neighbourhoods searched and voting every `grid` voxels along both plane axes;
     # None: the run's own (methods.npmrf_options.coherent_grid: 2 on photographs where every level's
     # side is even, docs/quality.md "Sparse sites"; else every site)

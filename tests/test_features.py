@@ -45,7 +45,8 @@ def test_the_channel_is_scaled_to_the_weight_and_the_colours_kept(weight):
 
 def test_the_volume_keeps_the_exemplars_channels_and_colours():
     e = _mortar()
-    with_channel = coherent_synthesize(e, size=16, window=5, levels=2, grid=2, iterations=(2, 1), rng=1).volume
+    with_channel = coherent_synthesize(e, size=16, window=5, levels=2, grid=2, iterations=(2, 1), rng=1,
+                                       feature_weight=2.0).volume
     without = coherent_synthesize(e, size=16, window=5, levels=2, grid=2, iterations=(2, 1), rng=1,
                                   feature_weight=0.0).volume
     assert with_channel.shape == without.shape == (16, 16, 16, 1)

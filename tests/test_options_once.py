@@ -56,8 +56,7 @@ def test_every_option_the_two_configurations_share_reaches_the_coherent_sampler(
 
 def test_the_segmented_preset_is_data_over_the_coherent_options():
     assert SEGMENTED.changes() == {"window": SEGMENTED.window, "value_weight": SEGMENTED.value_weight,
-                                   "smoothness": SEGMENTED.smoothness, "attached": SEGMENTED.attached,
-                                   "feature_weight": SEGMENTED.feature_weight}
+                                   "smoothness": SEGMENTED.smoothness, "attached": SEGMENTED.attached}
     runs = npmrf._coherent_runs(make_config(size=32, levels=3), True)
     assert [r.levels for r in runs] == list(SEGMENTED.pyramids(3))
     for r in runs:

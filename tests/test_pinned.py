@@ -58,35 +58,34 @@ PINNED = {
         lambda: npmrf3d.kopf_synthesize(checker(), size=8, window=4, levels=2, iterations=1,
                                         upsample="1/8", views="front,top", rng=3),
         "4dc32e57b84bd363472d19c27b3792113f8b29f5230079ca5669747e7f93f7f4"),
-    # the coherent support and Chen-Wang (k-coherence sets, exclusion, global k-d tree matches);
-    # these exemplars repeat too few patches for the level models' path that keeps repeated
-    # patches once (npmrf3d.model.nearest). The coherent runs match and decide with the
-    # line-distance channel (npmrf3d.model.features, feature_weight 2); the checkerboard is
-    # segmented and runs without it
+    # the coherent support and Chen-Wang (k-coherence sets, exclusion, global k-d tree matches),
+    # pinned from the code as it stood before the level models' nearest-neighbour search kept
+    # repeated patches once (npmrf3d.model.nearest): these exemplars repeat too few patches for
+    # that path, so their volumes must not move
     "coherent_ihc64": (
         lambda: npmrf3d.synthesize(_ihc(), size=16, levels=2, phase_weight=0.0, grid=1, rng=7),
-        "39f5a792a234b59c1472f87edcf0e4b5c24d6854598e85e082abb9018ad970ff"),
+        "8b75adb0bd7193ef09e4032e748f4a07a98e2ef3d0691d8333593aa46847df9e"),
     "coherent_gravel64_grey": (
         lambda: npmrf3d.synthesize(data.path("gravel64"), size=16, levels=2, window=5, phase_weight=0.0,
                                    grid=1, rng=3),
-        "8c29fd6bb0c4c7ffa8aea7df0228f7c5208cb8af8a1ee6f49a1f988ea87d9a3b"),
+        "f93e66edc88cfc2ea4413cec91ff1d2a5002d901dd120fc14a9627e1c04de196"),
     # with every site searched and voting (grid 1)
     "coherent_ihc64_phase": (
         lambda: npmrf3d.synthesize(_ihc(), size=16, levels=2, grid=1, rng=7),
-        "c130aa2c2d34b5b65002ded40c38150cc6ef98a5691333554f20f19f66adc771"),
+        "66b501bb096b4f53d6644fac4f3a7b62092a2e4cf0777bdcddbfd572684c8b7e"),
     "coherent_gravel64_grey_phase": (
         lambda: npmrf3d.synthesize(data.path("gravel64"), size=16, levels=2, window=5, grid=1, rng=3),
-        "53e52124b610c0dae0fcf7d9047541c037c83221da3b664ba1cb002c8844c371"),
+        "9f7830ade79b98c159ecdd105122dd5830e4b19d425497bb4dbc93de013639ca"),
     "coherent_checker": (
         lambda: npmrf3d.synthesize(checker(), size=16, levels=2, window=5, grid=1, rng=7),
         "60f60dee26b389fc239b76813e1c92010e9b126b0cbd91f1f86148c8551df2c1"),
     # the default: its phase control, sites every 2nd voxel
     "coherent_ihc64_default": (
         lambda: npmrf3d.synthesize(_ihc(), size=16, levels=2, rng=7),
-        "3c1654f9410b7d6ced566abe729a9c6474f115f4d2deb85a94a5f84ca93ad0f0"),
+        "76c56e6bb0b79fd279c72042cca5cf0acf6e4fca63205d05c7288831c5118092"),
     "coherent_gravel64_grey_default": (
         lambda: npmrf3d.synthesize(data.path("gravel64"), size=16, levels=2, window=5, rng=3),
-        "334e0063327c8f63ed7f1bbc67b80cc43fe3029b62c6212d093d9d049e023a40"),
+        "bfc5554848f0b13fdb8f24c3715f91ee6868d02363356c06b850ec7bfcae4f10"),
     "chen_wang_global_exclude": (
         lambda: chen_wang_synthesize(_ihc(), size=16, window=(6, 4), levels=2, iterations=(2, 2),
                                      global_share=0.2, coherence_exclude=2.0, rng=5),

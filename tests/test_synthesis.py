@@ -170,7 +170,7 @@ def _preset_twins(image, size, levels, seed):
     generator = np.random.default_rng(seed)
     return [coherent_synthesize(image, size=size, levels=n, window=(SEGMENTED.window,) * n,
                                 value_weight=SEGMENTED.value_weight, smoothness=SEGMENTED.smoothness,
-                                attached=SEGMENTED.attached, feature_weight=SEGMENTED.feature_weight,
+                                attached=SEGMENTED.attached,
                                 phase_weight=npmrf3d.SynthesisConfig.phase_weight, rng=generator)
             for n in (levels, levels - SEGMENTED.fewer_levels)]
 

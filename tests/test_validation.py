@@ -270,7 +270,7 @@ def test_parameter_error_is_a_value_error():
 
 
 #: A value other than the default for every option that some combinations cannot use.
-NON_DEFAULT = {"xi": -5.0, "stop": 0.5, "max_sweeps": 3, "inherit": "fixed",
+NON_DEFAULT = {"feature_weight": 1.0, "xi": -5.0, "stop": 0.5, "max_sweeps": 3, "inherit": "fixed",
                "sampler": "metropolis", "schedule": "linear", "t0": 2.0, "t_end": 0.1, "proposals": 3,
                "proposal": "labels", "preset": "paper", "bandwidth": 0.5, "adaptive": 0.1,
                "decision": "argmax", "tau": 0.5, "histogram_weight": 1.0, "toroidal_exemplar": True,

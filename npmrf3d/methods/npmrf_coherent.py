@@ -89,7 +89,7 @@ class SegmentedPreset:
 
     ``window``: at every level (the photographs' 7 covers half of the coarsest level's 16 x 16
     exemplar of a 64 x 64 slice); ``value_weight``: the histogram vote weighting (:class:`CoherentConfig`),
-    which keeps the phase fractions; ``feature_weight``: no line channel; ``fewer_levels``: a second run
+    which keeps the phase fractions; ``fewer_levels``: a second run
     with this many fewer pyramid levels (when one level at least is left; 0 = none), and the
     volume kept is the one whose two-point correlation shape is nearer the exemplars'
     (:func:`npmrf3d.analysis.metrics.two_point_shape_error`): the coarsest level builds the large pores
@@ -107,14 +107,13 @@ class SegmentedPreset:
     fewer_levels: int = 1
     smoothness: float = 3.0
     attached: bool = True
-    feature_weight: float = 0.0
 
     def changes(self) -> dict:
         """What the preset sets of the coherent sampler's options: its fields named as options of
         :class:`CoherentConfig`.
 
         >>> SEGMENTED.changes()
-        {'window': 5, 'value_weight': 8.0, 'smoothness': 3.0, 'attached': True, 'feature_weight': 0.0}
+        {'window': 5, 'value_weight': 8.0, 'smoothness': 3.0, 'attached': True}
         """
         names = options_of(CoherentConfig)
         return {name: value for name, value in asdict(self).items() if name in names}
@@ -201,7 +200,7 @@ class CoherentConfig:
     attached: bool = option(False, "the smoothness prior sees the minority phase's pieces apart from its largest "
                             "as the majority phase: draws the phase towards its network", kind="flag",
                             applies=lambda c: c.smoothness > 0, needs="smoothness is above 0")
-    feature_weight: float = option(2.0, "weight of the line-distance channel; 0 = colours alone", kind="real", low=0.0)
+    feature_weight: float = option(0.0, "weight of the line-distance channel; 0 = colours alone", kind="real", low=0.0)
     k: int = same_option(_CWC, "k")
     index_weight: float = same_option(_CWC, "index_weight")
     position_weight: float = same_option(_CWC, "position_weight")
