@@ -8,6 +8,18 @@ import pathlib
 from npmrf3d import cli
 
 
+#: Every command that makes a volume, with a small window where it takes one (add --size and
+#: --levels for a quick run).
+COMMANDS = {
+    "synth": ["synth", "bundled:gravel64", "--window", "3"],
+    "kopf": ["kopf", "bundled:gravel64"],
+    "chen-wang": ["chen-wang", "bundled:gravel64", "--window", "3"],
+    "coherent": ["coherent", "bundled:gravel64", "--window", "3"],
+    "volume": ["volume", "bundled:fibres48"],
+    "volume-npmrf": ["volume-npmrf", "bundled:fibres48"],
+}
+
+
 def listing(root: pathlib.Path) -> set[str]:
     """Every path below ``root``, relative to it."""
     return {str(p.relative_to(root)) for p in root.rglob("*")}

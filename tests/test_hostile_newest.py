@@ -17,7 +17,7 @@ import npmrf3d
 from npmrf3d.cli import main
 from npmrf3d.errors import ParameterError
 
-from .cli_checks import listing, refused_naming
+from .cli_checks import COMMANDS, listing, refused_naming
 
 QUICK = ["--size", "16", "--levels", "2", "--quiet"]
 DRY = [*QUICK, "--dry-run"]
@@ -176,14 +176,6 @@ def test_materials_thresholds_a_grey_slice_and_reads_an_elongated_crop_when_told
 
 # --- --out X.zarr on every command that makes a volume -----------------------------------------
 
-COMMANDS = {
-    "synth": ["synth", "bundled:gravel64", "--window", "3"],
-    "kopf": ["kopf", "bundled:gravel64"],
-    "chen-wang": ["chen-wang", "bundled:gravel64", "--window", "3"],
-    "coherent": ["coherent", "bundled:gravel64", "--window", "3"],
-    "volume": ["volume", "bundled:fibres48"],
-    "volume-npmrf": ["volume-npmrf", "bundled:fibres48"],
-}
 ODD_ZARR = [
     ("afile.zarr", ["'afile.zarr' exists and is not a folder"]),
     ("afile.zarr/v.zarr", ["cannot be created", "is not a folder"]),

@@ -23,18 +23,9 @@ from npmrf3d.cli import _blocks
 from npmrf3d.cli.main import main
 from npmrf3d.io.zarr_blocks import finished_blocks
 
-from .cli_checks import listing, refused_naming
+from .cli_checks import COMMANDS, listing, refused_naming
 
 SMALL = ["--size", "16", "--levels", "2", "--quiet"]
-#: Every command that makes a volume, at 16^3 with 2 levels.
-COMMANDS = {
-    "synth": ["synth", "bundled:gravel64", "--window", "3"],
-    "kopf": ["kopf", "bundled:gravel64"],
-    "chen-wang": ["chen-wang", "bundled:gravel64", "--window", "3"],
-    "coherent": ["coherent", "bundled:gravel64", "--window", "3"],
-    "volume": ["volume", "bundled:fibres48"],
-    "volume-npmrf": ["volume-npmrf", "bundled:fibres48"],
-}
 #: A block-wise run of the default sampler at 16^3 (``RUN``), into Zarr in 8 blocks of 8 (``BLOCKWISE``).
 RUN = ["synth", "bundled:gravel64", "--size", "16", "--levels", "2", "--window", "3", "--blockwise",
        "--whole-voxels", "1", "--quiet"]
