@@ -24,7 +24,7 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..options import options_of, recorded
-from ..plotting import preview_figure, save_figure
+from .. import plotting  # a module: plotting reads io.files, whose package imports this module
 from .files import as_volume, json_text, package_versions, to_jsonable, write_npy, write_volume_tiff
 
 __all__ = ["OutputLock", "RUN_DERIVED", "RUN_FILES", "check_replaceable", "clean_stale_staging",
@@ -353,7 +353,7 @@ def write_run(
             os.chmod(staging, mode)
             write_npy(staging / "volume.npy", volume)
             write_volume_tiff(staging / "volume.tif", volume)
-            save_figure(preview_figure(volume, exemplars, title=title), staging / "preview.png")
+            plotting.save_figure(plotting.preview_figure(volume, exemplars, title=title), staging / "preview.png")
             (staging / "run.json").write_text(text, encoding="utf-8")
             _move_into_place(staging, target, anchor, replace_run=bool(previous))
         finally:
