@@ -180,7 +180,7 @@ def test_write_run_failure_while_writing_leaves_nothing(tmp_path, rng, monkeypat
     def broken_save(fig, path):
         raise OSError("disk full")
 
-    monkeypatch.setattr(runs, "save_figure", broken_save)
+    monkeypatch.setattr(runs.plotting, "save_figure", broken_save)
     with pytest.raises(OSError, match="disk full"):
         make_run(tmp_path / "run", rng)
     assert list(tmp_path.iterdir()) == []
