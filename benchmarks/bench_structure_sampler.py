@@ -8,7 +8,8 @@ exemplar, the crops B are the floor. Per photograph, variant and seed, one 64^3 
 
 * ``layout``: the judge's ``pyramid`` estimator per axis (:func:`npmrf3d.analysis.structure.structure_scores`,
   8 slices per axis), as a ratio to the floor's (the crops B scored the same way; 1 = as good
-  as another crop), and its mean over the axes;
+  as another crop), and its mean over the constrained axes (every axis, unless the variant
+  constrains two views: the free axis is marked and left out of the mean);
 * ``ends``: line ends per skeleton pixel of the slices' thin dark lines (black top-hat at the
   exemplar's Otsu split, :func:`npmrf3d.analysis.structure.line_features`), pooled over the
   slices, as a ratio to the exemplar's (1 = lines as long as the exemplar's; the floor's crops
@@ -19,7 +20,8 @@ exemplar, the crops B are the floor. Per photograph, variant and seed, one 64^3 
   busy machine distorts less).
 
 Variants (:data:`VARIANTS`) are the default run (``npmrf3d.synthesize``) or the default's
-coherent options with fields replaced (``_quality._npmrf_coherent_with``); ``--trace`` also
+coherent options with fields replaced (``_quality._npmrf_coherent_with``; ``views-front-top``
+and the other pairs constrain two views); ``--trace`` also
 judges the volume after every level (coarse levels repeated up to the full size) and after
 each iteration's search (each voxel given its front, right and top matches' texels) against
 the solved volume.
@@ -78,9 +80,16 @@ def _with(**replaced):
     return run
 
 
+#: variant -> the axes whose slices its run constrains (absent: all three)
+CONSTRAINED: dict[str, tuple[int, ...]] = {}
+
+
 def add_variant(name: str, **replaced) -> None:
-    """Register the default's coherent options with ``replaced`` fields as ``name``."""
+    """Register the default's coherent options with ``replaced`` fields as ``name`` (a
+    ``views`` field leaves the other axes free: their slices are scored apart)."""
     VARIANTS[name] = _with(**replaced)
+    if "views" in replaced:
+        CONSTRAINED[name] = tuple(a for a in AXES if structure.AXIS_VIEWS[a] in replaced["views"])
 
 
 add_variant("coherent-default")
@@ -93,6 +102,11 @@ add_variant("coarse9-mid9", window=(9, 9, 7))
 add_variant("k1", k=1)
 add_variant("k2", k=2)
 add_variant("random0", random_candidates=0)
+#: two constrained views (docs/views.md): front and top share the exemplar's row axis, so an
+#: exemplar whose rows and columns differ asks for a structure that exists; the right view is free
+add_variant("views-front-top", views=("front", "top"))
+add_variant("views-front-right", views=("front", "right"))
+add_variant("views-right-top", views=("right", "top"))
 
 
 def neighbourhood_pca(grey: np.ndarray, dims: int, side: int = 5) -> np.ndarray:
@@ -125,6 +139,7 @@ def augmented(features, weight: float, **replaced):
 
 for _w in (0.5, 1.0, 2.0):
     add_variant(f"feat-dark-{_w:g}", feature_weight=_w)
+    add_variant(f"views-front-top-feat-dark-{_w:g}", views=("front", "top"), feature_weight=_w)
     VARIANTS[f"pca2-{_w:g}"] = augmented(lambda g: neighbourhood_pca(g, 2), _w, feature_weight=0.0)
 
 
@@ -170,13 +185,18 @@ class Photo:
             self.control[size] = measure(self.a, structureless(self.a, size, np.random.default_rng(0)))
         return self.control[size]
 
-    def score(self, volume: np.ndarray, seed: int, pooled: bool = True) -> dict:
-        """The table's scores of one volume."""
+    def score(self, volume: np.ndarray, seed: int, pooled: bool = True,
+              constrained: tuple[int, ...] | None = None) -> dict:
+        """The table's scores of one volume; ``layout_mean`` over the ``constrained`` axes
+        (default all three), the others kept apart as ``free``."""
         s = structure.structure_scores(volume, self.a, floor=self.floor, rng=seed)
         layout = {a: s.ratio[a]["pyramid"] / s.floor["pyramid"] for a in AXES}
         grey = slices_of(volume)
         ends = dark_line_ends(np.concatenate(list(grey.values())), self.threshold) / self.ends_a
         row = {"layout": layout, "layout_mean": float(np.mean(list(layout.values()))), "ends": ends}
+        if constrained is not None:
+            row["layout_mean"] = float(np.mean([layout[a] for a in constrained]))
+            row["free"] = {a: layout[a] for a in AXES if a not in constrained}
         if pooled:
             m = measure(self.a, volume)
             row.update(ac=m["ac"] / self.control_measure(volume.shape[0])["ac"], hkl=m["hist_kl"])
@@ -237,7 +257,8 @@ def main() -> None:
 
 
 def report(names, variants, seeds, args) -> None:
-    print("layout = judge pyramid / floor's (per axis 0 1 2, mean); ends = dark-line ends per "
+    print("layout = judge pyramid / floor's (per axis 0 1 2, mean over the constrained axes: a free "
+          "axis's slices are the cross-section the constrained views imply, not the exemplar); ends = dark-line ends per "
           "skeleton pixel / exemplar's; ac = pooled ac / control's; hkl raw; mean over seeds "
           "(layout mean: min-max)\n")
     print("| photograph | variant | layout 0 / 1 / 2 | layout mean (min-max) | ends (floor) | ac | hkl | s |")
@@ -249,7 +270,7 @@ def report(names, variants, seeds, args) -> None:
             rows = []
             for seed in seeds:
                 volume, sec, cpu = run_variant(photo, variant, args.size, args.levels, seed)
-                row = {**photo.score(volume, seed), "s": sec, "cpu": cpu, "photo": name, "variant": variant,
+                row = {**photo.score(volume, seed, constrained=CONSTRAINED.get(variant)), "s": sec, "cpu": cpu, "photo": name, "variant": variant,
                        "seed": seed, "size": args.size}
                 rows.append(row)
                 if args.png:
@@ -262,7 +283,8 @@ def report(names, variants, seeds, args) -> None:
             totals[variant].extend(rows)
             lay = np.mean([[r["layout"][a] for a in AXES] for r in rows], axis=0)
             means = [r["layout_mean"] for r in rows]
-            print(f"| {name} | {variant} | {' / '.join(f'{x:.2f}' for x in lay)} | {np.mean(means):.2f} "
+            free = set(AXES) - set(CONSTRAINED.get(variant, AXES))
+            print(f"| {name} | {variant} | {' / '.join(f'{x:.2f}' + ' free' * (a in free) for a, x in enumerate(lay))} | {np.mean(means):.2f} "
                   f"({min(means):.2f}-{max(means):.2f}) | {np.mean([r['ends'] for r in rows]):.2f} "
                   f"({photo.ends_floor:.2f}) | {np.mean([r['ac'] for r in rows]):.3f} | "
                   f"{np.mean([r['hkl'] for r in rows]):.4f} | {np.mean([r['s'] for r in rows]):.1f} |",
