@@ -4,7 +4,10 @@ For every real scan built by ``benchmarks/materials_scans.py`` (``scans/<name>.n
 [0, 1]), the exemplar is the scan's most typical ``S^3`` crop (``S = --size``, the crop whose grey
 mean and standard deviation lie nearest the crops' medians). The 2D methods (``npmrf``, the
 default; ``chen-wang``; ``kopf``) see its middle slice across axis 0 -- an anisotropic scan gives
-each view its own middle slice -- and ``volume-lh`` sees the crop itself. Each output (``S^3``)
+each view its own middle slice -- and ``volume-lh`` sees the crop itself. ``materials`` (by
+``--methods``) is what ``npmrf3d materials`` runs on those slices: split into phases 0 and 1 by
+the command's own :func:`npmrf3d.cli.materials.segment` at the threshold the benchmark judges by,
+then the default ``npmrf`` on the label image (which runs its segmented preset). Each output (``S^3``)
 and every ``S^3`` crop of the scan (stride ``S/2``, at most ``--max-crops`` spread evenly) is
 judged on the minority phase at the exemplar's threshold (0.5 for a binary scan, Otsu's for a
 grey one):
@@ -57,6 +60,7 @@ import numpy as np
 
 import npmrf3d
 from npmrf3d.analysis import materials
+from npmrf3d.cli.materials import phase_indices, segment
 from npmrf3d.model.otsu import otsu_threshold
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
@@ -65,8 +69,9 @@ from bench_volume_microct import typical_corner
 from materials_scans import SCANS, by_name
 
 METHODS = ("npmrf", "chen-wang", "kopf", "volume-lh")
-#: also accepted by --methods: the coherent sampler itself, whose options the default fixes
-EXTRA_METHODS = ("coherent",)
+#: also accepted by --methods: the coherent sampler itself, whose options the default fixes; the
+#: materials command's path (its split into two phases, then the default on the label image)
+EXTRA_METHODS = ("coherent", "materials")
 SCALARS = ("fraction", "surface", "diff0", "diff1", "diff2", "odiff0", "odiff1", "odiff2", "chord",
            "chord_other")
 ERRORS = ("s2", "s2_axes")
@@ -209,15 +214,36 @@ def exemplars_for(crop: np.ndarray, isotropic: bool) -> tuple[np.ndarray, dict]:
     return crop[n][..., None], views
 
 
+def as_phases(exemplar: np.ndarray, views: dict, threshold: float) -> tuple[np.ndarray, dict, np.ndarray]:
+    """The 2D exemplar and views as ``npmrf3d materials`` hands them to its method: split by
+    :func:`npmrf3d.cli.materials.segment` at ``threshold`` (pooled over the slices the method
+    sees) into phases 0 and 1; and the phases' values."""
+    slices = dict(views["exemplars"]) if views else {"exemplar": exemplar}
+    labels, values, _ = segment([s[..., 0] for s in slices.values()], threshold=repr(threshold))
+    phases = dict(zip(slices, (phase_indices(a, values) for a in labels)))
+    if views:
+        return exemplar, {"exemplars": phases}, values
+    return phases["exemplar"], {}, values
+
+
 def synthesize(method: str, crop: np.ndarray, isotropic: bool, size: int, seed: int,
-               options: dict) -> tuple[np.ndarray, float]:
+               options: dict, threshold: float) -> tuple[np.ndarray, float]:
+    """One method's ``size^3`` volume from ``crop`` (``materials``: the phases' values,
+    ``threshold`` its split) and the seconds it took."""
     t0 = time.perf_counter()
+    values = None
     if method == "volume-lh":
         exemplar, views = crop[..., None], {}
     else:
         exemplar, views = exemplars_for(crop, isotropic)
-    result = npmrf3d.synthesize(exemplar, method=method, size=size, rng=seed, **views, **options)
-    return result.volume[..., 0], time.perf_counter() - t0
+    if method == "materials":
+        exemplar, views, values = as_phases(exemplar, views, threshold)
+    result = npmrf3d.synthesize(None if views else exemplar, method="npmrf" if method == "materials" else method,
+                                size=size, rng=seed, **views, **options)
+    volume = result.volume[..., 0]
+    if values is not None:  # as the command maps the method's phases back to the input's values
+        volume = values[np.rint(volume).astype(np.int64)].astype(np.float32)
+    return volume, time.perf_counter() - t0
 
 
 def cell(j: dict) -> str:
@@ -313,7 +339,8 @@ def run_scan(name: str, path: pathlib.Path, args) -> dict:
     runs, volumes = {}, {}
     for method in args.methods:
         for seed in args.seeds:
-            vol, seconds = synthesize(method, crop, scan.isotropic, side, seed, args.options.get(method, {}))
+            vol, seconds = synthesize(method, crop, scan.isotropic, side, seed, args.options.get(method, {}),
+                                      threshold)
             stats = statistics(minority(vol), tau=not args.no_tau, solver=args.diffusivity)
             label = method if len(args.seeds) == 1 else f"{method} s{seed}"
             runs[label] = {"method": method, "seed": seed, "seconds": round(seconds, 1),

@@ -75,3 +75,29 @@ def test_a_run_writes_the_table_record_and_figure(bm, tmp_path, capsys):
 def test_no_scan_is_refused_in_one_line(bm, tmp_path, capsys):
     assert bm.main(["--scans", str(tmp_path), "--names", "ketton"]) == 2
     assert "materials_scans.py" in capsys.readouterr().err
+
+
+def test_materials_splits_grey_slices_as_the_command_does(bm):
+    slices = [blobs((24, 24, 1), s)[..., 0] for s in (3, 4, 5, 6)]
+    exemplar, views, values = bm.as_phases(slices[0][..., None],
+                                           {"exemplars": {v: s[..., None] for v, s in
+                                                          zip(("front", "right", "top"), slices[1:])}}, 0.45)
+    assert values.tolist() == [0, 1]
+    top = views["exemplars"]["top"]
+    assert top.dtype == np.float32 and top.shape == (24, 24, 1)
+    np.testing.assert_array_equal(top[..., 0], slices[3] > 0.45)
+    alone, none, _ = bm.as_phases(slices[0][..., None], {}, 0.45)
+    assert none == {} and alone.dtype == np.float32
+    np.testing.assert_array_equal(alone[..., 0], slices[0] > 0.45)
+
+
+def test_an_anisotropic_crop_runs_on_its_three_slices(bm):
+    volume, _ = bm.synthesize("materials", blobs((32, 32, 32), 8), False, 16, 1, {"levels": 1}, 0.5)
+    assert volume.shape == (16, 16, 16) and set(np.unique(volume).tolist()) == {0.0, 1.0}
+
+
+def test_a_materials_run_makes_a_two_phase_volume(bm):
+    crop = blobs((32, 32, 32), 7)
+    volume, _ = bm.synthesize("materials", crop, True, 16, 1, {"levels": 1}, 0.5)
+    assert volume.shape == (16, 16, 16) and set(np.unique(volume).tolist()) == {0.0, 1.0}
+    assert 0.2 < volume.mean() < 0.8

@@ -46,7 +46,7 @@ from ._materials_figures import FIGURES, write_figures, write_page
 from ._options import given
 from ._progress import run_method
 
-__all__ = ["MATERIALS_FILES", "read_input", "register", "segment"]
+__all__ = ["MATERIALS_FILES", "phase_indices", "read_input", "register", "segment"]
 
 METHOD = get_method("npmrf")
 CROP_METHOD = get_method("volume-lh")
@@ -171,7 +171,7 @@ def segment(arrays: list, threshold: str = "auto") -> tuple[list, np.ndarray, st
     return arrays, values, how
 
 
-def _indices(labels: np.ndarray, values: np.ndarray) -> np.ndarray:
+def phase_indices(labels: np.ndarray, values: np.ndarray) -> np.ndarray:
     """The phase numbers 0..n-1 of a label array, float32 with a channel axis (the method's input)."""
     return np.searchsorted(values, labels).astype(np.float32)[..., None]
 
@@ -239,7 +239,7 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
     crop = list(raw) == ["volume"]
     if crop:
         method, config = CROP_METHOD, _crop_config(args)
-        per_view = {"volume": load_volume_exemplar(_indices(labels["volume"], values), exemplar_kind="volume")}
+        per_view = {"volume": load_volume_exemplar(phase_indices(labels["volume"], values), exemplar_kind="volume")}
         volume_fits(per_view["volume"], window=config.window, name=f"input '{sources['input']}'")
     else:
         method = METHOD
@@ -247,7 +247,7 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
                                     **{**config_options(args, SynthesisConfig),
                                        "blockwise": blockwise_requested(args)})
         refuse_written(args, config)
-        shared = {id(a): _indices(a, values) for a in labels.values()}
+        shared = {id(a): phase_indices(a, values) for a in labels.values()}
         per_view = resolve_exemplars(None, {v: shared[id(a)] for v, a in labels.items()}, config.views,
                                      **method.fit(config))
     out = output_folder(args, RUN_FILES + MATERIALS_FILES)
