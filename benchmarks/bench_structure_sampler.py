@@ -3,7 +3,8 @@
 The photographs of the structure judge's validation (``bench_structure_judge.PHOTOS``, the
 set choices are made on) and its check set (``bench_structure_judge.CHECK``, kept out of every
 choice), halved to 128 x 128 as the quality benchmark does; crop A (top-left 64 x 64) is the
-exemplar, the crops B are the floor. Per photograph, variant and seed, one 64^3 volume (or
+exemplar, the crops B are the floor (``--crop 128``: the same crops of the full photograph, at
+twice the pixels). Per photograph, variant and seed, one 64^3 volume (or
 ``--size``) from crop A, and:
 
 * ``layout``: the judge's ``pyramid`` estimator per axis (:func:`npmrf3d.analysis.structure.structure_scores`,
@@ -169,8 +170,11 @@ class Photo:
     """Crop A, the crops B and what the scores compare with, computed once."""
 
     def __init__(self, name: str, side: int = 64):
-        photo = Exemplar(name, f"etr:{name}", "structured", held_out=True, half=True,
-                         crops_b={**PHOTOS, **CHECK}[name])
+        # 64: crops of the photograph halved to 128 x 128; 128: the same crops of the full
+        # 256 x 256 photograph (the same content at twice the pixels, crops B still apart)
+        scale = 1 if side <= 64 else 2
+        photo = Exemplar(name, f"etr:{name}", "structured", held_out=True, half=scale == 1,
+                         crops_b=tuple((r * scale, c * scale) for r, c in {**PHOTOS, **CHECK}[name]))
         self.name = name
         self.a, crops_b = photo.crops(side)
         self.floor = np.stack(crops_b)
@@ -231,7 +235,8 @@ def main() -> None:
     parser.add_argument("--photos", help="comma-separated names instead of --set")
     parser.add_argument("--seeds", default="0,1,2")
     parser.add_argument("--size", type=int, default=64)
-    parser.add_argument("--crop", type=int, default=64, help="exemplar side (64 or 128 = the whole photo)")
+    parser.add_argument("--crop", type=int, default=64, help="exemplar side: 64 (of the photograph halved to 128 x 128) or 128 (of the full "
+                        "256 x 256 photograph: the same content at twice the pixels)")
     parser.add_argument("--levels", type=int, default=3)
     parser.add_argument("--png", type=Path, help="write exemplar + central slices per run here")
     parser.add_argument("--json", type=Path, help="append every row to this JSON-lines file")
