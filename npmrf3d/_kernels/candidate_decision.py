@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._jit import jit
+from ._jit import jit, jit_inline
 from .kcoherence import mix, value_bin
 
 #: The solver's rule among a voxel's heaviest votes (``SolverRule.likelihood``): the
@@ -97,7 +97,7 @@ def view_likelihoods_table(row, uid, vv, vw, count, vsum, outlier, lik):
         lik[v] = (1.0 - outlier) * lik[v] / vsum[v] + outlier if vsum[v] > 0.0 else outlier
 
 
-@jit
+@jit_inline
 def candidate_likelihoods(kernel, rows, n_try, uid, vv, vw, count, vsum, outlier, out):
     """:func:`view_likelihoods_table` of ``n_try`` candidates at once: candidate ``a``'s estimates
     (its kernel row ``kernel[rows[a]]``) into ``out[a]`` (n_try, V). The votes come sorted by
@@ -145,7 +145,7 @@ def candidate_likelihoods(kernel, rows, n_try, uid, vv, vw, count, vsum, outlier
                 out[a + 3, v] = s3
 
 
-@jit
+@jit_inline
 def objective(lik, likelihood, prior):
     """The score of the rules with an objective from the views' estimates ``lik``: ML_H2b's
     ``sum_v log L_v + prior``, or ML_H2a's ``min_v L_v * exp(prior)`` (``prior`` 0: none)."""
@@ -157,7 +157,7 @@ def objective(lik, likelihood, prior):
     return score + prior if prior != 0.0 else score
 
 
-@jit
+@jit_inline
 def objective_product(lik, likelihood, exp_prior):
     """:func:`objective` as a product, for ranking without logarithms: ML_H2b's
     ``prod_v L_v * exp(prior)`` (the exponential of its log-score) or ML_H2a's
@@ -173,7 +173,7 @@ def objective_product(lik, likelihood, exp_prior):
     return least * exp_prior
 
 
-@jit
+@jit_inline
 def highest_objective(products, n_try, liks, likelihood, prior_of, first):
     """The first of the ``n_try`` candidates with the highest :func:`objective` (its estimates
     ``liks[a]`` (V,), its prior ``prior_of[a]``, 0 without), ranked by ``products[a]`` -- the
@@ -303,7 +303,7 @@ def winner_sources(winners, tops, vg, vv, view_starts, ex_flat, ex_off, new_src_
             new_src_t[v] = vg[near] - ex_off[v]
 
 
-@jit
+@jit_inline
 def nearest_in(lo, hi, g, vg, ex_flat):
     """Of the votes ``lo .. hi - 1`` (one view's stretch: the solver enumerates the votes view
     by view), the one whose texel is nearest in colour to texel ``g`` (first on ties), -1 for

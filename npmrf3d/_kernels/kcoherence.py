@@ -35,7 +35,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._jit import jit, jit_parallel, prange
+from ._jit import jit, jit_inline, jit_parallel, prange
 
 
 class SearchExemplar(NamedTuple):
@@ -184,7 +184,7 @@ def split(a, b, inv_b):
     return q, r
 
 
-@jit
+@jit_inline
 def gather(volume, ra, ca, n, u_r, u_c, window, anchor, trust, vec, weights):
     """The neighbourhood of the site at plane position ``(u_r, u_c)`` of slice ``n`` (view axes
     ``ra``, ``ca``; toroidal volume) into ``vec`` (``window**2 * C``, in (row, column, channel)
@@ -208,7 +208,7 @@ def gather(volume, ra, ca, n, u_r, u_c, window, anchor, trust, vec, weights):
                 m += 1
 
 
-@jit
+@jit_inline
 def project(volume, ra, ca, n, u_r, u_c, window, anchor, mean, basis, vec, y):
     """PCA projection of the neighbourhood of the site at plane position ``(u_r, u_c)`` of
     slice ``n`` (view axes ``ra``, ``ca``; toroidal volume) into ``y`` (``vec``: scratch of
@@ -377,7 +377,7 @@ def central_texels(texels, out):
             out[i, ch] = texels[best, i, ch]
 
 
-@jit
+@jit_inline
 def random_centres(salt, site, n_random, exemplar, out, start):
     """Append ``n_random`` valid centres of ``exemplar`` (:class:`SearchExemplar`) drawn from
     ``mix(salt + site * n_random + t)`` to ``out`` at ``start``; return the new count
@@ -394,7 +394,7 @@ def random_centres(salt, site, n_random, exemplar, out, start):
     return start + n_random
 
 
-@jit
+@jit_inline
 def candidates(src_v, ra, ca, pos0, pos1, pos2, exemplar, out):
     """Fill ``out`` with the candidate centres of the site ``(pos0, pos1, pos2)``; return count.
 
@@ -441,7 +441,7 @@ def candidates(src_v, ra, ca, pos0, pos1, pos2, exemplar, out):
     return count
 
 
-@jit
+@jit_inline
 def trusted_distance(vec, weights, exemplar, e):
     """Squared distance of a neighbourhood gathered by :func:`gather` (values ``vec``, trusts
     ``weights``) to the exemplar neighbourhood centred at ``e``, each pixel's term weighted by
@@ -466,7 +466,7 @@ def trusted_distance(vec, weights, exemplar, e):
     return d2
 
 
-@jit
+@jit_inline
 def distinct_blocks(cand, count, kk, keep):
     """The candidates ``cand[:count]`` of :func:`candidates` (and :func:`random_centres`) into
     ``keep`` without the neighbours' blocks that repeat an earlier block: a block is a coherent
@@ -493,7 +493,7 @@ def distinct_blocks(cand, count, kk, keep):
     return n
 
 
-@jit
+@jit_inline
 def pca_distances(y, proj, keep, count, out):
     """Squared distances ``sum_j (y[j] - proj[e, j])**2`` (summed in ``j`` order) of ``y`` to the
     projections of the centres ``keep[:count]`` into ``out``; four centres at a time, each its

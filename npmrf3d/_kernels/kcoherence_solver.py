@@ -29,7 +29,7 @@ from typing import NamedTuple
 import numpy as np
 
 from . import candidate_decision as _decide
-from ._jit import jit, jit_parallel, prange
+from ._jit import jit, jit_inline, jit_parallel, prange
 from .smoothness import add_smoothness, smoothness_prior
 from .candidate_decision import HEAT_BATH, METROPOLIS, ML_H1A, ML_H1B, ML_H2A, ML_H2B, value_prior
 from .kcoherence import first_site, global_flat, grid_voxels, mix, value_bin, wrap
@@ -184,9 +184,9 @@ def _texel_factors(views, hist, n_views, div, mul, vdiv, priors, exp_priors):
             exp_priors[g] = np.exp(priors[g])
 
 
-@jit
+@jit_inline
 def _votes(p0, p1, p2, assign, flat_assign, flat_omega, views, hist, trust, flat_windows, out_g, out_v, out_w, div, mul,
-           vdiv, sites, view_starts):
+           vdiv, sites, view_starts, vsum, colour_ids, out_ids):
     """Texels voted for voxel ``(p0, p1, p2)`` by every overlapping neighbourhood of every view.
 
     A neighbourhood at site ``u`` matched with centre ``e`` votes for the texel ``e + (x - u)``
@@ -218,8 +218,13 @@ def _votes(p0, p1, p2, assign, flat_assign, flat_omega, views, hist, trust, flat
     (:func:`npmrf3d._kernels.kcoherence.first_site`). ``flat_assign``, ``flat_omega`` and
     ``flat_windows`` are ``assign``, ``omega`` and ``trust.windows`` flattened, once per pass
     rather than per voxel (``assign`` gives the shapes).
+
+    ``vsum`` gets each view's sum of its votes' weights, added in the votes' order (the sums of
+    :func:`_view_sums`, the same bits); with ``colour_ids`` not empty, ``out_ids`` every vote's
+    texel's colour index ``colour_ids[out_g[q]]``.
     """
     view_axes, ex_off, ewidth = views.axes, views.offsets, views.widths
+    tabled = colour_ids.shape[0] > 0
     window, anchor, grid = views.window, views.anchor, views.grid
     hist_off, val_weight = hist.position_offsets, hist.value_weight
     n1 = assign.shape[2]
@@ -232,6 +237,7 @@ def _votes(p0, p1, p2, assign, flat_assign, flat_omega, views, hist, trust, flat
     count = 0
     for v in range(assign.shape[0]):
         view_starts[v] = count
+        total = 0.0
         ra = view_axes[v, 0]
         ca = view_axes[v, 1]
         nr = assign.shape[1 + ra]
@@ -270,15 +276,20 @@ def _votes(p0, p1, p2, assign, flat_assign, flat_omega, views, hist, trust, flat
                     weight = weight / vdiv[ex_off[v] + local]
                 if weighted:
                     weight = weight * share
-                out_g[count] = ex_off[v] + local
+                g = ex_off[v] + local
+                out_g[count] = g
                 out_v[count] = v
                 out_w[count] = weight
+                if tabled:
+                    out_ids[count] = colour_ids[g]
+                total += weight
                 count += 1
+        vsum[v] = total
     view_starts[assign.shape[0]] = count
     return count
 
 
-@jit
+@jit_inline
 def _top_votes(vg, vv, vw, count, n_views, most, tops, keys, weights):
     """The votes of the ``most`` heaviest distinct (texel, view) into ``tops``, heaviest first:
     a (texel, view) weighs its heaviest vote, ties go to the earlier vote, and it is represented
@@ -320,7 +331,7 @@ def _top_votes(vg, vv, vw, count, n_views, most, tops, keys, weights):
     return n
 
 
-@jit
+@jit_inline
 def _view_sums(vv, vw, count, vsum):
     """Per view, the sum of its votes' weights (``vsum``, one entry per view)."""
     for v in range(vsum.shape[0]):
@@ -369,7 +380,7 @@ def _medoid_energy(ex_flat, ga, vg, vw, count):
     return e_sum
 
 
-@jit
+@jit_inline
 def _score_candidates(ex_flat, vg, vv, vw, count, vsum, tops, n_try, likelihood, ranked, tabled, h2c, outlier,
                       priors, exp_priors, val_prior, lik, liks, products, prior_of, table, scores):
     """Judge the ``n_try`` candidates ``tops`` (votes, heaviest first): the NP-MRF rule's view
@@ -438,7 +449,7 @@ def _heat_bath(scores, n_try, temperature, key):
     return n_try - 1
 
 
-@jit
+@jit_inline
 def _copy_texel(volume, p0, p1, p2, texel, texel_bins, val_lo, val_scale, n_bins, old_bins_t, new_bins_t):
     """Give voxel ``(p0, p1, p2)`` the colour of ``texel`` (its value bins ``texel_bins``); when it
     changes, its old and new bins go to ``old_bins_t`` and ``new_bins_t``. Returns 1 if the
@@ -456,7 +467,7 @@ def _copy_texel(volume, p0, p1, p2, texel, texel_bins, val_lo, val_scale, n_bins
     return flag
 
 
-@jit
+@jit_inline
 def _copied_sources(best, vg, vv, view_starts, ex_flat, ex_off, new_src_t):
     """Each view's new source after copying vote ``best``'s texel: the texel itself for its own
     view, for every other view its voted texel nearest to the copied colour (unchanged without
@@ -624,16 +635,17 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                 p1 = (flat // n2) % n1
                 p2 = flat % n2
                 count = _votes(p0, p1, p2, assign, flat_assign, flat_omega, views, hist, trust, flat_windows, vg, vv,
-                               vw, div, mul, vdiv, sites, view_starts)
+                               vw, div, mul, vdiv, sites, view_starts, vsum, colour_ids, uid)
                 for v in range(n_views):
                     new_src[t, v] = src[v, p0, p1, p2]
                 if count == 0:
                     continue
                 if balance:
-                    # every view gets the same total say: its votes' weights sum to 1
-                    _view_sums(vv, vw, count, vsum)
+                    # every view gets the same total say: its votes' weights sum to 1 (then the
+                    # sums of the balanced weights)
                     for q in range(count):
                         vw[q] /= vsum[vv[q]]
+                    _view_sums(vv, vw, count, vsum)
                 if not medoid:
                     best = _nearest_to_mean(ex_flat, vg, vw, count, mean)
                 else:
@@ -641,10 +653,9 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                     # first (ties: the earlier vote)
                     n_try = _top_votes(vg, vv, vw, count, n_views, medoid, tops, top_keys, top_weights)
                     if likelihood:
-                        _view_sums(vv, vw, count, vsum)
+                        # the votes' per-view sums and colour ids came with them (_votes); the
+                        # balanced weights' sums were taken above
                         if tabled:
-                            for q in range(count):
-                                uid[q] = colour_ids[vg[q]]
                             for a in range(n_try):
                                 rows[a] = colour_ids[vg[tops[a]]]
                             _decide.candidate_likelihoods(kernel, rows, n_try, uid, vv, vw, count, vsum, outlier, liks)
