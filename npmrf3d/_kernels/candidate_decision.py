@@ -102,25 +102,28 @@ def candidate_likelihoods(kernel, rows, n_try, uid, vv, vw, count, vsum, outlier
     """:func:`view_likelihoods_table` of ``n_try`` candidates at once: candidate ``a``'s estimates
     (its kernel row ``kernel[rows[a]]``) into ``out[a]`` (n_try, V). The votes come sorted by
     view (the solver enumerates them view by view), so each view's sum runs over one stretch of
-    them; four candidates go side by side, each with its own sums in the same order, so the
-    same bits. Votes not sorted by view: one candidate at a time."""
+    them; eight candidates go side by side (the solver's eight heaviest votes in one pass over
+    the votes), each with its own sums in the same order, so the same bits. Votes not sorted by
+    view: one candidate at a time."""
     n_views = out.shape[1]
     for q in range(1, count):
         if vv[q] < vv[q - 1]:
             for a in range(n_try):
                 view_likelihoods_table(kernel[rows[a]], uid, vv, vw, count, vsum, outlier, out[a])
             return
-    for a in range(0, n_try, 4):
+    for a in range(0, n_try, 8):
+        last = n_try - 1
         k0 = kernel[rows[a]]
-        k1 = kernel[rows[min(a + 1, n_try - 1)]]
-        k2 = kernel[rows[min(a + 2, n_try - 1)]]
-        k3 = kernel[rows[min(a + 3, n_try - 1)]]
+        k1 = kernel[rows[min(a + 1, last)]]
+        k2 = kernel[rows[min(a + 2, last)]]
+        k3 = kernel[rows[min(a + 3, last)]]
+        k4 = kernel[rows[min(a + 4, last)]]
+        k5 = kernel[rows[min(a + 5, last)]]
+        k6 = kernel[rows[min(a + 6, last)]]
+        k7 = kernel[rows[min(a + 7, last)]]
         q = 0
         for v in range(n_views):
-            s0 = 0.0
-            s1 = 0.0
-            s2 = 0.0
-            s3 = 0.0
+            s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = 0.0
             while q < count and vv[q] == v:
                 w = vw[q]
                 i = uid[q]
@@ -128,14 +131,23 @@ def candidate_likelihoods(kernel, rows, n_try, uid, vv, vw, count, vsum, outlier
                 s1 += w * k1[i]
                 s2 += w * k2[i]
                 s3 += w * k3[i]
+                s4 += w * k4[i]
+                s5 += w * k5[i]
+                s6 += w * k6[i]
+                s7 += w * k7[i]
                 q += 1
             if vsum[v] > 0.0:
-                s0 = (1.0 - outlier) * s0 / vsum[v] + outlier
-                s1 = (1.0 - outlier) * s1 / vsum[v] + outlier
-                s2 = (1.0 - outlier) * s2 / vsum[v] + outlier
-                s3 = (1.0 - outlier) * s3 / vsum[v] + outlier
+                keep = 1.0 - outlier
+                s0 = keep * s0 / vsum[v] + outlier
+                s1 = keep * s1 / vsum[v] + outlier
+                s2 = keep * s2 / vsum[v] + outlier
+                s3 = keep * s3 / vsum[v] + outlier
+                s4 = keep * s4 / vsum[v] + outlier
+                s5 = keep * s5 / vsum[v] + outlier
+                s6 = keep * s6 / vsum[v] + outlier
+                s7 = keep * s7 / vsum[v] + outlier
             else:
-                s0 = s1 = s2 = s3 = outlier
+                s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = outlier
             out[a, v] = s0
             if a + 1 < n_try:
                 out[a + 1, v] = s1
@@ -143,6 +155,14 @@ def candidate_likelihoods(kernel, rows, n_try, uid, vv, vw, count, vsum, outlier
                 out[a + 2, v] = s2
             if a + 3 < n_try:
                 out[a + 3, v] = s3
+            if a + 4 < n_try:
+                out[a + 4, v] = s4
+            if a + 5 < n_try:
+                out[a + 5, v] = s5
+            if a + 6 < n_try:
+                out[a + 6, v] = s6
+            if a + 7 < n_try:
+                out[a + 7, v] = s7
 
 
 @jit_inline

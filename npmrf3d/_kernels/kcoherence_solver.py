@@ -146,10 +146,11 @@ NO_TRUST = VoteTrust(np.zeros((0, 0, 0), dtype=np.float32), np.zeros((0, 0, 0, 0
 
 
 @jit
-def _texel_factors(views, hist, n_views, div, mul, vdiv, priors, exp_priors):
+def _texel_factors(views, hist, n_views, factors, vdiv, priors, exp_priors):
     """Per packed position-histogram entry, the factors :func:`_votes` weighs a vote for that
-    texel by while the histograms are frozen (one batch): ``div`` the position divisor
-    ``1 + position_weight * excess`` (1.0 when not over-used), ``mul`` the boost
+    texel by while the histograms are frozen (one batch), side by side in ``factors`` (n, 2) so
+    that a vote reads both from one cache line: ``factors[i, 0]`` the position divisor
+    ``1 + position_weight * excess`` (1.0 when not over-used), ``factors[i, 1]`` the boost
     ``1 - position_boost * excess`` (1.0 when over-used or without boost); per packed texel
     ``vdiv`` the value-histogram divisor ``1 + val_weight * over`` (1.0 without). A factor of
     1.0 leaves a weight exactly as it is, so the weights keep their bits. With ``value_prior >
@@ -163,12 +164,12 @@ def _texel_factors(views, hist, n_views, div, mul, vdiv, priors, exp_priors):
         hi = hist_off[v + 1] if v + 1 < n_views else pos_hist.shape[0]
         for i in range(lo, hi):
             excess = pos_hist[i] / theta[v] - 1.0
-            div[i] = 1.0
-            mul[i] = 1.0
+            factors[i, 0] = 1.0
+            factors[i, 1] = 1.0
             if excess > 0.0:
-                div[i] = 1.0 + position_weight * excess
+                factors[i, 0] = 1.0 + position_weight * excess
             elif position_boost > 0.0:
-                mul[i] = 1.0 - position_boost * excess
+                factors[i, 1] = 1.0 - position_boost * excess
     if val_weight > 0.0:
         for g in range(vdiv.shape[0]):
             over = 0.0
@@ -185,7 +186,7 @@ def _texel_factors(views, hist, n_views, div, mul, vdiv, priors, exp_priors):
 
 
 @jit_inline
-def _votes(p0, p1, p2, assign, flat_assign, flat_omega, views, hist, trust, flat_windows, out_g, out_v, out_w, div, mul,
+def _votes(p0, p1, p2, assign, flat_assign, flat_omega, views, hist, trust, flat_windows, out_g, out_v, out_w, factors,
            vdiv, sites, view_starts, vsum, colour_ids, out_ids):
     """Texels voted for voxel ``(p0, p1, p2)`` by every overlapping neighbourhood of every view.
 
@@ -213,7 +214,7 @@ def _votes(p0, p1, p2, assign, flat_assign, flat_omega, views, hist, trust, flat
     (``position_offsets``), ``theta``, the strengths, ``ex_bins`` (``texel_bins``), ``val_hist``
     (``values``) and ``val_target`` (``value_target``).
 
-    ``div``, ``mul`` and ``vdiv`` are the histograms' factors of every texel (:func:`_texel_factors`);
+    ``factors`` and ``vdiv`` are the histograms' factors of every texel (:func:`_texel_factors`);
     ``sites`` (3,) the array index of the first search site along each axis
     (:func:`npmrf3d._kernels.kcoherence.first_site`). ``flat_assign``, ``flat_omega`` and
     ``flat_windows`` are ``assign``, ``omega`` and ``trust.windows`` flattened, once per pass
@@ -271,7 +272,7 @@ def _votes(p0, p1, p2, assign, flat_assign, flat_omega, views, hist, trust, flat
                 local = e + orow * w + ocol  # (e // w + orow) * w + (e % w + ocol)
                 i = hist_off[v] + local
                 # omega / (1 + position_weight * excess) or omega * (1 - position_boost * excess)
-                weight = np.float64(flat_omega[site]) / div[i] * mul[i]
+                weight = np.float64(flat_omega[site]) / factors[i, 0] * factors[i, 1]
                 if val_weight > 0.0:
                     weight = weight / vdiv[ex_off[v] + local]
                 if weighted:
@@ -290,44 +291,38 @@ def _votes(p0, p1, p2, assign, flat_assign, flat_omega, views, hist, trust, flat
 
 
 @jit_inline
-def _top_votes(vg, vv, vw, count, n_views, most, tops, keys, weights):
+def _top_votes(vg, vv, vw, count, n_views, most, tops, keys, bits):
     """The votes of the ``most`` heaviest distinct (texel, view) into ``tops``, heaviest first:
     a (texel, view) weighs its heaviest vote, ties go to the earlier vote, and it is represented
-    by the first of its heaviest votes. One pass keeping the sorted best so far (their keys
-    ``texel * n_views + view`` and weights in the scratch ``keys`` and ``weights``, ``most``
-    each); a vote whose (texel, view) is kept already replaces it only when heavier. Returns how
-    many (at most the distinct (texel, view) among the votes)."""
-    n = 0
-    last = np.inf  # the weight to beat once ``most`` are kept
+    by the first of its heaviest votes. Returns how many (at most the distinct (texel, view)
+    among the votes).
+
+    In rounds, each taking the first of the heaviest votes left and dropping every vote of its
+    (texel, view): that vote is its (texel, view)'s representative, and the rounds take them
+    heaviest first, the earlier on ties. The weights are positive, so their float64 bits
+    (``bits``, scratch of ``count`` int64, -1 once dropped) order as the weights do: the rounds
+    compare integers, in loops without data-dependent branches. ``keys`` (scratch of ``count``)
+    holds every vote's ``texel * n_views + view``."""
+    weight_bits = vw.view(np.int64)
     for q in range(count):
-        wq = vw[q]
-        if n == most and not wq > last:
-            continue
-        key = vg[q] * n_views + vv[q]
-        # (texel, view) kept already: only a heavier vote moves it up
-        i = -1
-        for j in range(n):
-            if keys[j] == key:
-                i = j
-                break
-        if i >= 0:
-            if not wq > weights[i]:
-                continue
-        elif n < most:
-            i = n
-            n += 1
-        else:
-            i = n - 1
-        while i > 0 and wq > weights[i - 1]:
-            tops[i] = tops[i - 1]
-            keys[i] = keys[i - 1]
-            weights[i] = weights[i - 1]
-            i -= 1
-        tops[i] = q
-        keys[i] = key
-        weights[i] = wq
-        if n == most:
-            last = weights[n - 1]
+        keys[q] = vg[q] * n_views + vv[q]
+        bits[q] = weight_bits[q]
+    n = 0
+    while n < most:
+        top = np.int64(-1)
+        for q in range(count):
+            top = max(top, bits[q])
+        if top < 0:
+            break
+        pick = 0
+        while bits[pick] != top:
+            pick += 1
+        tops[n] = pick
+        n += 1
+        key = keys[pick]
+        for q in range(count):
+            if keys[q] == key:
+                bits[q] = -1
     return n
 
 
@@ -586,8 +581,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
     cap = n_views * views.window * views.window
     tried = max(medoid, 1)
     changed = 0
-    div = np.empty(hist.positions.shape[0], dtype=np.float64)
-    mul = np.empty(hist.positions.shape[0], dtype=np.float64)
+    factors = np.empty((hist.positions.shape[0], 2), dtype=np.float64)
     vdiv = np.empty(ex_flat.shape[0], dtype=np.float64)
     priors = np.zeros(ex_flat.shape[0], dtype=np.float64)
     exp_priors = np.ones(ex_flat.shape[0], dtype=np.float64)
@@ -607,7 +601,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
         old_bins = np.zeros((m, channels), dtype=np.int64)
         new_bins = np.zeros((m, channels), dtype=np.int64)
         n_chunks = (m + chunk - 1) // chunk
-        _texel_factors(views, hist, n_views, div, mul, vdiv, priors, exp_priors)
+        _texel_factors(views, hist, n_views, factors, vdiv, priors, exp_priors)
         for c in prange(n_chunks):
             vg = np.empty(cap, dtype=np.int64)
             vv = np.empty(cap, dtype=np.int64)
@@ -619,8 +613,8 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
             rows = np.empty(tried, dtype=np.int64)
             liks = np.empty((tried, n_views), dtype=np.float64)
             tops = np.empty(tried, dtype=np.int64)
-            top_keys = np.empty(tried, dtype=np.int64)
-            top_weights = np.empty(tried, dtype=np.float64)
+            vote_keys = np.empty(cap, dtype=np.int64)
+            vote_bits = np.empty(cap, dtype=np.int64)
             lik = np.empty(n_views, dtype=np.float64)
             scores = np.empty(tried, dtype=np.float64)
             products = np.empty(tried, dtype=np.float64)
@@ -635,7 +629,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                 p1 = (flat // n2) % n1
                 p2 = flat % n2
                 count = _votes(p0, p1, p2, assign, flat_assign, flat_omega, views, hist, trust, flat_windows, vg, vv,
-                               vw, div, mul, vdiv, sites, view_starts, vsum, colour_ids, uid)
+                               vw, factors, vdiv, sites, view_starts, vsum, colour_ids, uid)
                 for v in range(n_views):
                     new_src[t, v] = src[v, p0, p1, p2]
                 if count == 0:
@@ -651,7 +645,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                 else:
                     # candidates: the votes of the `medoid` heaviest distinct (texel, view), heaviest
                     # first (ties: the earlier vote)
-                    n_try = _top_votes(vg, vv, vw, count, n_views, medoid, tops, top_keys, top_weights)
+                    n_try = _top_votes(vg, vv, vw, count, n_views, medoid, tops, vote_keys, vote_bits)
                     if likelihood:
                         # the votes' per-view sums and colour ids came with them (_votes); the
                         # balanced weights' sums were taken above
