@@ -327,7 +327,7 @@ def winner_sources(winners, tops, vg, vv, view_starts, ex_flat, ex_off, new_src_
 def nearest_in(lo, hi, g, vg, ex_flat):
     """Of the votes ``lo .. hi - 1`` (one view's stretch: the solver enumerates the votes view
     by view), the one whose texel is nearest in colour to texel ``g`` (first on ties), -1 for
-    an empty stretch."""
+    an empty stretch. A vote of distance 0 ends the search: no later one is nearer."""
     near = -1
     near_d = np.inf
     for q in range(lo, hi):
@@ -338,6 +338,8 @@ def nearest_in(lo, hi, g, vg, ex_flat):
         if dd < near_d:
             near_d = dd
             near = q
+            if dd == 0.0:
+                break
     return near
 
 
