@@ -624,8 +624,14 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
     n_lo, n_hi = rule.box_lo[na], rule.box_hi[na]
     follow = rule.follow
     rounds = batches if follow else 1
+    # each centre's cost factor while the index histogram is frozen (one batch):
+    # 1 + index_weight * excess when over-used, else exactly 1.0 (a distance keeps its bits)
+    factor = np.empty(index_hist.shape[0], dtype=np.float64)
     for b in range(rounds):
         nb = (nn - b + rounds - 1) // rounds
+        for e in range(index_hist.shape[0]):
+            excess = index_hist[e] / phi - 1.0
+            factor[e] = 1.0 + index_weight * excess if excess > 0.0 else 1.0
         for t in prange(nb):
             n = b + t * rounds
             if n < n_lo or n >= n_hi:
@@ -664,8 +670,7 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
                     for t2 in range(count):
                         e = keep[t2]
                         d2 = dists[t2]
-                        excess = index_hist[e] / phi - 1.0
-                        cost = d2 * (1.0 + index_weight * excess) if excess > 0.0 else d2
+                        cost = d2 * factor[e]
                         if cost < best_cost:
                             best_cost = cost
                             best = e
