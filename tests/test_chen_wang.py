@@ -703,8 +703,8 @@ def test_top_votes_match_their_twin(count, texels, most):
     vg = rng.integers(0, texels, count).astype(np.int64)
     vv = rng.integers(0, 3, count).astype(np.int64)
     vw = rng.integers(1, 6, count).astype(np.float64)
-    tops, keys, weights = np.empty(most, dtype=np.int64), np.empty(most, dtype=np.int64), np.empty(most)
-    n = _s._top_votes(vg, vv, vw, count, 3, most, tops, keys, weights)
+    tops, keys, bits = np.empty(most, dtype=np.int64), np.empty(count, dtype=np.int64), np.empty(count, dtype=np.int64)
+    n = _s._top_votes(vg, vv, vw, count, 3, most, tops, keys, bits)
     np.testing.assert_array_equal(tops[:n], naive_top_votes(vg, vv, vw, most))
 
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._jit import jit
+from ._jit import jit, jit_inline
 from .kcoherence import mix, value_bin
 
 #: The solver's rule among a voxel's heaviest votes (``SolverRule.likelihood``): the
@@ -97,30 +97,33 @@ def view_likelihoods_table(row, uid, vv, vw, count, vsum, outlier, lik):
         lik[v] = (1.0 - outlier) * lik[v] / vsum[v] + outlier if vsum[v] > 0.0 else outlier
 
 
-@jit
+@jit_inline
 def candidate_likelihoods(kernel, rows, n_try, uid, vv, vw, count, vsum, outlier, out):
     """:func:`view_likelihoods_table` of ``n_try`` candidates at once: candidate ``a``'s estimates
     (its kernel row ``kernel[rows[a]]``) into ``out[a]`` (n_try, V). The votes come sorted by
     view (the solver enumerates them view by view), so each view's sum runs over one stretch of
-    them; four candidates go side by side, each with its own sums in the same order, so the
-    same bits. Votes not sorted by view: one candidate at a time."""
+    them; eight candidates go side by side (the solver's eight heaviest votes in one pass over
+    the votes), each with its own sums in the same order, so the same bits. Votes not sorted by
+    view: one candidate at a time."""
     n_views = out.shape[1]
     for q in range(1, count):
         if vv[q] < vv[q - 1]:
             for a in range(n_try):
                 view_likelihoods_table(kernel[rows[a]], uid, vv, vw, count, vsum, outlier, out[a])
             return
-    for a in range(0, n_try, 4):
+    for a in range(0, n_try, 8):
+        last = n_try - 1
         k0 = kernel[rows[a]]
-        k1 = kernel[rows[min(a + 1, n_try - 1)]]
-        k2 = kernel[rows[min(a + 2, n_try - 1)]]
-        k3 = kernel[rows[min(a + 3, n_try - 1)]]
+        k1 = kernel[rows[min(a + 1, last)]]
+        k2 = kernel[rows[min(a + 2, last)]]
+        k3 = kernel[rows[min(a + 3, last)]]
+        k4 = kernel[rows[min(a + 4, last)]]
+        k5 = kernel[rows[min(a + 5, last)]]
+        k6 = kernel[rows[min(a + 6, last)]]
+        k7 = kernel[rows[min(a + 7, last)]]
         q = 0
         for v in range(n_views):
-            s0 = 0.0
-            s1 = 0.0
-            s2 = 0.0
-            s3 = 0.0
+            s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = 0.0
             while q < count and vv[q] == v:
                 w = vw[q]
                 i = uid[q]
@@ -128,14 +131,23 @@ def candidate_likelihoods(kernel, rows, n_try, uid, vv, vw, count, vsum, outlier
                 s1 += w * k1[i]
                 s2 += w * k2[i]
                 s3 += w * k3[i]
+                s4 += w * k4[i]
+                s5 += w * k5[i]
+                s6 += w * k6[i]
+                s7 += w * k7[i]
                 q += 1
             if vsum[v] > 0.0:
-                s0 = (1.0 - outlier) * s0 / vsum[v] + outlier
-                s1 = (1.0 - outlier) * s1 / vsum[v] + outlier
-                s2 = (1.0 - outlier) * s2 / vsum[v] + outlier
-                s3 = (1.0 - outlier) * s3 / vsum[v] + outlier
+                keep = 1.0 - outlier
+                s0 = keep * s0 / vsum[v] + outlier
+                s1 = keep * s1 / vsum[v] + outlier
+                s2 = keep * s2 / vsum[v] + outlier
+                s3 = keep * s3 / vsum[v] + outlier
+                s4 = keep * s4 / vsum[v] + outlier
+                s5 = keep * s5 / vsum[v] + outlier
+                s6 = keep * s6 / vsum[v] + outlier
+                s7 = keep * s7 / vsum[v] + outlier
             else:
-                s0 = s1 = s2 = s3 = outlier
+                s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = outlier
             out[a, v] = s0
             if a + 1 < n_try:
                 out[a + 1, v] = s1
@@ -143,9 +155,17 @@ def candidate_likelihoods(kernel, rows, n_try, uid, vv, vw, count, vsum, outlier
                 out[a + 2, v] = s2
             if a + 3 < n_try:
                 out[a + 3, v] = s3
+            if a + 4 < n_try:
+                out[a + 4, v] = s4
+            if a + 5 < n_try:
+                out[a + 5, v] = s5
+            if a + 6 < n_try:
+                out[a + 6, v] = s6
+            if a + 7 < n_try:
+                out[a + 7, v] = s7
 
 
-@jit
+@jit_inline
 def objective(lik, likelihood, prior):
     """The score of the rules with an objective from the views' estimates ``lik``: ML_H2b's
     ``sum_v log L_v + prior``, or ML_H2a's ``min_v L_v * exp(prior)`` (``prior`` 0: none)."""
@@ -157,7 +177,7 @@ def objective(lik, likelihood, prior):
     return score + prior if prior != 0.0 else score
 
 
-@jit
+@jit_inline
 def objective_product(lik, likelihood, exp_prior):
     """:func:`objective` as a product, for ranking without logarithms: ML_H2b's
     ``prod_v L_v * exp(prior)`` (the exponential of its log-score) or ML_H2a's
@@ -173,7 +193,7 @@ def objective_product(lik, likelihood, exp_prior):
     return least * exp_prior
 
 
-@jit
+@jit_inline
 def highest_objective(products, n_try, liks, likelihood, prior_of, first):
     """The first of the ``n_try`` candidates with the highest :func:`objective` (its estimates
     ``liks[a]`` (V,), its prior ``prior_of[a]``, 0 without), ranked by ``products[a]`` -- the
@@ -303,11 +323,11 @@ def winner_sources(winners, tops, vg, vv, view_starts, ex_flat, ex_off, new_src_
             new_src_t[v] = vg[near] - ex_off[v]
 
 
-@jit
+@jit_inline
 def nearest_in(lo, hi, g, vg, ex_flat):
     """Of the votes ``lo .. hi - 1`` (one view's stretch: the solver enumerates the votes view
     by view), the one whose texel is nearest in colour to texel ``g`` (first on ties), -1 for
-    an empty stretch."""
+    an empty stretch. A vote of distance 0 ends the search: no later one is nearer."""
     near = -1
     near_d = np.inf
     for q in range(lo, hi):
@@ -318,6 +338,8 @@ def nearest_in(lo, hi, g, vg, ex_flat):
         if dd < near_d:
             near_d = dd
             near = q
+            if dd == 0.0:
+                break
     return near
 
 

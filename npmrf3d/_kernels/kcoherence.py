@@ -35,7 +35,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._jit import jit, jit_parallel, prange
+from ._jit import jit, jit_inline, jit_parallel, prange
 
 
 class SearchExemplar(NamedTuple):
@@ -184,31 +184,41 @@ def split(a, b, inv_b):
     return q, r
 
 
-@jit
+@jit_inline
 def gather(volume, ra, ca, n, u_r, u_c, window, anchor, trust, vec, weights):
     """The neighbourhood of the site at plane position ``(u_r, u_c)`` of slice ``n`` (view axes
     ``ra``, ``ca``; toroidal volume) into ``vec`` (``window**2 * C``, in (row, column, channel)
-    order) and, when ``trust`` is not empty, each pixel's trust into ``weights`` (``window**2``)."""
+    order) and, when ``trust`` is not empty, each pixel's trust into ``weights`` (``window**2``).
+    The pixels are read from the flat C-ordered volume at ``n * S_n + x_r * S_r + x_c * S_c``
+    (``S`` the axes' strides in values)."""
     na = 3 - ra - ca
     nr = volume.shape[ra]
     nc = volume.shape[ca]
     channels = volume.shape[3]
+    flat = volume.reshape(-1)
+    step = (volume.shape[1] * volume.shape[2] * channels, volume.shape[2] * channels, channels)
+    step_r = step[ra]
+    step_c = step[ca]
+    base = n * step[na]
+    trusted = trust.shape[0] > 0
     m = 0
     for wr in range(window):
         x_r = wrap(u_r - anchor + wr, nr)
+        row = base + x_r * step_r
         for wc in range(window):
             x_c = wrap(u_c - anchor + wc, nc)
-            q0 = n if na == 0 else (x_r if ra == 0 else x_c)
-            q1 = n if na == 1 else (x_r if ra == 1 else x_c)
-            q2 = n if na == 2 else (x_r if ra == 2 else x_c)
-            if trust.shape[0] > 0:
+            if trusted:
+                q0 = n if na == 0 else (x_r if ra == 0 else x_c)
+                q1 = n if na == 1 else (x_r if ra == 1 else x_c)
+                q2 = n if na == 2 else (x_r if ra == 2 else x_c)
                 weights[wr * window + wc] = trust[q0, q1, q2]
+            at = row + x_c * step_c
             for ch in range(channels):
-                vec[m] = volume[q0, q1, q2, ch]
+                vec[m] = flat[at + ch]
                 m += 1
 
 
-@jit
+@jit_inline
 def project(volume, ra, ca, n, u_r, u_c, window, anchor, mean, basis, vec, y):
     """PCA projection of the neighbourhood of the site at plane position ``(u_r, u_c)`` of
     slice ``n`` (view axes ``ra``, ``ca``; toroidal volume) into ``y`` (``vec``: scratch of
@@ -377,7 +387,7 @@ def central_texels(texels, out):
             out[i, ch] = texels[best, i, ch]
 
 
-@jit
+@jit_inline
 def random_centres(salt, site, n_random, exemplar, out, start):
     """Append ``n_random`` valid centres of ``exemplar`` (:class:`SearchExemplar`) drawn from
     ``mix(salt + site * n_random + t)`` to ``out`` at ``start``; return the new count
@@ -394,7 +404,7 @@ def random_centres(salt, site, n_random, exemplar, out, start):
     return start + n_random
 
 
-@jit
+@jit_inline
 def candidates(src_v, ra, ca, pos0, pos1, pos2, exemplar, out):
     """Fill ``out`` with the candidate centres of the site ``(pos0, pos1, pos2)``; return count.
 
@@ -441,7 +451,7 @@ def candidates(src_v, ra, ca, pos0, pos1, pos2, exemplar, out):
     return count
 
 
-@jit
+@jit_inline
 def trusted_distance(vec, weights, exemplar, e):
     """Squared distance of a neighbourhood gathered by :func:`gather` (values ``vec``, trusts
     ``weights``) to the exemplar neighbourhood centred at ``e``, each pixel's term weighted by
@@ -466,7 +476,7 @@ def trusted_distance(vec, weights, exemplar, e):
     return d2
 
 
-@jit
+@jit_inline
 def distinct_blocks(cand, count, kk, keep):
     """The candidates ``cand[:count]`` of :func:`candidates` (and :func:`random_centres`) into
     ``keep`` without the neighbours' blocks that repeat an earlier block: a block is a coherent
@@ -493,22 +503,57 @@ def distinct_blocks(cand, count, kk, keep):
     return n
 
 
-@jit
+@jit_inline
 def pca_distances(y, proj, keep, count, out):
     """Squared distances ``sum_j (y[j] - proj[e, j])**2`` (summed in ``j`` order) of ``y`` to the
-    projections of the centres ``keep[:count]`` into ``out``; four centres at a time, each its
-    own sum, so the same bits as one at a time with four times the independent work."""
+    projections of the centres ``keep[:count]`` into ``out``; eight centres at a time, each its
+    own sum, so the same bits as one at a time with eight independent chains of additions
+    instead of one."""
     dims = y.shape[0]
     i = 0
+    while i + 8 <= count:
+        e0 = keep[i]
+        e1 = keep[i + 1]
+        e2 = keep[i + 2]
+        e3 = keep[i + 3]
+        e4 = keep[i + 4]
+        e5 = keep[i + 5]
+        e6 = keep[i + 6]
+        e7 = keep[i + 7]
+        s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = 0.0
+        for j in range(dims):
+            yj = y[j]
+            d0 = yj - proj[e0, j]
+            d1 = yj - proj[e1, j]
+            d2 = yj - proj[e2, j]
+            d3 = yj - proj[e3, j]
+            d4 = yj - proj[e4, j]
+            d5 = yj - proj[e5, j]
+            d6 = yj - proj[e6, j]
+            d7 = yj - proj[e7, j]
+            s0 += d0 * d0
+            s1 += d1 * d1
+            s2 += d2 * d2
+            s3 += d3 * d3
+            s4 += d4 * d4
+            s5 += d5 * d5
+            s6 += d6 * d6
+            s7 += d7 * d7
+        out[i] = s0
+        out[i + 1] = s1
+        out[i + 2] = s2
+        out[i + 3] = s3
+        out[i + 4] = s4
+        out[i + 5] = s5
+        out[i + 6] = s6
+        out[i + 7] = s7
+        i += 8
     while i + 4 <= count:
         e0 = keep[i]
         e1 = keep[i + 1]
         e2 = keep[i + 2]
         e3 = keep[i + 3]
-        s0 = 0.0
-        s1 = 0.0
-        s2 = 0.0
-        s3 = 0.0
+        s0 = s1 = s2 = s3 = 0.0
         for j in range(dims):
             yj = y[j]
             d0 = yj - proj[e0, j]
@@ -579,8 +624,14 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
     n_lo, n_hi = rule.box_lo[na], rule.box_hi[na]
     follow = rule.follow
     rounds = batches if follow else 1
+    # each centre's cost factor while the index histogram is frozen (one batch):
+    # 1 + index_weight * excess when over-used, else exactly 1.0 (a distance keeps its bits)
+    factor = np.empty(index_hist.shape[0], dtype=np.float64)
     for b in range(rounds):
         nb = (nn - b + rounds - 1) // rounds
+        for e in range(index_hist.shape[0]):
+            excess = index_hist[e] / phi - 1.0
+            factor[e] = 1.0 + index_weight * excess if excess > 0.0 else 1.0
         for t in prange(nb):
             n = b + t * rounds
             if n < n_lo or n >= n_hi:
@@ -619,8 +670,7 @@ def search_view(volume, src_v, ra, ca, exemplar, rule, index_hist, assign_v, fre
                     for t2 in range(count):
                         e = keep[t2]
                         d2 = dists[t2]
-                        excess = index_hist[e] / phi - 1.0
-                        cost = d2 * (1.0 + index_weight * excess) if excess > 0.0 else d2
+                        cost = d2 * factor[e]
                         if cost < best_cost:
                             best_cost = cost
                             best = e

@@ -29,7 +29,7 @@ from typing import NamedTuple
 import numpy as np
 
 from . import candidate_decision as _decide
-from ._jit import jit, jit_parallel, prange
+from ._jit import jit, jit_inline, jit_parallel, prange
 from .smoothness import add_smoothness, smoothness_prior
 from .candidate_decision import HEAT_BATH, METROPOLIS, ML_H1A, ML_H1B, ML_H2A, ML_H2B, value_prior
 from .kcoherence import first_site, global_flat, grid_voxels, mix, value_bin, wrap
@@ -146,10 +146,11 @@ NO_TRUST = VoteTrust(np.zeros((0, 0, 0), dtype=np.float32), np.zeros((0, 0, 0, 0
 
 
 @jit
-def _texel_factors(views, hist, n_views, div, mul, vdiv, priors, exp_priors):
+def _texel_factors(views, hist, n_views, factors, vdiv, priors, exp_priors):
     """Per packed position-histogram entry, the factors :func:`_votes` weighs a vote for that
-    texel by while the histograms are frozen (one batch): ``div`` the position divisor
-    ``1 + position_weight * excess`` (1.0 when not over-used), ``mul`` the boost
+    texel by while the histograms are frozen (one batch), side by side in ``factors`` (n, 2) so
+    that a vote reads both from one cache line: ``factors[i, 0]`` the position divisor
+    ``1 + position_weight * excess`` (1.0 when not over-used), ``factors[i, 1]`` the boost
     ``1 - position_boost * excess`` (1.0 when over-used or without boost); per packed texel
     ``vdiv`` the value-histogram divisor ``1 + val_weight * over`` (1.0 without). A factor of
     1.0 leaves a weight exactly as it is, so the weights keep their bits. With ``value_prior >
@@ -163,12 +164,12 @@ def _texel_factors(views, hist, n_views, div, mul, vdiv, priors, exp_priors):
         hi = hist_off[v + 1] if v + 1 < n_views else pos_hist.shape[0]
         for i in range(lo, hi):
             excess = pos_hist[i] / theta[v] - 1.0
-            div[i] = 1.0
-            mul[i] = 1.0
+            factors[i, 0] = 1.0
+            factors[i, 1] = 1.0
             if excess > 0.0:
-                div[i] = 1.0 + position_weight * excess
+                factors[i, 0] = 1.0 + position_weight * excess
             elif position_boost > 0.0:
-                mul[i] = 1.0 - position_boost * excess
+                factors[i, 1] = 1.0 - position_boost * excess
     if val_weight > 0.0:
         for g in range(vdiv.shape[0]):
             over = 0.0
@@ -184,9 +185,9 @@ def _texel_factors(views, hist, n_views, div, mul, vdiv, priors, exp_priors):
             exp_priors[g] = np.exp(priors[g])
 
 
-@jit
-def _votes(p0, p1, p2, assign, flat_assign, flat_omega, views, hist, trust, flat_windows, out_g, out_v, out_w, div, mul,
-           vdiv, sites, view_starts):
+@jit_inline
+def _votes(p0, p1, p2, assign, flat_assign, flat_omega, views, hist, trust, flat_windows, out_g, out_v, out_w, factors,
+           vdiv, sites, view_starts, vsum, colour_ids, out_ids):
     """Texels voted for voxel ``(p0, p1, p2)`` by every overlapping neighbourhood of every view.
 
     A neighbourhood at site ``u`` matched with centre ``e`` votes for the texel ``e + (x - u)``
@@ -213,13 +214,18 @@ def _votes(p0, p1, p2, assign, flat_assign, flat_omega, views, hist, trust, flat
     (``position_offsets``), ``theta``, the strengths, ``ex_bins`` (``texel_bins``), ``val_hist``
     (``values``) and ``val_target`` (``value_target``).
 
-    ``div``, ``mul`` and ``vdiv`` are the histograms' factors of every texel (:func:`_texel_factors`);
+    ``factors`` and ``vdiv`` are the histograms' factors of every texel (:func:`_texel_factors`);
     ``sites`` (3,) the array index of the first search site along each axis
     (:func:`npmrf3d._kernels.kcoherence.first_site`). ``flat_assign``, ``flat_omega`` and
     ``flat_windows`` are ``assign``, ``omega`` and ``trust.windows`` flattened, once per pass
     rather than per voxel (``assign`` gives the shapes).
+
+    ``vsum`` gets each view's sum of its votes' weights, added in the votes' order (the sums of
+    :func:`_view_sums`, the same bits); with ``colour_ids`` not empty, ``out_ids`` every vote's
+    texel's colour index ``colour_ids[out_g[q]]``.
     """
     view_axes, ex_off, ewidth = views.axes, views.offsets, views.widths
+    tabled = colour_ids.shape[0] > 0
     window, anchor, grid = views.window, views.anchor, views.grid
     hist_off, val_weight = hist.position_offsets, hist.value_weight
     n1 = assign.shape[2]
@@ -232,6 +238,7 @@ def _votes(p0, p1, p2, assign, flat_assign, flat_omega, views, hist, trust, flat
     count = 0
     for v in range(assign.shape[0]):
         view_starts[v] = count
+        total = 0.0
         ra = view_axes[v, 0]
         ca = view_axes[v, 1]
         nr = assign.shape[1 + ra]
@@ -265,62 +272,61 @@ def _votes(p0, p1, p2, assign, flat_assign, flat_omega, views, hist, trust, flat
                 local = e + orow * w + ocol  # (e // w + orow) * w + (e % w + ocol)
                 i = hist_off[v] + local
                 # omega / (1 + position_weight * excess) or omega * (1 - position_boost * excess)
-                weight = np.float64(flat_omega[site]) / div[i] * mul[i]
+                weight = np.float64(flat_omega[site]) / factors[i, 0] * factors[i, 1]
                 if val_weight > 0.0:
                     weight = weight / vdiv[ex_off[v] + local]
                 if weighted:
                     weight = weight * share
-                out_g[count] = ex_off[v] + local
+                g = ex_off[v] + local
+                out_g[count] = g
                 out_v[count] = v
                 out_w[count] = weight
+                if tabled:
+                    out_ids[count] = colour_ids[g]
+                total += weight
                 count += 1
+        vsum[v] = total
     view_starts[assign.shape[0]] = count
     return count
 
 
-@jit
-def _top_votes(vg, vv, vw, count, n_views, most, tops, keys, weights):
+@jit_inline
+def _top_votes(vg, vv, vw, count, n_views, most, tops, keys, bits):
     """The votes of the ``most`` heaviest distinct (texel, view) into ``tops``, heaviest first:
     a (texel, view) weighs its heaviest vote, ties go to the earlier vote, and it is represented
-    by the first of its heaviest votes. One pass keeping the sorted best so far (their keys
-    ``texel * n_views + view`` and weights in the scratch ``keys`` and ``weights``, ``most``
-    each); a vote whose (texel, view) is kept already replaces it only when heavier. Returns how
-    many (at most the distinct (texel, view) among the votes)."""
-    n = 0
-    last = np.inf  # the weight to beat once ``most`` are kept
+    by the first of its heaviest votes. Returns how many (at most the distinct (texel, view)
+    among the votes).
+
+    In rounds, each taking the first of the heaviest votes left and dropping every vote of its
+    (texel, view): that vote is its (texel, view)'s representative, and the rounds take them
+    heaviest first, the earlier on ties. The weights are positive, so their float64 bits
+    (``bits``, scratch of ``count`` int64, -1 once dropped) order as the weights do: the rounds
+    compare integers, in loops without data-dependent branches. ``keys`` (scratch of ``count``)
+    holds every vote's ``texel * n_views + view``."""
+    weight_bits = vw.view(np.int64)
     for q in range(count):
-        wq = vw[q]
-        if n == most and not wq > last:
-            continue
-        key = vg[q] * n_views + vv[q]
-        # (texel, view) kept already: only a heavier vote moves it up
-        i = -1
-        for j in range(n):
-            if keys[j] == key:
-                i = j
-                break
-        if i >= 0:
-            if not wq > weights[i]:
-                continue
-        elif n < most:
-            i = n
-            n += 1
-        else:
-            i = n - 1
-        while i > 0 and wq > weights[i - 1]:
-            tops[i] = tops[i - 1]
-            keys[i] = keys[i - 1]
-            weights[i] = weights[i - 1]
-            i -= 1
-        tops[i] = q
-        keys[i] = key
-        weights[i] = wq
-        if n == most:
-            last = weights[n - 1]
+        keys[q] = vg[q] * n_views + vv[q]
+        bits[q] = weight_bits[q]
+    n = 0
+    while n < most:
+        top = np.int64(-1)
+        for q in range(count):
+            top = max(top, bits[q])
+        if top < 0:
+            break
+        pick = 0
+        while bits[pick] != top:
+            pick += 1
+        tops[n] = pick
+        n += 1
+        key = keys[pick]
+        for q in range(count):
+            if keys[q] == key:
+                bits[q] = -1
     return n
 
 
-@jit
+@jit_inline
 def _view_sums(vv, vw, count, vsum):
     """Per view, the sum of its votes' weights (``vsum``, one entry per view)."""
     for v in range(vsum.shape[0]):
@@ -369,7 +375,7 @@ def _medoid_energy(ex_flat, ga, vg, vw, count):
     return e_sum
 
 
-@jit
+@jit_inline
 def _score_candidates(ex_flat, vg, vv, vw, count, vsum, tops, n_try, likelihood, ranked, tabled, h2c, outlier,
                       priors, exp_priors, val_prior, lik, liks, products, prior_of, table, scores):
     """Judge the ``n_try`` candidates ``tops`` (votes, heaviest first): the NP-MRF rule's view
@@ -438,7 +444,7 @@ def _heat_bath(scores, n_try, temperature, key):
     return n_try - 1
 
 
-@jit
+@jit_inline
 def _copy_texel(volume, p0, p1, p2, texel, texel_bins, val_lo, val_scale, n_bins, old_bins_t, new_bins_t):
     """Give voxel ``(p0, p1, p2)`` the colour of ``texel`` (its value bins ``texel_bins``); when it
     changes, its old and new bins go to ``old_bins_t`` and ``new_bins_t``. Returns 1 if the
@@ -456,7 +462,7 @@ def _copy_texel(volume, p0, p1, p2, texel, texel_bins, val_lo, val_scale, n_bins
     return flag
 
 
-@jit
+@jit_inline
 def _copied_sources(best, vg, vv, view_starts, ex_flat, ex_off, new_src_t):
     """Each view's new source after copying vote ``best``'s texel: the texel itself for its own
     view, for every other view its voted texel nearest to the copied colour (unchanged without
@@ -575,8 +581,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
     cap = n_views * views.window * views.window
     tried = max(medoid, 1)
     changed = 0
-    div = np.empty(hist.positions.shape[0], dtype=np.float64)
-    mul = np.empty(hist.positions.shape[0], dtype=np.float64)
+    factors = np.empty((hist.positions.shape[0], 2), dtype=np.float64)
     vdiv = np.empty(ex_flat.shape[0], dtype=np.float64)
     priors = np.zeros(ex_flat.shape[0], dtype=np.float64)
     exp_priors = np.ones(ex_flat.shape[0], dtype=np.float64)
@@ -596,7 +601,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
         old_bins = np.zeros((m, channels), dtype=np.int64)
         new_bins = np.zeros((m, channels), dtype=np.int64)
         n_chunks = (m + chunk - 1) // chunk
-        _texel_factors(views, hist, n_views, div, mul, vdiv, priors, exp_priors)
+        _texel_factors(views, hist, n_views, factors, vdiv, priors, exp_priors)
         for c in prange(n_chunks):
             vg = np.empty(cap, dtype=np.int64)
             vv = np.empty(cap, dtype=np.int64)
@@ -608,8 +613,8 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
             rows = np.empty(tried, dtype=np.int64)
             liks = np.empty((tried, n_views), dtype=np.float64)
             tops = np.empty(tried, dtype=np.int64)
-            top_keys = np.empty(tried, dtype=np.int64)
-            top_weights = np.empty(tried, dtype=np.float64)
+            vote_keys = np.empty(cap, dtype=np.int64)
+            vote_bits = np.empty(cap, dtype=np.int64)
             lik = np.empty(n_views, dtype=np.float64)
             scores = np.empty(tried, dtype=np.float64)
             products = np.empty(tried, dtype=np.float64)
@@ -624,27 +629,27 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                 p1 = (flat // n2) % n1
                 p2 = flat % n2
                 count = _votes(p0, p1, p2, assign, flat_assign, flat_omega, views, hist, trust, flat_windows, vg, vv,
-                               vw, div, mul, vdiv, sites, view_starts)
+                               vw, factors, vdiv, sites, view_starts, vsum, colour_ids, uid)
                 for v in range(n_views):
                     new_src[t, v] = src[v, p0, p1, p2]
                 if count == 0:
                     continue
                 if balance:
-                    # every view gets the same total say: its votes' weights sum to 1
-                    _view_sums(vv, vw, count, vsum)
+                    # every view gets the same total say: its votes' weights sum to 1 (then the
+                    # sums of the balanced weights)
                     for q in range(count):
                         vw[q] /= vsum[vv[q]]
+                    _view_sums(vv, vw, count, vsum)
                 if not medoid:
                     best = _nearest_to_mean(ex_flat, vg, vw, count, mean)
                 else:
                     # candidates: the votes of the `medoid` heaviest distinct (texel, view), heaviest
                     # first (ties: the earlier vote)
-                    n_try = _top_votes(vg, vv, vw, count, n_views, medoid, tops, top_keys, top_weights)
+                    n_try = _top_votes(vg, vv, vw, count, n_views, medoid, tops, vote_keys, vote_bits)
                     if likelihood:
-                        _view_sums(vv, vw, count, vsum)
+                        # the votes' per-view sums and colour ids came with them (_votes); the
+                        # balanced weights' sums were taken above
                         if tabled:
-                            for q in range(count):
-                                uid[q] = colour_ids[vg[q]]
                             for a in range(n_try):
                                 rows[a] = colour_ids[vg[tops[a]]]
                             _decide.candidate_likelihoods(kernel, rows, n_try, uid, vv, vw, count, vsum, outlier, liks)
