@@ -49,7 +49,7 @@ SYNTH_VALUES = [["synth", *TINY, *extra] for extra in (
     ["missing.png"], ["folder"], ["text.txt"], ["truncated.png"], ["garbage.npy"], ["nan.npy"],
     ["inf.npy"], ["small.png", "--window", "5"], ["complex.npy"], ["four_d.npy"], ["empty.npy"],
     ["bundled:nope"], ["--exemplar-front", "missing.png"], ["--exemplar-top", "truncated.png"],
-    ["--out", ""], ["--out", "afile"], ["--out", "afile/sub"], ["--checkpoint", "folder"],
+    ["--out", ""], ["--out", "/"], ["--out", "afile"], ["--out", "afile/sub"], ["--checkpoint", "folder"],
     ["--checkpoint", "nofolder/c.npz"], ["--checkpoint", "foreign.npz"],
     ["--checkpoint", "garbage.npz"], ["--size", "4096", "--levels", "1"],
     ["--size", "100000", "--levels", "1"], ["sp ace/ünï.png"],

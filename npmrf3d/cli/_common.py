@@ -242,6 +242,10 @@ def output_folder(args: argparse.Namespace, files: tuple[str, ...] = RUN_FILES) 
     if not args.out.strip():
         raise ParameterError("--out must name a folder; got an empty string")
     out = pathlib.Path(args.out)
+    resolved = pathlib.Path(os.path.realpath(out))  # realpath: a link loop is check_out's to refuse
+    if resolved == pathlib.Path(resolved.anchor):
+        raise ParameterError(f"--out '{args.out}' is the root of the file system; name a folder for "
+                             "the run's files")
     if args.overwrite:
         check_replaceable(out)
     check_out(out, args.overwrite, files)
