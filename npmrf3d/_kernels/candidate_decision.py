@@ -136,33 +136,17 @@ def candidate_likelihoods(kernel, rows, n_try, uid, vv, vw, count, vsum, outlier
                 s6 += w * k6[i]
                 s7 += w * k7[i]
                 q += 1
-            if vsum[v] > 0.0:
-                keep = 1.0 - outlier
-                s0 = keep * s0 / vsum[v] + outlier
-                s1 = keep * s1 / vsum[v] + outlier
-                s2 = keep * s2 / vsum[v] + outlier
-                s3 = keep * s3 / vsum[v] + outlier
-                s4 = keep * s4 / vsum[v] + outlier
-                s5 = keep * s5 / vsum[v] + outlier
-                s6 = keep * s6 / vsum[v] + outlier
-                s7 = keep * s7 / vsum[v] + outlier
-            else:
-                s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = outlier
+            # a slot past the last candidate repeats the last one's row and sums: the same value
             out[a, v] = s0
-            if a + 1 < n_try:
-                out[a + 1, v] = s1
-            if a + 2 < n_try:
-                out[a + 2, v] = s2
-            if a + 3 < n_try:
-                out[a + 3, v] = s3
-            if a + 4 < n_try:
-                out[a + 4, v] = s4
-            if a + 5 < n_try:
-                out[a + 5, v] = s5
-            if a + 6 < n_try:
-                out[a + 6, v] = s6
-            if a + 7 < n_try:
-                out[a + 7, v] = s7
+            out[min(a + 1, last), v] = s1
+            out[min(a + 2, last), v] = s2
+            out[min(a + 3, last), v] = s3
+            out[min(a + 4, last), v] = s4
+            out[min(a + 5, last), v] = s5
+            out[min(a + 6, last), v] = s6
+            out[min(a + 7, last), v] = s7
+            for b in range(a, min(a + 8, n_try)):
+                out[b, v] = (1.0 - outlier) * out[b, v] / vsum[v] + outlier if vsum[v] > 0.0 else outlier
 
 
 @jit_inline

@@ -548,27 +548,6 @@ def pca_distances(y, proj, keep, count, out):
         out[i + 6] = s6
         out[i + 7] = s7
         i += 8
-    while i + 4 <= count:
-        e0 = keep[i]
-        e1 = keep[i + 1]
-        e2 = keep[i + 2]
-        e3 = keep[i + 3]
-        s0 = s1 = s2 = s3 = 0.0
-        for j in range(dims):
-            yj = y[j]
-            d0 = yj - proj[e0, j]
-            d1 = yj - proj[e1, j]
-            d2 = yj - proj[e2, j]
-            d3 = yj - proj[e3, j]
-            s0 += d0 * d0
-            s1 += d1 * d1
-            s2 += d2 * d2
-            s3 += d3 * d3
-        out[i] = s0
-        out[i + 1] = s1
-        out[i + 2] = s2
-        out[i + 3] = s3
-        i += 4
     while i < count:
         e = keep[i]
         d2 = 0.0
