@@ -651,7 +651,7 @@ def solve(volume, src, assign, omega, views, hist, trust, rule, order, batch_bou
                         # balanced weights' sums were taken above
                         if tabled:
                             for a in range(n_try):
-                                rows[a] = colour_ids[vg[tops[a]]]
+                                rows[a] = uid[tops[a]]  # the vote's colour id, read by _votes
                             _decide.candidate_likelihoods(kernel, rows, n_try, uid, vv, vw, count, vsum, outlier, liks)
                     best = _score_candidates(ex_flat, vg, vv, vw, count, vsum, tops, n_try, likelihood, ranked, tabled,
                                              h2c, outlier, priors, exp_priors, val_prior, lik, liks, products, prior_of,
