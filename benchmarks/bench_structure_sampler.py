@@ -197,9 +197,9 @@ class Photo:
         layout = {a: s.ratio[a]["pyramid"] / s.floor["pyramid"] for a in AXES}
         grey = slices_of(volume)
         ends = dark_line_ends(np.concatenate(list(grey.values())), self.threshold) / self.ends_a
-        row = {"layout": layout, "layout_mean": float(np.mean(list(layout.values()))), "ends": ends}
-        if constrained is not None:
-            row["layout_mean"] = float(np.mean([layout[a] for a in constrained]))
+        constrained = AXES if constrained is None else constrained
+        row = {"layout": layout, "layout_mean": float(np.mean([layout[a] for a in constrained])), "ends": ends}
+        if constrained != AXES:
             row["free"] = {a: layout[a] for a in AXES if a not in constrained}
         if pooled:
             m = measure(self.a, volume)
@@ -235,8 +235,9 @@ def main() -> None:
     parser.add_argument("--photos", help="comma-separated names instead of --set")
     parser.add_argument("--seeds", default="0,1,2")
     parser.add_argument("--size", type=int, default=64)
-    parser.add_argument("--crop", type=int, default=64, help="exemplar side: 64 (of the photograph halved to 128 x 128) or 128 (of the full "
-                        "256 x 256 photograph: the same content at twice the pixels)")
+    parser.add_argument("--crop", type=int, default=64,
+                        help="exemplar side: 64 (of the photograph halved to 128 x 128) or 128 (of the "
+                             "full 256 x 256 photograph: the same content at twice the pixels)")
     parser.add_argument("--levels", type=int, default=3)
     parser.add_argument("--png", type=Path, help="write exemplar + central slices per run here")
     parser.add_argument("--json", type=Path, help="append every row to this JSON-lines file")
