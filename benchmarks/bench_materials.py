@@ -7,7 +7,9 @@ default; ``chen-wang``; ``kopf``) see its middle slice across axis 0 -- an aniso
 each view its own middle slice -- and ``volume-lh`` sees the crop itself. ``materials`` (by
 ``--methods``) is what ``npmrf3d materials`` runs on those slices: split into phases 0 and 1 by
 the command's own :func:`npmrf3d.cli.materials.segment` at the threshold the benchmark judges by,
-then the default ``npmrf`` on the label image (which runs its segmented preset). Each output (``S^3``)
+then, as :func:`npmrf3d.cli.materials.split_order` chooses, the default ``npmrf`` on the label
+image (which runs its segmented preset) or on the grey slices, whose volume is split at the same
+threshold (``--option materials:split=before`` or ``after`` forces one). Each output (``S^3``)
 and every ``S^3`` crop of the scan (stride ``S/2``, at most ``--max-crops`` spread evenly) is
 judged on the minority phase at the exemplar's threshold (0.5 for a binary scan, Otsu's for a
 grey one):
@@ -60,7 +62,7 @@ import numpy as np
 
 import npmrf3d
 from npmrf3d.analysis import materials
-from npmrf3d.cli.materials import phase_indices, segment
+from npmrf3d.cli.materials import phase_indices, segment, split_order
 from npmrf3d.model.otsu import otsu_threshold
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
@@ -214,16 +216,21 @@ def exemplars_for(crop: np.ndarray, isotropic: bool) -> tuple[np.ndarray, dict]:
     return crop[n][..., None], views
 
 
-def as_phases(exemplar: np.ndarray, views: dict, threshold: float) -> tuple[np.ndarray, dict, np.ndarray]:
+def as_phases(exemplar: np.ndarray, views: dict, threshold: float,
+              split: str = "auto") -> tuple[np.ndarray, dict, np.ndarray, str]:
     """The 2D exemplar and views as ``npmrf3d materials`` hands them to its method: split by
     :func:`npmrf3d.cli.materials.segment` at ``threshold`` (pooled over the slices the method
-    sees) into phases 0 and 1; and the phases' values."""
+    sees) into phases 0 and 1, or left grey when :func:`~npmrf3d.cli.materials.split_order`
+    (``split``) splits after synthesis; the phases' values; and that order."""
     slices = dict(views["exemplars"]) if views else {"exemplar": exemplar}
     labels, values, _ = segment([s[..., 0] for s in slices.values()], threshold=repr(threshold))
+    order, _ = split_order(labels, True, split)
+    if order == "after":
+        return exemplar, views, values, order
     phases = dict(zip(slices, (phase_indices(a, values) for a in labels)))
     if views:
-        return exemplar, {"exemplars": phases}, values
-    return phases["exemplar"], {}, values
+        return exemplar, {"exemplars": phases}, values, order
+    return phases["exemplar"], {}, values, order
 
 
 def synthesize(method: str, crop: np.ndarray, isotropic: bool, size: int, seed: int,
@@ -231,17 +238,20 @@ def synthesize(method: str, crop: np.ndarray, isotropic: bool, size: int, seed: 
     """One method's ``size^3`` volume from ``crop`` (``materials``: the phases' values,
     ``threshold`` its split) and the seconds it took."""
     t0 = time.perf_counter()
-    values = None
+    values = order = None
     if method == "volume-lh":
         exemplar, views = crop[..., None], {}
     else:
         exemplar, views = exemplars_for(crop, isotropic)
     if method == "materials":
-        exemplar, views, values = as_phases(exemplar, views, threshold)
+        options = dict(options)
+        exemplar, views, values, order = as_phases(exemplar, views, threshold, options.pop("split", "auto"))
     result = npmrf3d.synthesize(None if views else exemplar, method="npmrf" if method == "materials" else method,
                                 size=size, rng=seed, **views, **options)
     volume = result.volume[..., 0]
-    if values is not None:  # as the command maps the method's phases back to the input's values
+    if order == "after":  # as the command splits the grey volume at the input's threshold
+        volume = values[(volume > threshold).astype(np.int64)].astype(np.float32)
+    elif values is not None:  # as the command maps the method's phases back to the input's values
         volume = values[np.rint(volume).astype(np.int64)].astype(np.float32)
     return volume, time.perf_counter() - t0
 

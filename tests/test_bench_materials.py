@@ -79,16 +79,20 @@ def test_no_scan_is_refused_in_one_line(bm, tmp_path, capsys):
 
 def test_materials_splits_grey_slices_as_the_command_does(bm):
     slices = [blobs((24, 24, 1), s)[..., 0] for s in (3, 4, 5, 6)]
-    exemplar, views, values = bm.as_phases(slices[0][..., None],
-                                           {"exemplars": {v: s[..., None] for v, s in
-                                                          zip(("front", "right", "top"), slices[1:])}}, 0.45)
-    assert values.tolist() == [0, 1]
-    top = views["exemplars"]["top"]
+    views = {"exemplars": {v: s[..., None] for v, s in zip(("front", "right", "top"), slices[1:])}}
+    exemplar, phases, values, order = bm.as_phases(slices[0][..., None], views, 0.45, "before")
+    assert values.tolist() == [0, 1] and order == "before"
+    top = phases["exemplars"]["top"]
     assert top.dtype == np.float32 and top.shape == (24, 24, 1)
     np.testing.assert_array_equal(top[..., 0], slices[3] > 0.45)
-    alone, none, _ = bm.as_phases(slices[0][..., None], {}, 0.45)
+    alone, none, _, _ = bm.as_phases(slices[0][..., None], {}, 0.45, "before")
     assert none == {} and alone.dtype == np.float32
     np.testing.assert_array_equal(alone[..., 0], slices[0] > 0.45)
+    # a minority phase under the command's cut: the grey slices go to the method as they are
+    high = float(np.quantile(np.concatenate([s.ravel() for s in slices]), 0.9))
+    grey, same, values, order = bm.as_phases(slices[0][..., None], views, high)
+    assert order == "after" and values.tolist() == [0, 1] and same is views
+    np.testing.assert_array_equal(grey[..., 0], slices[0])
 
 
 def test_an_anisotropic_crop_runs_on_its_three_slices(bm):

@@ -35,13 +35,15 @@ def test_a_grey_slice_is_split_at_otsu_and_the_report_holds_its_numbers(tmp_path
     assert set(np.unique(volume)) == {0, 1}
     report = json.loads((out / "materials.json").read_text())
     assert report["input"]["values"] == [0, 1] and "Otsu" in report["input"]["phases"]
+    assert report["input"]["split"] == "before" and "at least 0.3" in report["input"]["split_why"]
     assert report["method"] == "npmrf"
     phase1 = report["phases"][1]
     assert phase1["volume"]["fraction"] == pytest.approx(float((volume == 1).mean()))
     assert phase1["volume"]["percolates"] == materials.percolates(volume[..., 0] == 1)
     assert phase1["input"]["fraction"] == pytest.approx(float((grey > otsu_threshold(grey)).mean()))
     assert phase1["compare"]["fraction"]["words"].startswith("fraction ")
-    assert "materials_two_point.png" in (out / "materials.html").read_text()
+    page = (out / "materials.html").read_text()
+    assert "materials_two_point.png" in page and "before synthesis: minority phase" in page
 
 
 def test_a_three_phase_label_image_keeps_its_three_values_and_dtype(tmp_path):
@@ -150,3 +152,60 @@ def test_colour_one_phase_and_tiny_crops_are_refused(tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and expected[name] in err[0], err
         assert not out.exists()
+
+
+def _minority_slice(seed=4, share=0.15):
+    """A grey uint8 slice whose bright phase (Otsu's) holds about ``share`` of the pixels."""
+    field = _blobs((32, 32), seed=seed)
+    noise = np.random.default_rng(seed).random((32, 32))
+    bright = field > np.quantile(field, 1 - share)
+    return np.where(bright, 170 + 60 * noise, 40 + 60 * noise).astype(np.uint8)
+
+
+def test_a_small_minority_phase_is_split_after_synthesis_as_synth_makes_it(tmp_path):
+    grey = _minority_slice()
+    np.save(tmp_path / "slice.npy", grey)
+    out = tmp_path / "run"
+    assert main(["materials", str(tmp_path / "slice.npy"), *QUICK, "--seed", "3", "--out", str(out)]) == 0
+    report = json.loads((out / "materials.json").read_text())
+    assert report["input"]["split"] == "after" and "under 0.3" in report["input"]["split_why"]
+    assert json.loads((out / "run.json").read_text())["split"]["order"] == "after"
+    volume = np.load(out / "volume.npy")
+    assert volume.dtype == np.uint8 and set(np.unique(volume)) <= {0, 1}
+    # the grey volume synth makes from the same slice and seed, split at the input's threshold
+    assert main(["synth", str(tmp_path / "slice.npy"), *QUICK, "--seed", "3", "--out", str(tmp_path / "synth")]) == 0
+    cut = otsu_threshold(grey)
+    below = grey[grey <= cut].max() / 255.0
+    synth = np.load(tmp_path / "synth" / "volume.npy")
+    np.testing.assert_array_equal(volume, (synth > np.float32(below)).astype(np.uint8))
+    forced = tmp_path / "before"
+    assert main(["materials", str(tmp_path / "slice.npy"), *QUICK, "--seed", "3", "--split", "before",
+                 "--out", str(forced)]) == 0
+    report = json.loads((forced / "materials.json").read_text())
+    assert report["input"]["split"] == "before" and report["input"]["split_why"].startswith("--split before")
+    assert set(np.unique(np.load(forced / "volume.npy"))) <= {0, 1}
+
+
+def test_split_order_follows_the_minority_share():
+    from npmrf3d.cli.materials import SPLIT_AFTER_BELOW, split_order
+    small = [np.zeros((10, 10), np.uint8)]
+    small[0][:2] = 1                                   # 0.2 of the pixels
+    assert SPLIT_AFTER_BELOW == 0.3 and split_order(small, True)[0] == "after"
+    half = [np.tile(np.array([0, 1], np.uint8), (10, 5))]
+    assert split_order(half, True)[0] == "before"
+    assert split_order([1 - small[0]], True)[0] == split_order(small, True)[0]   # either phase the minority
+    assert split_order(small, True, "before")[0] == "before" and split_order(half, True, "after")[0] == "after"
+    assert split_order(small, True, crop=True)[0] == "before" and split_order(small, False)[0] == "before"
+
+
+@pytest.mark.parametrize("name, message", [("labels.npy", "applies to a grey input"),
+                                           ("crop.npy", "a 3D crop is split before")])
+def test_split_after_is_refused_where_nothing_grey_is_split(tmp_path, capsys, name, message):
+    inputs = {"labels.npy": (_blobs((32, 32)) > 0.5).astype(np.uint8) * 3,
+              "crop.npy": (_blobs((20, 20, 20)) * 255).astype(np.uint8)}
+    np.save(tmp_path / name, inputs[name])
+    out = tmp_path / "run"
+    assert main(["materials", str(tmp_path / name), *QUICK, "--split", "after", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0], err
+    assert not out.exists()

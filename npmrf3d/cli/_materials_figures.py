@@ -181,7 +181,9 @@ def write_page(out: pathlib.Path, report: dict, title: str) -> None:
             "<style>body{font-family:sans-serif;max-width:70em;margin:auto}table{border-collapse:collapse}"
             "td,th{border:1px solid #aaa;padding:3px 8px;text-align:left}</style></head><body>"
             f"<h1>{html.escape(title)}</h1><p>Input ({html.escape(report['input']['kind'])}): "
-            f"{html.escape(source)}; phases {html.escape(report['input']['phases'])}, values "
+            f"{html.escape(source)}; phases {html.escape(report['input']['phases'])} "
+            f"({html.escape(report['input']['split'])} synthesis: "
+            f"{html.escape(report['input']['split_why'])}), values "
             f"{html.escape(str(report['input']['values']))} ({html.escape(report['input']['dtype'])}); method "
             f"{html.escape(report['method'])}; diffusivity by {html.escape(report['diffusivity_solver'])}.</p>"
             f"<p><b>{html.escape(report['summary'][0])}</b></p>{''.join(rows)}{figures}</body></html>\n")
