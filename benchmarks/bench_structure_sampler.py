@@ -68,10 +68,11 @@ def _with(**replaced):
     """The default's coherent options (``npmrf._coherent_options``) with ``replaced`` fields,
     run by ``coherent_synthesize`` given only the fields that differ from its own defaults."""
     def run(ex, size, levels, seed):
-        from npmrf3d.methods import npmrf, npmrf_coherent
-        config = npmrf.make_config(size=size, levels=levels)
-        options = npmrf._coherent_options(config, npmrf.segmented(config, {v: ex for v in config.views}),
-                                          replaced.get("levels", levels))
+        from npmrf3d.methods import npmrf, npmrf_coherent, npmrf_options
+        per_view = {v: ex for v in npmrf.make_config(size=size).views}
+        config = npmrf_options.settle(npmrf.make_config(size=size, levels=levels), per_view)
+        options = npmrf._coherent_options(config, npmrf.segmented(config, per_view),
+                                          replaced.get("levels", config.levels))
         options = dataclasses.replace(options, **replaced).to_dict()
         base = npmrf_coherent.DEFAULTS.to_dict()
         fields = {k: v for k, v in options.items() if k not in ("size", "seed") and v != base[k]}
@@ -238,7 +239,8 @@ def main() -> None:
     parser.add_argument("--crop", type=int, default=64,
                         help="exemplar side: 64 (of the photograph halved to 128 x 128) or 128 (of the "
                              "full 256 x 256 photograph: the same content at twice the pixels)")
-    parser.add_argument("--levels", type=int, default=3)
+    parser.add_argument("--levels", type=int, help="pyramid levels (default: the sampler's own, "
+                                                   "from the exemplar's and the volume's size)")
     parser.add_argument("--png", type=Path, help="write exemplar + central slices per run here")
     parser.add_argument("--json", type=Path, help="append every row to this JSON-lines file")
     parser.add_argument("--trace", action="store_true", help="judge every level and the search")
@@ -254,7 +256,7 @@ def main() -> None:
         sets = {"photos": [n.strip() for n in args.photos.split(",")]}
     seeds = [int(s) for s in args.seeds.split(",")]
     print(f"# structure of the sampler's volumes; {hardware()}; {args.size}^3 from "
-          f"{args.crop}x{args.crop}, {args.levels} levels, seeds {seeds}")
+          f"{args.crop}x{args.crop}, {args.levels or 'the default'} levels, seeds {seeds}")
     if args.png:
         args.png.mkdir(parents=True, exist_ok=True)
     for set_name, names in sets.items():

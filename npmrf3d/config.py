@@ -165,8 +165,11 @@ class SynthesisConfig:
     size: tuple[int, int, int] = option(help="output size", kind="own")
     window: int = option(7, "side of each view's square neighbourhood, odd, 3 to 15",
                          kind="int", metavar="W", group="volume and pyramid")
-    levels: int = option(3, "pyramid levels (scales), 1 to 8", kind="int", low=1, high=8,
-                         metavar="L", group="volume and pyramid")
+    # None: decided from the exemplar and the volume (methods.npmrf_options.pyramid_levels)
+    levels: int | None = option(None, "pyramid levels (scales), 1 to 8", kind="int", low=1, high=8,
+                                optional=True, metavar="L", group="volume and pyramid",
+                                decided="3; one more per doubling of both the exemplar and the volume "
+                                        "beyond 64")
     heuristic: str = option("ML_H2b", "how the views' estimates combine: ML_H2b product, ML_H2a minimum, "
                             "ML_H1a/ML_H1b per-view argmax",
                             kind="choice", choices=lambda: _registry("HEURISTICS"))
@@ -344,6 +347,10 @@ class SynthesisMethod:
         can be made alone (:mod:`npmrf3d.model.regions`); ``run`` then takes ``region=`` (a
         :class:`npmrf3d.model.regions.RegionPlan`) and returns that block. None, or a None
         result: the method runs on the whole volume only.
+    settle : callable, optional
+        ``settle(config, per_view_exemplars) -> config``: the configuration with what it leaves to
+        the exemplars decided (the NP-MRF sampler's levels), applied once the exemplars are
+        loaded and before anything reads the configuration further. None: nothing to decide.
     """
 
     name: str
@@ -356,3 +363,4 @@ class SynthesisMethod:
     resources: Callable[[Any, dict], Any] | None = None
     unavailable: Callable[[], str | None] | None = None
     aprons: Callable[[Any, Any], Any] | None = None
+    settle: Callable[[Any, Any], Any] | None = None

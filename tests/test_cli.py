@@ -78,7 +78,7 @@ def test_synth_help_lists_every_option_with_its_default(capsys):
         assert action.help and action.help.strip()
         if action.option_strings != ["-h", "--help"]:
             assert "default" in action.help or action.default is not None or action.default is False
-    for expected in ("(default: 7)", "(default: 64)", "(default: 3)", "(default: ML_H2b)",
+    for expected in ("(default: 7)", "(default: 64)", "(default: 3; one more per doubling", "(default: ML_H2b)",
                      "(default: icm)", "(default: -1; support full: -3)", "(default: 0.95)", "(default: 30)",
                      "support full with icm: 1/8", "(default: resynth)", "(default: front,right,top)",
                      "(default: coherent)", "(default: 0)", "(default: npmrf3d-synth-out)",

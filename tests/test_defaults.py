@@ -209,6 +209,33 @@ def test_the_default_site_spacing_follows_the_run():
     assert coherent_grid(make_config(size=64, grid=2), True, 3) == 2
 
 
+def test_the_default_levels_follow_the_exemplar_and_the_volume():
+    """3 levels up to 64 pixels and voxels; one more for each doubling of both the exemplar's and
+    the volume's smallest side while every side halves evenly; levels given are kept; the public
+    functions' preparation settles them."""
+    import numpy as np
+
+    from npmrf3d.methods._api import prepare
+    from npmrf3d.methods.npmrf import METHOD
+    from npmrf3d.methods.npmrf_options import BASE_LEVELS, pyramid_levels, settle
+
+    assert SynthesisConfig.levels is None and BASE_LEVELS == 3
+    assert [pyramid_levels((n,) * 3, side) for n, side in ((64, 64), (128, 64), (64, 128), (128, 128),
+                                                           (256, 256), (256, 128), (1024, 1024))] == [3, 3, 3, 4, 5, 4, 7]
+    assert pyramid_levels((128, 128, 96), 256) == 3 and pyramid_levels((132,) * 3, 256) == 3  # 96 < 128; 132 / 8 is odd
+    rng = np.random.default_rng(0)
+    big, small = rng.random((128, 130)), rng.random((64, 64))
+    unsettled = make_config(size=128)
+    assert unsettled.levels is None
+    assert settle(unsettled, {"front": big, "right": big, "top": big}).levels == 4
+    assert settle(unsettled, {"front": big, "right": small, "top": big}).levels == 3  # the smallest exemplar
+    assert settle(make_config(size=128, levels=2), {"front": big}).levels == 2
+    config, _, _ = prepare(METHOD, big, None, size=128, rng=0, options={}, memory=False)
+    assert config.levels == 4
+    config, _, _ = prepare(METHOD, big, None, size=64, rng=0, options={}, memory=False)
+    assert config.levels == 3
+
+
 @pytest.mark.parametrize("name", ["npmrf", "kopf", "chen-wang", "coherent", "volume-lh", "npmrf-3d"])
 @pytest.mark.parametrize("keyword, value, words", [("progress", 5, "progress must be a callable"),
                                                    ("checkpoint", 5, "checkpoint must be a file path")])

@@ -320,6 +320,6 @@ def test_a_planted_contradiction_is_caught(tmp_path):
     table = ("| option | default | meaning |\n| --- | --- | --- |\n| `--window` | 9 | w |\n"
              "| `--sampler` | `metropolis` with `full`, `metropolis` with `coherent` | s |\n")
     assert len(default_errors(table, ("synth",))) == 2
-    assert default_errors("`--levels L` (default 4)", ("synth",)) != []
-    assert default_errors("`--levels L` (default 3)", ("synth",)) == []
+    assert default_errors("`--window W` (default 9)", ("synth",)) != []
+    assert default_errors("`--window W` (default 7)", ("synth",)) == []
     assert by_support_errors("--xi", "-3 with `full`, -1 with `coherent`") == []

@@ -26,6 +26,7 @@ from ..io.runs import (
     write_run,
 )
 from ..methods import check_resources, estimate
+from ..methods._api import settled
 from ..model.exemplar import exemplar_source, resolve_exemplars
 from ..model.neighbourhood import VIEWS
 from ..resources import available_memory, format_bytes
@@ -315,17 +316,19 @@ def view_sources(args: argparse.Namespace):
 def prepare_run(args: argparse.Namespace, method, config, *, whole: bool = True):
     """Checks and inputs shared by every command that runs a method of the registry, in the
     order that keeps user errors ahead of any work: the ``--out`` folder, the ``--checkpoint``,
-    the exemplars, and (``whole``: the volume made at once) the memory. Returns (out,
-    checkpoint, per-view exemplars, per-view names for run.json)."""
+    the exemplars, and (``whole``: the volume made at once) the memory. Returns (the
+    configuration settled on the exemplars, out, checkpoint, per-view exemplars, per-view names
+    for run.json)."""
     out = output_folder(args, RUN_FILES if whole else ())  # a Zarr volume checks its own identity
     checkpoint = pathlib.Path(args.checkpoint) if getattr(args, "checkpoint", None) is not None else None
     check_checkpoint(checkpoint, out)
     exemplar, per_view_sources, source_names = view_sources(args)
     per_view = resolve_exemplars(exemplar, per_view_sources, config.views, **method.fit(config),
                                  exemplar_kind=getattr(args, "exemplar_kind", "auto"))
+    config = settled(method, config, per_view)
     if whole and not getattr(args, "dry_run", False):
         check_resources(method, config, per_view, hint=_RESOURCE_HINT)
-    return out, checkpoint, per_view, source_names(config.views)
+    return config, out, checkpoint, per_view, source_names(config.views)
 
 
 _RESOURCE_HINT = ("lower --size (or --levels, the exemplar size), or make it in blocks with --out VOL.zarr; "

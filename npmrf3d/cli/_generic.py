@@ -142,7 +142,7 @@ def add_method_parser(commands, name: str, method, *, help: str, description: st
         # messages name library parameters; npmrf3d.cli.main turns them into these options
         config = method.make_config(size=parse_size(args.size), views=args.views, seed=args.seed, **options)
         refuse_written(args, config)
-        out_dir, checkpoint, per_view, sources = prepare_run(args, method, config, whole=not zarr_output(args))
+        config, out_dir, checkpoint, per_view, sources = prepare_run(args, method, config, whole=not zarr_output(args))
         if refuse is not None:
             refuse(args, config, per_view)
         title = f"{method.description.split(':')[0]}, {config.levels} levels, seed {config.seed}"

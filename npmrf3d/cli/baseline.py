@@ -179,7 +179,7 @@ def _run(args: argparse.Namespace, argv: list[str]) -> int:
         **{**config_options(args, KopfConfig), "iterations": _parse_iterations(args.iterations),
            "mean_shift": _parse_mean_shift(args.mean_shift)})
     refuse_written(args, config)
-    out, checkpoint, per_view, sources = prepare_run(args, METHOD, config, whole=not zarr_output(args))
+    config, out, checkpoint, per_view, sources = prepare_run(args, METHOD, config, whole=not zarr_output(args))
     if constraint is not None:  # its checks, before the work (the method repeats them)
         channels = next(iter(per_view.values())).shape[2]
         constraint_arrays(constraint, weight, config.size, channels)

@@ -39,6 +39,7 @@ from ..errors import ParameterError
 from ..io.files import read_stack, write_json, write_npy
 from ..io.runs import RUN_FILES
 from ..methods import check_resources, get_method
+from ..methods._api import settled
 from ..methods.npmrf_coherent import SEGMENTED_MAX_VALUES
 from ..model.exemplar import exemplar_source, resolve_exemplars
 from ..model.exemplar3d import MIN_VOLUME_SIDE, interpret, load_volume_exemplar, volume_fits
@@ -299,6 +300,7 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
         shared = {id(a): a if order == "after" else phase_indices(a, values) for a in given_views.values()}
         per_view = resolve_exemplars(None, {v: shared[id(a)] for v, a in given_views.items()}, config.views,
                                      **method.fit(config))
+        config = settled(method, config, per_view)
     out = output_folder(args, RUN_FILES + MATERIALS_FILES)
     checkpoint = None if args.checkpoint is None else pathlib.Path(args.checkpoint)
     check_checkpoint(checkpoint, out)

@@ -94,7 +94,7 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
                                 variant=args.variant, **{**config_options(args, SynthesisConfig),
                                                          "blockwise": blockwise_requested(args)})
     refuse_written(args, config)
-    out, checkpoint, per_view, sources = prepare_run(args, METHOD, config, whole=not zarr_output(args))
+    config, out, checkpoint, per_view, sources = prepare_run(args, METHOD, config, whole=not zarr_output(args))
 
     _check_segmented_window(args, config, per_view)
     if zarr_output(args):

@@ -26,7 +26,7 @@ from ..config import SynthesisMethod
 from ..model.exemplar import resolve_exemplars
 from ..resources import check_memory, generic_estimate
 
-__all__ = ["option_names", "prepare", "seed_of"]
+__all__ = ["option_names", "prepare", "seed_of", "settled"]
 
 
 def seed_of(rng) -> int | None:
@@ -40,12 +40,18 @@ def option_names(method: SynthesisMethod) -> tuple[str, ...]:
     return tuple(name for name in params if name not in ("size", "seed"))
 
 
+def settled(method: SynthesisMethod, config, per_view: Mapping[str, np.ndarray]):
+    """``config`` with what it leaves to the exemplars decided (the method's ``settle``)."""
+    return config if method.settle is None else method.settle(config, per_view)
+
+
 def prepare(method: SynthesisMethod, exemplar, exemplars: Mapping | None, *, size, rng,
             options: Mapping[str, Any],
             load: Callable[..., dict] | None = None,
             memory: bool = True, progress=None,
             checkpoint=None) -> tuple[Any, np.random.Generator, dict]:
-    """``(config, generator, per_view)`` of a call of ``method``'s public function.
+    """``(config, generator, per_view)`` of a call of ``method``'s public function (the
+    configuration settled on the exemplars, :func:`settled`).
 
     ``load(exemplar, exemplars, config)`` reads the exemplars (default: one 2D exemplar per
     constrained view, checked against the method's ``fit``). ``memory=False`` leaves out the
@@ -69,6 +75,7 @@ def prepare(method: SynthesisMethod, exemplar, exemplars: Mapping | None, *, siz
                                      levels=fit["levels"], toroidal=fit.get("toroidal", False))
     else:
         per_view = load(exemplar, exemplars, config)
+    config = settled(method, config, per_view)
     if memory:
         check_memory((method.resources or generic_estimate)(config, per_view))
     return config, generator, per_view

@@ -38,6 +38,7 @@ from ..model.pyramid import level_shape
 from ..model.regions import RegionPlan, plan_region
 from ..resources import Estimate, available_memory, check_memory, format_bytes, format_seconds
 from . import METHODS
+from ._api import settled
 
 __all__ = ["BlockPlan", "block_plan", "blockwise_method", "make_block", "run_identity", "shared_exemplars",
            "synthesize_blocks", "write_zarr", "zarr_attrs"]
@@ -62,6 +63,7 @@ def make_block(method: SynthesisMethod, per_view: Mapping[str, np.ndarray], conf
     if config.seed is None:
         raise ValueError("a block needs the run's seed")
     per_view = shared_exemplars(per_view)
+    config = settled(method, config, per_view)
     plan = plan_region(config.size, config.levels, blockwise_method(method, config, per_view), origin, shape,
                        start=start)
     return method.run(per_view, config, np.random.default_rng(config.seed), region=plan).volume
@@ -69,7 +71,8 @@ def make_block(method: SynthesisMethod, per_view: Mapping[str, np.ndarray], conf
 
 def run_identity(method: SynthesisMethod, config, per_view) -> str:
     """What makes a Zarr volume this run's and no other's (JSON): the method, its configuration
-    (seed included) and each view's exemplar digest."""
+    (seed included, settled on the exemplars) and each view's exemplar digest."""
+    config = settled(method, config, per_view)
     return json.dumps({"method": method.name, "config": config.to_dict(),
                        "exemplars": {v: exemplar_digest(a) for v, a in per_view.items()}}, sort_keys=True, default=str)
 
@@ -150,6 +153,7 @@ def block_plan(method: SynthesisMethod, per_view, config, *, block: int) -> Bloc
     method's estimate at the cone's finest region, the voxels of all cones against the
     pyramid's, and the whole run's time (the method's estimate of the volume made at once,
     times that share)."""
+    config = settled(method, config, per_view)
     size = tuple(config.size)
     block = clamp_block(block, size)
     aprons = blockwise_method(method, config, per_view)

@@ -24,7 +24,7 @@ from ..options import shared
 from ..resources import coherent_estimate, npmrf_estimate, one_after_another
 from . import npmrf_coherent
 from ._api import prepare
-from .npmrf_options import coherent_grid, make_config
+from .npmrf_options import BASE_LEVELS, coherent_grid, make_config, settle
 
 __all__ = ["METHOD", "make_config", "npmrf_method", "npmrf_synthesize", "run"]
 
@@ -261,8 +261,10 @@ def npmrf_method(per_view: dict[str, np.ndarray], config: SynthesisConfig, rng: 
     ``t_start`` (optional, every method accepts it): ``time.perf_counter()`` when the caller
     started, so that ``timings["setup"]`` includes loading the exemplars. ``region`` (a
     ``blockwise`` configuration): one block from its dependency cone
-    (:mod:`npmrf3d.methods.blocks`).
+    (:mod:`npmrf3d.methods.blocks`). A configuration that leaves its levels to the run is
+    settled on ``per_view`` first (:func:`npmrf3d.methods.npmrf_options.settle`).
     """
+    config = settle(config, per_view)
     if config.support == "coherent":
         return _run_coherent(per_view, config, rng, progress=progress, checkpoint=checkpoint,
                              t_start=t_start, region=region)
@@ -346,9 +348,10 @@ def _run_coherent(per_view, config: SynthesisConfig, rng, *, progress, checkpoin
 METHOD = SynthesisMethod(
     name="npmrf", run=npmrf_method, make_config=make_config, config_class=SynthesisConfig,
     synthesize=npmrf_synthesize,
-    fit=lambda c: {"window": c.window, "levels": c.levels, "toroidal": c.toroidal_exemplar},
+    fit=lambda c: {"window": c.window, "levels": c.levels or BASE_LEVELS, "toroidal": c.toroidal_exemplar},
     resources=npmrf_resources,
     aprons=npmrf_aprons,
+    settle=settle,
     description="the NP-MRF sampler (Urs, Da Costa and Germain 2014): Parzen LCPDFs of three 2D views, "
                 "four heuristics, ICM or annealing",
 )

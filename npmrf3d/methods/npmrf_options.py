@@ -31,8 +31,8 @@ from ..model.kcoherence_icm import IcmSchedule
 from ..model.neighbourhood import VIEWS
 from ..options import made_from, options_of, validate
 
-__all__ = ["APPLIES", "BY_SUPPORT", "DEFAULT_SAMPLER", "DEFAULT_UPSAMPLE", "DEFAULT_XI", "applies", "combination",
-           "make_config"]
+__all__ = ["APPLIES", "BASE_LEVELS", "BY_SUPPORT", "DEFAULT_SAMPLER", "DEFAULT_UPSAMPLE", "DEFAULT_XI", "applies", "combination",
+           "make_config", "pyramid_levels", "settle"]
 
 #: Up-sampling used when none is asked for: the paper's choice for each relaxation.
 DEFAULT_UPSAMPLE = {"icm": "1/8", "anneal": "8/8"}
@@ -63,6 +63,41 @@ def coherent_grid(config: SynthesisConfig, segmented: bool, levels: int) -> int:
     if segmented or not fits_grid(config.size, levels, SPARSE_GRID):
         return 1
     return SPARSE_GRID
+
+
+#: The pyramid's depth when none is asked for, for exemplars and volumes up to :data:`BASE_SIDE`
+#: wide: the exemplar's coarsest level is then 16 to 31 pixels (docs/quality.md, "Larger
+#: exemplars: the pyramid's depth").
+BASE_LEVELS = 3
+#: Each doubling of both the exemplar's and the volume's smallest side beyond this adds a level,
+#: so that the coarsest exemplar level stays 16 to 31 pixels wide and its window spans as much of
+#: a structural unit as on a 64-pixel exemplar: at 128^3 from 128-pixel photographs, 4 levels
+#: keep block walls' courses better than 3 (docs/quality.md).
+BASE_SIDE = 64
+
+
+def pyramid_levels(size, exemplar_side: int) -> int:
+    """The levels of a run that asks for none: :data:`BASE_LEVELS`, and one more for each
+    doubling of both ``exemplar_side`` (the smallest side of the exemplars) and the volume's
+    smallest side beyond :data:`BASE_SIDE`, while every side of ``size`` halves evenly (at most 8).
+
+    >>> pyramid_levels((64, 64, 64), 128), pyramid_levels((128,) * 3, 128), pyramid_levels((256,) * 3, 200)
+    (3, 4, 4)
+    """
+    levels = BASE_LEVELS
+    while (levels < 8 and min(exemplar_side, *size) >= BASE_SIDE * 2 ** (levels - BASE_LEVELS + 1)
+           and all(n % 2 ** levels == 0 for n in size)):
+        levels += 1
+    return levels
+
+
+def settle(config: SynthesisConfig, per_view) -> SynthesisConfig:
+    """``config`` with the levels it leaves to the run (None) decided from the exemplars
+    ``per_view`` (:func:`pyramid_levels`); a configuration that names its levels, as it is."""
+    if config.levels is not None:
+        return config
+    side = min(min(a.shape[:2]) for a in per_view.values())
+    return dataclasses.replace(config, levels=pyramid_levels(config.size, side))
 
 
 #: The options whose default depends on the support (None in :func:`make_config` means "the
@@ -216,11 +251,12 @@ def make_config(values: dict) -> SynthesisConfig:
     """
     levels = validate(_C, "levels", values["levels"])
     window = check.window(values["window"])
+    size = check.size(values["size"], levels=BASE_LEVELS if levels is None else levels, window=window)
     heuristic = get_heuristic(values["heuristic"]).name
     relaxation = validate(_C, "relaxation", values["relaxation"])
     variant, raw = values.pop("variant"), dict(values)
     support, preset = _support_and_preset(variant, values["support"], values["preset"])
-    own = {"levels": levels, "window": window, "size": check.size(values["size"], levels=levels, window=window),
+    own = {"levels": levels, "window": window, "size": size,
            "heuristic": heuristic, "relaxation": relaxation, "views": check.views(values["views"], VIEWS),
            "support": support, "preset": preset,
            "seed": None if values["seed"] is None else check.integer("seed", values["seed"], low=0)}
