@@ -45,8 +45,11 @@ def npmrf_synthesize(exemplar=None, *, size=DEFAULT_SIZE, rng=None, progress: Pr
         Output size, divisible by ``2**(levels - 1)``.
     window : odd int in [3, 15]
         Side of each view's square neighbourhood.
-    levels : int
-        Number of pyramid levels (the paper's "scales").
+    levels : int or None
+        Number of pyramid levels (the paper's "scales"). None (the default): 3, and one more for
+        each doubling of both the exemplars' and the volume's smallest side beyond 64
+        (:func:`npmrf3d.methods.npmrf_options.pyramid_levels`); the result's ``config`` holds
+        the count that ran.
     support : {"coherent", "full"} or None
         Which exemplar neighbourhoods each view's Parzen estimate sums over (docs/model.md,
         section 8). ``coherent`` (None, the default, chosen by measurement: docs/quality.md):
