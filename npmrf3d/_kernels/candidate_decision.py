@@ -197,8 +197,23 @@ def highest_objective(products, n_try, liks, likelihood, prior_of, first):
         cut = products[top] * (1.0 - NEAR_TIE)
     best = first
     best_e = np.inf
+    n_views = liks.shape[1]
     for a in range(n_try):
         if products[a] >= cut:
+            # an earlier candidate with the same estimates and prior has the same score, which a
+            # later one does not beat (ties go to the first): not computed again
+            repeat = False
+            for b in range(a):
+                if products[b] >= cut and prior_of[b] == prior_of[a]:
+                    same = True
+                    for v in range(n_views):
+                        if liks[b, v] != liks[a, v]:
+                            same = False
+                    if same:
+                        repeat = True
+                        break
+            if repeat:
+                continue
             score = objective(liks[a], likelihood, prior_of[a])
             if -score < best_e:
                 best_e = -score
