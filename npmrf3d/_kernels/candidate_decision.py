@@ -197,8 +197,23 @@ def highest_objective(products, n_try, liks, likelihood, prior_of, first):
         cut = products[top] * (1.0 - NEAR_TIE)
     best = first
     best_e = np.inf
+    n_views = liks.shape[1]
     for a in range(n_try):
         if products[a] >= cut:
+            # an earlier candidate with the same estimates and prior has the same score, which a
+            # later one does not beat (ties go to the first): not computed again
+            repeat = False
+            for b in range(a):
+                if products[b] >= cut and prior_of[b] == prior_of[a]:
+                    same = True
+                    for v in range(n_views):
+                        if liks[b, v] != liks[a, v]:
+                            same = False
+                    if same:
+                        repeat = True
+                        break
+            if repeat:
+                continue
             score = objective(liks[a], likelihood, prior_of[a])
             if -score < best_e:
                 best_e = -score
@@ -311,7 +326,8 @@ def winner_sources(winners, tops, vg, vv, view_starts, ex_flat, ex_off, new_src_
 def nearest_in(lo, hi, g, vg, ex_flat):
     """Of the votes ``lo .. hi - 1`` (one view's stretch: the solver enumerates the votes view
     by view), the one whose texel is nearest in colour to texel ``g`` (first on ties), -1 for
-    an empty stretch. A vote of distance 0 ends the search: no later one is nearer."""
+    an empty stretch. Every vote is compared, the nearest so far kept by selections rather
+    than branches (which the distances' order would mispredict)."""
     near = -1
     near_d = np.inf
     for q in range(lo, hi):
@@ -319,11 +335,9 @@ def nearest_in(lo, hi, g, vg, ex_flat):
         for ch in range(ex_flat.shape[1]):
             diff = ex_flat[vg[q], ch] - ex_flat[g, ch]
             dd += diff * diff
-        if dd < near_d:
-            near_d = dd
-            near = q
-            if dd == 0.0:
-                break
+        nearer = dd < near_d
+        near = q if nearer else near
+        near_d = dd if nearer else near_d
     return near
 
 

@@ -299,30 +299,33 @@ def _top_votes(vg, vv, vw, count, n_views, most, tops, keys, bits):
 
     In rounds, each taking the first of the heaviest votes left and dropping every vote of its
     (texel, view): that vote is its (texel, view)'s representative, and the rounds take them
-    heaviest first, the earlier on ties. The weights are positive, so their float64 bits
+    heaviest first, the earlier on ties; a round's drop and the next round's heaviest are one
+    pass over the votes. The weights are positive, so their float64 bits
     (``bits``, scratch of ``count`` int64, -1 once dropped) order as the weights do: the rounds
     compare integers, in loops without data-dependent branches. ``keys`` (scratch of ``count``)
     holds every vote's ``texel * n_views + view``."""
     weight_bits = vw.view(np.int64)
+    top = np.int64(-1)
     for q in range(count):
         keys[q] = vg[q] * n_views + vv[q]
         bits[q] = weight_bits[q]
+        top = max(top, bits[q])
     n = 0
-    while n < most:
-        top = np.int64(-1)
-        for q in range(count):
-            top = max(top, bits[q])
-        if top < 0:
-            break
+    while n < most and top >= 0:
         pick = 0
         while bits[pick] != top:
             pick += 1
         tops[n] = pick
         n += 1
+        if n == most:
+            break
+        # drop the pick's (texel, view) and find the next round's heaviest in the same pass
         key = keys[pick]
+        top = np.int64(-1)
         for q in range(count):
-            if keys[q] == key:
-                bits[q] = -1
+            b = bits[q] if keys[q] != key else np.int64(-1)
+            bits[q] = b
+            top = max(top, b)
     return n
 
 
