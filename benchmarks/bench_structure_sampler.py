@@ -104,6 +104,9 @@ add_variant("coarse9-mid9", window=(9, 9, 7))
 add_variant("k1", k=1)
 add_variant("k2", k=2)
 add_variant("random0", random_candidates=0)
+#: every site searched and voting (the default's sparse sites: every 2nd voxel)
+add_variant("grid1", grid=1)
+add_variant("grid1-feat-dark-1", grid=1, feature_weight=1.0)
 #: two constrained views (docs/views.md): front and top share the exemplar's row axis, so an
 #: exemplar whose rows and columns differ asks for a structure that exists; the right view is free
 add_variant("views-front-top", views=("front", "top"))
