@@ -236,6 +236,14 @@ def test_the_default_levels_follow_the_exemplar_and_the_volume():
     assert config.levels == 3
 
 
+@pytest.mark.parametrize("size, levels", [(128, 4), (64, 3)])
+def test_the_dry_run_names_the_settled_levels(capsys, tmp_path, size, levels):
+    from npmrf3d import cli
+
+    assert cli.main(["synth", "bundled:brick", "--size", str(size), "--dry-run", "--out", str(tmp_path / "o")]) == 0
+    assert f"npmrf {size}x{size}x{size}, {levels} levels: needs about" in capsys.readouterr().out
+
+
 @pytest.mark.parametrize("name", ["npmrf", "kopf", "chen-wang", "coherent", "volume-lh", "npmrf-3d"])
 @pytest.mark.parametrize("keyword, value, words", [("progress", 5, "progress must be a callable"),
                                                    ("checkpoint", 5, "checkpoint must be a file path")])

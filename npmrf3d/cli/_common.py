@@ -360,7 +360,8 @@ def dry_run(method, config, per_view: dict) -> int:
     needed = estimate(method, config, per_view)
     available = available_memory()
     size = "x".join(str(n) for n in config.size)
-    say(f"{method.name} {size}: {needed.describe()}")
+    levels = getattr(config, "levels", None)  # the settled pyramid, where the method has one
+    say(f"{method.name} {size}{'' if levels is None else f', {levels} levels'}: {needed.describe()}")
     if available is not None:
         fits = "fits" if needed.bytes <= available else "does NOT fit"
         say(f"available memory: {format_bytes(available)} (the run {fits})")
