@@ -69,8 +69,9 @@ def _with(**replaced):
     run by ``coherent_synthesize`` given only the fields that differ from its own defaults."""
     def run(ex, size, levels, seed):
         from npmrf3d.methods import npmrf, npmrf_coherent, npmrf_options
-        per_view = {v: ex for v in npmrf.make_config(size=size).views}
-        config = npmrf_options.settle(npmrf.make_config(size=size, levels=levels), per_view)
+        config = npmrf.make_config(size=size, levels=levels)
+        per_view = {v: ex for v in config.views}
+        config = npmrf_options.settle(config, per_view)
         options = npmrf._coherent_options(config, npmrf.segmented(config, per_view),
                                           replaced.get("levels", config.levels))
         options = dataclasses.replace(options, **replaced).to_dict()

@@ -285,7 +285,8 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
     labels = {k: by_id[id(a)] for k, a in raw.items()}
     _each_slice_shows_phases(labels, sources, len(values))
     crop = list(raw) == ["volume"]
-    order, why = split_order(segmented, not how.startswith("labels kept"), args.split, crop=crop)
+    grey_split = not how.startswith("labels kept")  # segment() split grey values into two phases
+    order, why = split_order(segmented, grey_split, args.split, crop=crop)
     if crop:
         method, config = CROP_METHOD, _crop_config(args)
         per_view = {"volume": load_volume_exemplar(phase_indices(labels["volume"], values), exemplar_kind="volume")}
@@ -307,7 +308,7 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
     if args.dry_run:
         return dry_run(method, config, per_view)
     check_resources(method, config, per_view, hint="lower --size; --dry-run shows the estimate")
-    if not args.quiet and not how.startswith("labels kept"):
+    if not args.quiet and grey_split:
         say(f"{how}, {order} synthesis: {why}", error=True)
     with claim_output(out, args.overwrite):
         result = run_method(args, method, config, per_view, checkpoint=checkpoint, t_start=t_start,
