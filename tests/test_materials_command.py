@@ -162,11 +162,12 @@ def _minority_slice(seed=4, share=0.15):
     return np.where(bright, 170 + 60 * noise, 40 + 60 * noise).astype(np.uint8)
 
 
-def test_a_small_minority_phase_is_split_after_synthesis_as_synth_makes_it(tmp_path):
+def test_a_small_minority_phase_is_split_after_synthesis_as_synth_makes_it(tmp_path, capsys):
     grey = _minority_slice()
     np.save(tmp_path / "slice.npy", grey)
     out = tmp_path / "run"
-    assert main(["materials", str(tmp_path / "slice.npy"), *QUICK, "--seed", "3", "--out", str(out)]) == 0
+    assert main(["materials", str(tmp_path / "slice.npy"), *QUICK[:-1], "--seed", "3", "--out", str(out)]) == 0
+    assert ", 2 labels, " in capsys.readouterr().out  # the phases, not the grey levels synthesised
     report = json.loads((out / "materials.json").read_text())
     assert report["input"]["split"] == "after" and "under 0.3" in report["input"]["split_why"]
     assert json.loads((out / "run.json").read_text())["split"]["order"] == "after"

@@ -331,8 +331,9 @@ def run(args: argparse.Namespace, argv: list[str]) -> int:
         title = f"npmrf3d materials: {method.name}, {len(values)} phases, seed {config.seed}"
         shown = {"input slice" if crop else v: (a[a.shape[0] // 2] if crop else a).astype(np.float32)[..., None]
                  for v, a in labels.items()}
-        write_result(out, args, argv, "materials", dataclasses.replace(
-            result, volume=volume.astype(np.float32)[..., None]), shown, sources, title, method=method.name,
+        written = dataclasses.replace(result, volume=volume.astype(np.float32)[..., None],
+                                      labels=values.astype(np.float32).reshape(-1, 1))  # the phases, not grey levels
+        write_result(out, args, argv, "materials", written, shown, sources, title, method=method.name,
             labels=len(values), split={"order": order, "why": why})
         write_npy(out / "volume.npy", volume[..., None])
         write_figures(out, report, volume, labels)
