@@ -305,6 +305,10 @@ def test_bundled_exemplars():
         assert image.shape == shape and image.dtype == np.uint8
     gravel = io.read_array(data.path("gravel"))
     np.testing.assert_array_equal(io.read_array(data.path("gravel64")), gravel[:64, :64])
+    # the scan slices cross the 48^3 crop of the same scan at its voxel 24 (the scan's 64)
+    crop = io.read_array(data.path("fibres48"))
+    for view, cut in {"front": crop[:, :, 24], "right": crop[24], "top": crop[:, 24]}.items():
+        np.testing.assert_array_equal(io.read_array(data.path(f"polymer_{view}"))[40:88, 40:88], cut)
 
 
 def test_unknown_bundled_name():

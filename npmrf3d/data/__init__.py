@@ -14,6 +14,9 @@ name                shape          content (scikit-image source)
 ``microaneurysms``  96 x 96        retina with vessels and lesions (``microaneurysms``)
 ``phase_bands``     128 x 128      banded phase-image background (``cell``)
 ``pompeii_coins``   128 x 128      coins on a tray (``coins``)
+``polymer_front``   128 x 128      micro-CT slices of short fibres in a polymer
+``polymer_right``   128 x 128      matrix, one per view (the middle slices of
+``polymer_top``     128 x 128      quanfima's 128^3 scan, MIT; not scikit-image)
 ``retina_vessels``  128 x 128 x 3  fundus photograph, vessels (``retina``)
 ``rocket_truss``    80 x 80 x 3    launch-tower truss (``rocket``)
 ``stripes``         80 x 80 x 3    flag stripes (``astronaut``)
@@ -21,7 +24,8 @@ name                shape          content (scikit-image source)
 ``wood``            128 x 128 x 3  wooden table grain (``coffee``)
 ==================  =============  ==============================================
 
-8-bit grey or RGB PNGs. One 3D exemplar, for the methods that take a volume
+8-bit grey or RGB PNGs; the three ``polymer_*`` slices are the inputs of ``npmrf3d materials
+--slices`` (docs/materials.md). One 3D exemplar, for the methods that take a volume
 (``npmrf3d volume bundled:fibres48``):
 
 ==================  =============  ==============================================
