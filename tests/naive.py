@@ -985,6 +985,15 @@ def naive_relative_weights(dist, d_min, inv, lowest):
     return out
 
 
+def naive_label_weights(dist, label_starts, inv, prune):
+    """``W_j = sum_{p in label j} exp(lw_p)`` (float64) over the patches kept by pruning, with
+    ``lw_p`` the float32 log weight ``(D_min - D_p) inv`` the kernel forms (kept: ``lw_p >=
+    max(-prune, -87)``)."""
+    dist = np.asarray(dist, dtype=np.float32)
+    w = naive_relative_weights(dist, float(dist.min()), inv, -prune)
+    return np.array([w[label_starts[j]:label_starts[j + 1]].sum() for j in range(len(label_starts) - 1)])
+
+
 # --------------------------------------------------------------------------- repetition
 
 

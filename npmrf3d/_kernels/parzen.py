@@ -26,7 +26,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._jit import jit, jit_contract
-from .vecmath import WEIGHT_LOG_MIN, relative_weights
+from .vecmath import WEIGHT_LOG_MIN, relative_weight, relative_weights
 
 
 class LcpdfOptions(NamedTuple):
@@ -146,28 +146,30 @@ def smallest_distance(dist, n, cell):
     return np.float64(cell[0])
 
 
+#: Distances per chunk of :func:`kept_label_weights`' scan: a chunk whose smallest distance lies
+#: beyond the pruning bound is passed over whole.
+SCAN = 32
+#: :func:`kept_label_weights` hands over to :func:`all_label_weights` when more than this share
+#: of the chunks may hold a kept patch (one by one, a kept patch costs several times what it
+#: costs in the vectorised pass over all patches; measured on the Figure-4 job's distances).
+KEPT_CHUNKS_MAX = 0.125
+
+
 @jit
-def label_weights(dist, n_patches, label_starts, inv_two_h2, adapt_eps, min_two_h2, prune,
-                  log_norm_const, weights, nonzero, log_weights, wbuf):
-    """Patch weights summed per centre label, and the log normaliser ``log sum_j W_j c_j``.
-
-    ``W_j = sum_{p: y_p = j} exp(-(D_p - D_min) / (2 h^2))`` (patches more than ``prune`` below
-    the best skipped) goes to ``weights[j]`` for the ``n_nz`` labels listed in ``nonzero``
-    (in label order), ``log W_j`` to ``log_weights[:n_nz]``. Returns ``(n_nz, log_z)``; the
-    caller must reset ``weights`` at the listed labels to 0. The distances must be >= 0, the
-    patches grouped by label (``label_starts`` (K + 1,), :class:`npmrf3d._kernels.relax.
-    ViewModels`).
-
-    The weights come from the vectorised float32 ``exp`` of
-    :func:`npmrf3d._kernels.vecmath.relative_weights`, which also applies the pruning (in
-    float32); each label's range is then summed in float64 (four partial sums). Kept log
-    weights below that ``exp``'s range (only with ``prune > 87``) come from ``math.exp``.
-    ``wbuf`` (2, >= n) float32 is scratch.
-    """
-    d_min = smallest_distance(dist, n_patches, wbuf[1])
-    inv = inv_two_h2
+def neighbour_bandwidth(d_min, inv_two_h2, adapt_eps, min_two_h2):
+    """``1 / (2 h^2)`` of a site: the view's, or ``1 / max(adapt_eps * D_min, min_two_h2)``."""
     if adapt_eps > 0.0:
-        inv = 1.0 / max(adapt_eps * d_min, min_two_h2)
+        return 1.0 / max(adapt_eps * d_min, min_two_h2)
+    return inv_two_h2
+
+
+@jit
+def all_label_weights(dist, n_patches, label_starts, inv_two_h2, adapt_eps, min_two_h2, prune,
+                      weights, nonzero, wbuf):
+    """:func:`label_weights`' sums ``W_j`` over every patch (any ``prune``): writes ``weights[j]``
+    and lists the labels in ``nonzero``; returns their number."""
+    d_min = smallest_distance(dist, n_patches, wbuf[1])
+    inv = neighbour_bandwidth(d_min, inv_two_h2, adapt_eps, min_two_h2)
     relative_weights(dist, n_patches, d_min, inv, -prune, wbuf[0], wbuf[1])
     w32 = wbuf[0]
     beyond = prune > -WEIGHT_LOG_MIN  # pruning (nearly) off: weights below float32's range
@@ -196,6 +198,124 @@ def label_weights(dist, n_patches, label_starts, inv_two_h2, adapt_eps, min_two_
             weights[j] = w
             nonzero[n_nz] = j
             n_nz += 1
+    return n_nz
+
+
+@jit
+def kept_label_weights(dist, n_patches, label_starts, inv_two_h2, adapt_eps, min_two_h2, prune,
+                       weights, nonzero, wbuf):
+    """:func:`all_label_weights` for ``prune <= -WEIGHT_LOG_MIN``, bit for bit, at the cost of
+    two passes of integer minima over the distances and the chunks that may hold a patch the
+    pruning keeps (a handful of 3,364 patches once a level has cooled).
+
+    Every weight that pruning keeps lies at most ``prune / inv`` above ``D_min``: a chunk of
+    :data:`SCAN` distances whose smallest lies beyond that (with a margin for float32 rounding)
+    holds none. Each distance of the other chunks gets the test and the float32 ``exp`` of
+    :func:`npmrf3d._kernels.vecmath.relative_weights` (:func:`npmrf3d._kernels.vecmath.
+    relative_weight`), and a kept weight is added to the same one of its label's four partial
+    sums as there (by its place in the label's range): the weights left out are 0, and adding
+    0 leaves a sum as it is, so each ``W_j`` keeps its bits. With more than
+    :data:`KEPT_CHUNKS_MAX` of the chunks in play it is :func:`all_label_weights`.
+    """
+    n = n_patches
+    bits = dist[:n].view(np.int32)
+    n_chunks = (n + SCAN - 1) // SCAN
+    lows = np.empty(n_chunks, dtype=np.int32)  # each chunk's smallest distance (as its bits)
+    for c in range(n // SCAN):  # full chunks: a fixed-length loop, vectorised
+        m = bits[c * SCAN]
+        for p in range(c * SCAN + 1, c * SCAN + SCAN):
+            m = min(m, bits[p])
+        lows[c] = m
+    if n % SCAN:
+        m = bits[n - n % SCAN]
+        for p in range(n - n % SCAN + 1, n):
+            m = min(m, bits[p])
+        lows[n_chunks - 1] = m
+    cell = wbuf[1][:1]
+    cell.view(np.int32)[0] = lows.min()
+    d_min = np.float64(cell[0])  # as smallest_distance() finds it
+    inv = neighbour_bandwidth(d_min, inv_two_h2, adapt_eps, min_two_h2)
+    top = np.float32(d_min)
+    scale32 = np.float32(inv)
+    floor = np.float32(max(-prune, WEIGHT_LOG_MIN))
+    cell[0] = np.inf  # a kept d has (top - d) * scale32 >= floor, so d <= top - floor / scale32
+    if scale32 > 0.0:
+        cell[0] = np.float32((np.float64(top) - np.float64(floor) / np.float64(scale32))
+                             * (1.0 + 1e-5))
+    bound = cell.view(np.int32)[0]
+    n_in = 0
+    for c in range(n_chunks):
+        if lows[c] <= bound:
+            n_in += 1
+    if n_in > KEPT_CHUNKS_MAX * n_chunks:
+        return all_label_weights(dist, n_patches, label_starts, inv_two_h2, adapt_eps,
+                                 min_two_h2, prune, weights, nonzero, wbuf)
+    n_labels = label_starts.shape[0] - 1
+    first, last = label_starts[0], label_starts[n_labels]
+    n_nz = 0
+    j = 0
+    s0 = s1 = s2 = s3 = 0.0
+    for c in range(n_chunks):
+        if lows[c] > bound:
+            continue
+        for p in range(max(c * SCAN, first), min(c * SCAN + SCAN, n, last)):
+            if bits[p] > bound:
+                continue
+            w32 = relative_weight(dist[p], top, scale32, floor)
+            if w32 == 0.0:
+                continue
+            if p >= label_starts[j + 1]:  # the first kept patch of a later label
+                w = (s0 + s1) + (s2 + s3)
+                if w != 0.0:
+                    weights[j] = w
+                    nonzero[n_nz] = j
+                    n_nz += 1
+                s0 = s1 = s2 = s3 = 0.0
+                while p >= label_starts[j + 1]:
+                    j += 1
+            start, stop = label_starts[j], label_starts[j + 1]
+            slot = (p - start) % 4 if p < start + (stop - start) // 4 * 4 else 0
+            if slot == 0:
+                s0 += w32
+            elif slot == 1:
+                s1 += w32
+            elif slot == 2:
+                s2 += w32
+            else:
+                s3 += w32
+    w = (s0 + s1) + (s2 + s3)
+    if w != 0.0:
+        weights[j] = w
+        nonzero[n_nz] = j
+        n_nz += 1
+    return n_nz
+
+
+@jit
+def label_weights(dist, n_patches, label_starts, inv_two_h2, adapt_eps, min_two_h2, prune,
+                  log_norm_const, weights, nonzero, log_weights, wbuf):
+    """Patch weights summed per centre label, and the log normaliser ``log sum_j W_j c_j``.
+
+    ``W_j = sum_{p: y_p = j} exp(-(D_p - D_min) / (2 h^2))`` (patches more than ``prune`` below
+    the best skipped) goes to ``weights[j]`` for the ``n_nz`` labels listed in ``nonzero``
+    (in label order), ``log W_j`` to ``log_weights[:n_nz]``. Returns ``(n_nz, log_z)``; the
+    caller must reset ``weights`` at the listed labels to 0. The distances must be >= 0, the
+    patches grouped by label (``label_starts`` (K + 1,), :class:`npmrf3d._kernels.relax.
+    ViewModels`).
+
+    The weights come from the vectorised float32 ``exp`` of
+    :func:`npmrf3d._kernels.vecmath.relative_weights`, which also applies the pruning (in
+    float32); each label's range is then summed in float64 (four partial sums). Kept log
+    weights below that ``exp``'s range (only with ``prune > 87``) come from ``math.exp``.
+    With pruning (``prune <= 87``) only the kept patches are visited
+    (:func:`kept_label_weights`, the same sums). ``wbuf`` (2, >= n) float32 is scratch.
+    """
+    if prune > -WEIGHT_LOG_MIN:
+        n_nz = all_label_weights(dist, n_patches, label_starts, inv_two_h2, adapt_eps,
+                                 min_two_h2, prune, weights, nonzero, wbuf)
+    else:
+        n_nz = kept_label_weights(dist, n_patches, label_starts, inv_two_h2, adapt_eps,
+                                  min_two_h2, prune, weights, nonzero, wbuf)
     top = -np.inf
     for a in range(n_nz):
         jl = nonzero[a]
@@ -282,8 +402,10 @@ def log_lcpdf_from_distances(
     if outlier > 0.0 and have_table:
         scale = (1.0 - outlier) / math.exp(log_z)
         floor = outlier / n_labels
+        log_floor = math.log(floor)
         for kl in range(n_labels):
-            out[kl] = math.log(out[kl] * scale + floor)
+            x = out[kl] * scale + floor
+            out[kl] = log_floor if x == floor else math.log(x)  # far labels: the floor alone
     else:
         for kl in range(n_labels):
             if out[kl] > 1e-280:

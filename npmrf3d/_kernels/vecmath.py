@@ -24,11 +24,13 @@ machine (libm's ``exp`` may differ between platforms in the last bit; this one d
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from ._jit import jit
+from ._jit import jit, jit_inline
 
-__all__ = ["WEIGHT_LOG_MIN", "relative_weights"]
+__all__ = ["WEIGHT_LOG_MIN", "relative_weight", "relative_weights"]
 
 #: Log weights below this are not computed by :func:`relative_weights` (they are set to 0): the
 #: float32 result would leave the normal range. Callers that keep such weights take them from
@@ -80,3 +82,31 @@ def relative_weights(dist, n, d_min, inv, lowest, out, scratch):
     scale = bits.view(np.float32)
     for p in range(n):
         out[p] = out[p] * scale[p]
+
+
+@jit_inline
+def relative_weight(d, top, scale32, floor):
+    """One weight of :func:`relative_weights`, by the same float32 operations in the same order
+    (so the same bits): ``exp((top - d) * scale32)`` of a float32 distance ``d``, where ``top``,
+    ``scale32`` and ``floor`` are the float32 numbers that function forms from ``d_min``,
+    ``inv`` and ``max(lowest, WEIGHT_LOG_MIN)``; 0 where the log weight is below ``floor``.
+
+    ``2**k`` comes from ``math.ldexp(1.0, k)`` here, where that function spells it in the
+    exponent bits: ``t - _ROUND`` is the integer ``k`` exactly, and ``k >= -126`` above the
+    floor, so ``2**k`` is a normal float32 either way.
+    """
+    c7, c6, c5, c4, c3, c2, c1 = _C
+    lw = (top - d) * scale32
+    if lw < floor:
+        return np.float32(0.0)
+    t = lw * _LOG2E + _ROUND
+    kf = t - _ROUND
+    r = (lw - kf * _LN2_HI) - kf * _LN2_LO
+    q = c7 * r + c6
+    q = q * r + c5
+    q = q * r + c4
+    q = q * r + c3
+    q = q * r + c2
+    q = q * r + c1
+    q = q * r + c1
+    return q * np.float32(math.ldexp(1.0, int(kf)))
