@@ -188,12 +188,34 @@ def test_cache_folder_falls_back_to_a_private_temporary_folder(tmp_path, monkeyp
     monkeypatch.setattr("tempfile.tempdir", str(tmp_path))
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "afile" / "numba"))
     chosen = pathlib.Path(_jit._cache_dir())
-    assert chosen.parent == tmp_path and chosen.name.startswith("npmrf3d-numba-")
-    assert stat.S_IMODE(chosen.stat().st_mode) & 0o077 == 0
+    assert chosen.name == _jit.SOURCES_FOLDER
+    private = chosen.parent
+    assert private.parent == tmp_path and private.name.startswith("npmrf3d-numba-")
+    assert stat.S_IMODE(private.stat().st_mode) & 0o077 == 0
     # a shared folder another user could write is never used
-    chosen.chmod(0o777)
+    private.chmod(0o777)
     assert _cache_folders.private_temp_folder("numba") is None
     assert _jit._cache_dir() is None
+
+
+def test_cache_folder_is_keyed_by_the_kernels_sources(tmp_path, monkeypatch):
+    from npmrf3d._kernels import _jit
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
+    chosen = pathlib.Path(_jit._cache_dir())
+    assert chosen == tmp_path / "numba" / _jit.SOURCES_FOLDER and chosen.is_dir()
+    # a worker process inherits the subfolder and keeps it (no folder inside the folder)
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(chosen))
+    assert pathlib.Path(_jit._cache_dir()) == chosen
+    # one byte of any kernel module changed (a helper other kernels inline): another folder
+    copy = tmp_path / "kernels"
+    copy.mkdir()
+    for path in pathlib.Path(_jit.__file__).parent.glob("*.py"):
+        (copy / path.name).write_bytes(path.read_bytes())
+    assert f"kernels-{_jit.kernel_sources_digest(copy)}" == _jit.SOURCES_FOLDER
+    helper = copy / "vecmath.py"
+    helper.write_bytes(helper.read_bytes() + b"\n")
+    assert f"kernels-{_jit.kernel_sources_digest(copy)}" != _jit.SOURCES_FOLDER
 
 
 def test_info_works_when_the_home_folder_cannot_be_written(tmp_path):

@@ -17,6 +17,7 @@ operations in the same order, so the same bits.
 
 from __future__ import annotations
 
+import hashlib
 import os
 import threading
 import time
@@ -76,13 +77,39 @@ def _default_cache_dir() -> str:
     return str(Path(base) / "npmrf3d" / "numba")
 
 
+def kernel_sources_digest(folder: Path = Path(__file__).parent) -> str:
+    """The first 12 hex digits of the SHA-256 of the compiled kernels' sources (every ``.py``
+    file of ``folder``, this package, by name then content).
+
+    numba's disk cache checks only the source file of the kernel it loads, not those of the
+    functions compiled into it: a kernel that inlines a helper of another module would keep the
+    helper's old machine code after that module changed (an upgrade, or an edited checkout).
+    The cache therefore lives in a folder of this digest (:func:`_cache_dir`), and kernels whose
+    sources changed in any way are compiled afresh.
+    """
+    digest = hashlib.sha256()
+    for path in sorted(Path(folder).glob("*.py")):
+        digest.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+    return digest.hexdigest()[:12]
+
+
+#: The cache's subfolder for these kernel sources (:func:`kernel_sources_digest`).
+SOURCES_FOLDER = f"kernels-{kernel_sources_digest()}"
+
+
 def _cache_dir() -> str | None:
-    """The folder for numba's cache: ``$NUMBA_CACHE_DIR`` or :func:`_default_cache_dir` when it
-    can be written, else a private folder in the temporary folder, else None (no cache: numba
-    raises when a kernel is decorated if it finds no writable cache folder at all).
+    """The folder for numba's cache: the subfolder :data:`SOURCES_FOLDER` of
+    ``$NUMBA_CACHE_DIR`` or :func:`_default_cache_dir` when it can be written, else of a private
+    folder in the temporary folder, else None (no cache: numba raises when a kernel is decorated
+    if it finds no writable cache folder at all). A ``$NUMBA_CACHE_DIR`` that already names that
+    subfolder (a worker process inherits its parent's) is used as it is.
     """
     chosen = os.environ.get("NUMBA_CACHE_DIR") or _default_cache_dir()
-    return chosen if writable_folder(chosen) else private_temp_folder("numba")
+    base = chosen if writable_folder(chosen) else private_temp_folder("numba")
+    if base is None or Path(base).name == SOURCES_FOLDER:
+        return base
+    inner = os.path.join(base, SOURCES_FOLDER)
+    return inner if writable_folder(inner) else None
 
 
 # Read by numba when each decorated function is created (its cache locator), so setting it here,
