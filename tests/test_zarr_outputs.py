@@ -191,3 +191,22 @@ def test_the_block_plan_gives_the_whole_runs_time_and_memory(tmp_path, capsys):
     assert "216 blocks of 192" in one and "in all: roughly" in one and "of work on 2 cores for the 216 blocks" in one
     assert "(one block at a time)" in one and "(2 workers holding a block each)" in two
     assert listing(tmp_path) == set()
+
+
+def test_the_dry_run_names_larger_blocks_that_fit_and_save_time(monkeypatch, capsys, tmp_path):
+    from npmrf3d.cli import _blocks
+
+    argv = ["synth", "bundled:gravel64", "--size", "1024", "--blockwise", "--out", str(tmp_path / "big.zarr"),
+            "--dry-run"]
+    monkeypatch.setattr(_blocks, "available_memory", lambda: 64 * 2**30)
+    assert main(argv) == 0
+    roomy = capsys.readouterr().out
+    line = next(ln for ln in roomy.splitlines() if ln.startswith("larger blocks"))
+    assert "--block 256: roughly" in line and "--block 512: roughly" in line
+    monkeypatch.setattr(_blocks, "available_memory", lambda: 3 * 2**30)   # only blocks of 256 fit
+    assert main(argv) == 0
+    tight = capsys.readouterr().out
+    assert "--block 256: roughly" in tight and "--block 384" not in tight
+    assert main([*argv, "--block", "512"]) == 0   # nothing larger to offer
+    assert "larger blocks" not in capsys.readouterr().out
+    assert listing(tmp_path) == set()
