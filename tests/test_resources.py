@@ -101,13 +101,16 @@ def test_format():
     ["synth", "--size", "2048,2048,4096", "--levels", "1"],
     ["baseline", "kopf", "--size", "4096"], ["baseline", "kopf", "--size", "100000", "--levels", "1"],
 ])
-def test_absurd_sizes_refused_in_under_a_second(argv, tmp_path, capsys):
+def test_absurd_sizes_refused_before_anything_is_allocated(argv, tmp_path, capsys):
+    # refused from the estimate, not after trying: the process's own CPU time (which a busy
+    # machine does not inflate as it does the wall time) stays far below what allocating or
+    # filling even one such volume would take
     out = tmp_path / "out"
-    t0 = time.perf_counter()
+    t0 = time.process_time()
     code = cli.main([*argv, "--out", str(out)])
-    elapsed = time.perf_counter() - t0
+    used = time.process_time() - t0
     err = capsys.readouterr().err
-    assert code == 2 and elapsed < 1.0, elapsed
+    assert code == 2 and used < 2.0, used
     lines = err.strip().splitlines()
     assert len(lines) == 1 and "of memory" in lines[0] and "are available" in lines[0], err
     assert not out.exists() and list(tmp_path.iterdir()) == []

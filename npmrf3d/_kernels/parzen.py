@@ -16,6 +16,11 @@ With ``h_c = h`` this is exactly the LCPDF ``L_v`` of docs/model.md, section 2 (
 more than ``prune`` below the best one are skipped (``prune = inf`` keeps all). With
 ``adapt_eps > 0`` the neighbour bandwidth is chosen per site: ``2 h^2 = max(adapt_eps * D_min,
 min_two_h2)`` (a relative, Efros-Leung-like tolerance around the best match).
+
+Why one module of over 400 lines: the distances, the patch weights (the full pass and the one
+that visits only the chunks of patches the pruning keeps, the same float32 operations in the
+same order), the label smoothing and the normaliser are the stages of one site's evaluation,
+and :mod:`npmrf3d._kernels.relax` inlines them into its sweeps.
 """
 
 from __future__ import annotations
