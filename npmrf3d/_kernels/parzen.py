@@ -30,7 +30,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._jit import jit, jit_contract
+from ._jit import jit, jit_contract, jit_inline
 from .vecmath import WEIGHT_LOG_MIN, relative_weight, relative_weights
 
 
@@ -168,6 +168,17 @@ def neighbour_bandwidth(d_min, inv_two_h2, adapt_eps, min_two_h2):
     return inv_two_h2
 
 
+@jit_inline
+def _listed(weights, nonzero, n_nz, j, w):
+    """Label ``j``'s sum ``w`` into ``weights[j]`` and ``j`` into the list ``nonzero`` when it is
+    not 0; the list's new length."""
+    if w == 0.0:
+        return n_nz
+    weights[j] = w
+    nonzero[n_nz] = j
+    return n_nz + 1
+
+
 @jit
 def all_label_weights(dist, n_patches, label_starts, inv_two_h2, adapt_eps, min_two_h2, prune,
                       weights, nonzero, wbuf):
@@ -199,10 +210,7 @@ def all_label_weights(dist, n_patches, label_starts, inv_two_h2, adapt_eps, min_
                     lw = -(dist[p] - d_min) * inv
                     if lw >= -prune:
                         w += math.exp(lw)  # may underflow to 0: then it adds nothing
-        if w != 0.0:
-            weights[j] = w
-            nonzero[n_nz] = j
-            n_nz += 1
+        n_nz = _listed(weights, nonzero, n_nz, j, w)
     return n_nz
 
 
@@ -270,11 +278,7 @@ def kept_label_weights(dist, n_patches, label_starts, inv_two_h2, adapt_eps, min
             if w32 == 0.0:
                 continue
             if p >= label_starts[j + 1]:  # the first kept patch of a later label
-                w = (s0 + s1) + (s2 + s3)
-                if w != 0.0:
-                    weights[j] = w
-                    nonzero[n_nz] = j
-                    n_nz += 1
+                n_nz = _listed(weights, nonzero, n_nz, j, (s0 + s1) + (s2 + s3))
                 s0 = s1 = s2 = s3 = 0.0
                 while p >= label_starts[j + 1]:
                     j += 1
@@ -288,12 +292,7 @@ def kept_label_weights(dist, n_patches, label_starts, inv_two_h2, adapt_eps, min
                 s2 += w32
             else:
                 s3 += w32
-    w = (s0 + s1) + (s2 + s3)
-    if w != 0.0:
-        weights[j] = w
-        nonzero[n_nz] = j
-        n_nz += 1
-    return n_nz
+    return _listed(weights, nonzero, n_nz, j, (s0 + s1) + (s2 + s3))
 
 
 @jit

@@ -46,6 +46,25 @@ _C = (np.float32(1.0 / 5040.0), np.float32(1.0 / 720.0), np.float32(1.0 / 120.0)
       np.float32(1.0 / 24.0), np.float32(1.0 / 6.0), np.float32(0.5), np.float32(1.0))
 
 
+@jit_inline
+def _reduced_exp(v):
+    """``exp(v)`` of a float32 ``v >= WEIGHT_LOG_MIN`` in two parts, ``(q, t)``: ``t - _ROUND``
+    is the integer ``k`` (``t`` keeps it in its low bits) and ``q = exp(v - k ln 2)`` from the
+    degree-7 polynomial, so that ``exp(v) = q * 2**k``."""
+    c7, c6, c5, c4, c3, c2, c1 = _C
+    t = v * _LOG2E + _ROUND
+    kf = t - _ROUND
+    r = (v - kf * _LN2_HI) - kf * _LN2_LO
+    q = c7 * r + c6
+    q = q * r + c5
+    q = q * r + c4
+    q = q * r + c3
+    q = q * r + c2
+    q = q * r + c1
+    q = q * r + c1
+    return q, t
+
+
 @jit
 def relative_weights(dist, n, d_min, inv, lowest, out, scratch):
     """``out[p] = exp(-(dist[p] - d_min) * inv)`` (float32) for ``p < n``.
@@ -56,24 +75,13 @@ def relative_weights(dist, n, d_min, inv, lowest, out, scratch):
     (``>= WEIGHT_LOG_MIN``: a pruning threshold) the weight is 0. ``out`` and ``scratch``
     (>= n,) float32.
     """
-    c7, c6, c5, c4, c3, c2, c1 = _C
     top = np.float32(d_min)
     scale32 = np.float32(inv)
     floor = np.float32(max(lowest, WEIGHT_LOG_MIN))
     for p in range(n):
         lw = (top - dist[p]) * scale32
         low = lw < floor
-        v = floor if low else lw
-        t = v * _LOG2E + _ROUND
-        kf = t - _ROUND
-        r = (v - kf * _LN2_HI) - kf * _LN2_LO
-        q = c7 * r + c6
-        q = q * r + c5
-        q = q * r + c4
-        q = q * r + c3
-        q = q * r + c2
-        q = q * r + c1
-        q = q * r + c1
+        q, t = _reduced_exp(floor if low else lw)
         out[p] = np.float32(0.0) if low else q
         scratch[p] = t
     bits = scratch[:n].view(np.int32)
@@ -95,18 +103,8 @@ def relative_weight(d, top, scale32, floor):
     exponent bits: ``t - _ROUND`` is the integer ``k`` exactly, and ``k >= -126`` above the
     floor, so ``2**k`` is a normal float32 either way.
     """
-    c7, c6, c5, c4, c3, c2, c1 = _C
     lw = (top - d) * scale32
     if lw < floor:
         return np.float32(0.0)
-    t = lw * _LOG2E + _ROUND
-    kf = t - _ROUND
-    r = (lw - kf * _LN2_HI) - kf * _LN2_LO
-    q = c7 * r + c6
-    q = q * r + c5
-    q = q * r + c4
-    q = q * r + c3
-    q = q * r + c2
-    q = q * r + c1
-    q = q * r + c1
-    return q * np.float32(math.ldexp(1.0, int(kf)))
+    q, t = _reduced_exp(lw)
+    return q * np.float32(math.ldexp(1.0, int(t - _ROUND)))
